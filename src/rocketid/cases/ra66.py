@@ -1,0 +1,90 @@
+"""RA-66: the chapter's study as rocketid's reference case (METHOD.md section 2).
+
+The chapter gives no vehicle data; these are rocketid's:
+
+============  ==================================================================
+Earth         Re = 6 371 000 m, g = 9.80665 (Re/(Re+h))^2
+vehicle       m(t) = 20 000 - 100 t kg; Pe = 400 000 N; Sm = pi * 1.0^2 m^2
+input         alpha(t) = -8 deg sin^2(pi (t-4)/20) for 4 <= t <= 24 s, else 0
+start         x = h = v = 0, theta = 90 deg; t in [0, 66] s
+truth         CD = 0.5, CL = 0.1
+measurements  x, h, v at t = 0.01 k s, k = 1..6600; noise N(0, 1)
+parameters    CD0..CD6 (knots at 0, 11, ..., 66 s), CL (CL0 = CL1, one value)
+p0            CD = 0.1, 0.6, 0.1, 0.6, 0.1, 0.6, 0.1; CL = 0.12
+bounds        1e-4 <= p <= 1
+============  ==================================================================
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import sympy as sp
+
+from ..collocation.transcription import Mesh, graded_mesh
+from ..model import Model, ModelSpec
+from ..physics.ascent import ascent_dynamics, ascent_states, flight_conditions
+
+__all__ = ["ra66", "ra66_truth", "ra66_times", "ra66_mesh", "RA66_P0", "RA66_TRUTH_VALUES"]
+
+RA66_P0 = (0.1, 0.6, 0.1, 0.6, 0.1, 0.6, 0.1, 0.12)
+RA66_TRUTH_VALUES = (0.5,) * 7 + (0.1,)
+RA66_BOUNDS = (1e-4, 1.0)
+
+
+def ra66_alpha(t: sp.Symbol) -> sp.Expr:
+    """The pitch-over attack angle (rad)."""
+    return sp.Piecewise((-8 * sp.pi / 180 * sp.sin(sp.pi * (t - 4) / 20) ** 2, (t >= 4) & (t <= 24)), (0, True))
+
+
+def ra66(*, n_cd_segments: int = 6, atmosphere: str = "yang1983", sigma: float = 1.0) -> ModelSpec:
+    """The RA-66 model with the chapter's parameterization.
+
+    Parameters
+    ----------
+    n_cd_segments : int
+        Segments of the time-knot drag coefficient (the chapter: 6).
+    atmosphere : {"yang1983", "us76"}
+    sigma : float
+        Noise standard deviation of x, h, v.
+
+    Returns
+    -------
+    ModelSpec
+    """
+    m = Model("RA-66", 0.0, 66.0, description="the chapter's study (METHOD.md section 2)")
+    st = ascent_states(m)
+    fc = flight_conditions(m, st, atmosphere=atmosphere)
+    alpha = m.input("alpha", ra66_alpha(m.t), breakpoints=(4.0, 24.0))
+    mass = m.define("mass", 20000.0 - 100.0 * m.t)
+    Pe = m.constant("Pe", 400000.0)
+    Sm = m.constant("Sm", math.pi * 1.0 ** 2)
+    bp = np.linspace(0.0, 66.0, n_cd_segments + 1)
+    cd_guess = [RA66_P0[i % 2] if n_cd_segments == 6 else 0.5 for i in range(n_cd_segments + 1)]
+    if n_cd_segments == 6:
+        cd_guess = list(RA66_P0[:7])
+    CD = m.piecewise_linear("CD", bp, cd_guess, bounds=RA66_BOUNDS, nominal=0.5)
+    CL = m.piecewise_linear("CL", [0.0, 66.0], RA66_P0[7], bounds=RA66_BOUNDS, ties=[(0, 1)], nominal=0.1)
+    ascent_dynamics(m, st, fc, thrust=Pe, mass=mass, area=Sm, cd=CD, cl=CL, alpha=alpha)
+    for s in (st.x, st.h, st.v):
+        m.output(str(s), s, sigma=sigma)
+    return m.freeze()
+
+
+def ra66_truth(spec: ModelSpec) -> np.ndarray:
+    """The true parameter vector of RA-66 (CD = 0.5 at every knot, CL = 0.1)."""
+    vals = {}
+    for p in spec.parameters:
+        vals[p.symbol] = 0.1 if str(p.symbol) == "CL" else 0.5
+    return spec.parameter_vector(vals)
+
+
+def ra66_times() -> np.ndarray:
+    """The 6600 sample times t = 0.01 k, k = 1..6600."""
+    return np.arange(1, 6601) * 0.01
+
+
+def ra66_mesh(n_elements: int = 66, K: int = 3, refine_first: int = 3) -> Mesh:
+    """rocketid's default RA-66 mesh: 1 s elements, the first split geometrically."""
+    return graded_mesh(0.0, 66.0, n_elements, K, refine_first=refine_first)

@@ -1,0 +1,207 @@
+"""Measured trajectory data: channels of samples, CSV input and output.
+
+A :class:`Measurements` value holds one :class:`Channel` per measured output
+(``x``, ``h``, ``v`` for RA-66), each with its own sample times. It is
+validated when made: times finite, strictly increasing, no NaN, sigma
+positive. CSV files have a header row; the time column is ``t`` and channel
+columns are named like the model's outputs unless mapped otherwise.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from .errors import DataError
+
+__all__ = ["Channel", "Measurements", "read_csv"]
+
+
+@dataclass(frozen=True)
+class Channel:
+    """One measured output.
+
+    Attributes
+    ----------
+    name : str
+        The model output it measures.
+    times : ndarray, shape (n,)
+        Sample times, strictly increasing.
+    values : ndarray, shape (n,)
+    sigma : float or None
+        Noise standard deviation; None means "use the model's".
+    """
+
+    name: str
+    times: np.ndarray
+    values: np.ndarray
+    sigma: float | None = None
+
+    def __post_init__(self):
+        t = np.asarray(self.times, dtype=float).ravel()
+        y = np.asarray(self.values, dtype=float).ravel()
+        if t.shape != y.shape:
+            raise DataError(f"channel {self.name!r}: {t.size} times but {y.size} values")
+        if t.size == 0:
+            raise DataError(f"channel {self.name!r} has no samples")
+        bad = np.flatnonzero(~np.isfinite(t))
+        if bad.size:
+            raise DataError(f"channel {self.name!r}: time is NaN or infinite at sample {bad[0]} "
+                            f"(and {bad.size - 1} more); remove or fix those rows")
+        bad = np.flatnonzero(~np.isfinite(y))
+        if bad.size:
+            raise DataError(f"channel {self.name!r}: value is NaN or infinite at t = {t[bad[0]]:g} "
+                            f"(sample {bad[0]}, {bad.size} in all); remove those rows or fill them")
+        dt = np.diff(t)
+        if np.any(dt == 0):
+            i = int(np.flatnonzero(dt == 0)[0])
+            raise DataError(f"channel {self.name!r}: duplicate time t = {t[i]:g} (samples {i} and {i + 1}); "
+                            "each sample time may appear once")
+        if np.any(dt < 0):
+            i = int(np.flatnonzero(dt < 0)[0])
+            raise DataError(f"channel {self.name!r}: times are not sorted (t = {t[i]:g} is followed by "
+                            f"{t[i + 1]:g} at sample {i + 1}); sort the data by time")
+        if self.sigma is not None and not (self.sigma > 0 and math.isfinite(self.sigma)):
+            raise DataError(f"channel {self.name!r}: sigma must be positive and finite, got {self.sigma}")
+        t.flags.writeable = False
+        y.flags.writeable = False
+        object.__setattr__(self, "times", t)
+        object.__setattr__(self, "values", y)
+
+
+@dataclass(frozen=True)
+class Measurements:
+    """Measured outputs, one :class:`Channel` each.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> m = Measurements.from_arrays(np.array([0.1, 0.2]), {"x": [1.0, 2.0]})
+    >>> m["x"].values
+    array([1., 2.])
+    """
+
+    channels: tuple[Channel, ...]
+
+    def __post_init__(self):
+        names = [c.name for c in self.channels]
+        if len(set(names)) != len(names):
+            raise DataError(f"duplicate channel names in {names}")
+        if not names:
+            raise DataError("measurements have no channels")
+
+    @classmethod
+    def from_arrays(cls, t: Sequence[float], values: Mapping[str, Sequence[float]],
+                    sigma: Mapping[str, float] | None = None) -> "Measurements":
+        """Channels sharing the sample times ``t``."""
+        sigma = sigma or {}
+        return cls(tuple(Channel(str(k), np.asarray(t, float), np.asarray(v, float), sigma.get(k))
+                         for k, v in values.items()))
+
+    def __getitem__(self, name: str) -> Channel:
+        for c in self.channels:
+            if c.name == name:
+                return c
+        raise DataError(f"no channel named {name!r}; the data have {', '.join(self.names)}")
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(c.name for c in self.channels)
+
+    @property
+    def n_samples(self) -> int:
+        """Total number of measured values over all channels."""
+        return sum(c.times.size for c in self.channels)
+
+    def subset(self, names: Sequence[str]) -> "Measurements":
+        """Only the named channels (in that order)."""
+        return Measurements(tuple(self[n] for n in names))
+
+    def window(self, t_start: float, t_end: float) -> "Measurements":
+        """Samples with ``t_start <= t <= t_end`` (for hold-out checks)."""
+        out = []
+        for c in self.channels:
+            keep = (c.times >= t_start) & (c.times <= t_end)
+            if not keep.any():
+                raise DataError(f"channel {c.name!r} has no samples in [{t_start:g}, {t_end:g}]")
+            out.append(Channel(c.name, c.times[keep], c.values[keep], c.sigma))
+        return Measurements(tuple(out))
+
+    def to_csv(self, path: str | os.PathLike) -> Path:
+        """Write a CSV with columns ``t`` and one per channel (channels must share times)."""
+        t0 = self.channels[0].times
+        for c in self.channels[1:]:
+            if c.times.shape != t0.shape or np.any(c.times != t0):
+                raise DataError("to_csv needs channels with common sample times; write channels separately")
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with open(path, "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(["t", *self.names])
+            cols = [t0] + [c.values for c in self.channels]
+            for row in zip(*cols):
+                w.writerow([repr(float(v)) for v in row])
+        return path
+
+
+def read_csv(path: str | os.PathLike, channels: Sequence[str] = ("x", "h", "v"), *,
+             time_column: str = "t", column_map: Mapping[str, str] | None = None,
+             sigma: Mapping[str, float] | None = None) -> Measurements:
+    """Read measurements from a CSV file with a header row.
+
+    Parameters
+    ----------
+    path : path-like
+    channels : sequence of str
+        The model outputs to read.
+    time_column : str
+        Name of the time column (seconds).
+    column_map : mapping, optional
+        ``{output name: CSV column}`` where the file's names differ.
+    sigma : mapping, optional
+        Noise standard deviation per channel (default: the model's).
+
+    Returns
+    -------
+    Measurements
+
+    Raises
+    ------
+    DataError
+        Missing file or columns, non-numeric cells, NaN, unsorted or duplicate times.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise DataError(f"data file {str(path)!r} does not exist")
+    column_map = dict(column_map or {})
+    with open(path, newline="") as fh:
+        reader = csv.reader(fh)
+        try:
+            header = [h.strip() for h in next(reader)]
+        except StopIteration:
+            raise DataError(f"{path}: the file is empty; expected a header row with {time_column}, "
+                            f"{', '.join(channels)}") from None
+        rows = [r for r in reader if any(cell.strip() for cell in r)]
+    wanted = {time_column: time_column, **{c: column_map.get(c, c) for c in channels}}
+    missing = [col for col in wanted.values() if col not in header]
+    if missing:
+        raise DataError(f"{path}: missing column(s) {', '.join(missing)}; the file has {', '.join(header)}. "
+                        "Rename the columns or map them (CLI: --column NAME=COLUMN, API: column_map=)")
+    idx = {key: header.index(col) for key, col in wanted.items()}
+    data = {key: np.empty(len(rows)) for key in idx}
+    for i, r in enumerate(rows):
+        for key, j in idx.items():
+            cell = r[j].strip() if j < len(r) else ""
+            try:
+                data[key][i] = float(cell) if cell else math.nan
+            except ValueError:
+                raise DataError(f"{path}, line {i + 2}, column {wanted[key]!r}: {cell!r} is not a number") from None
+    if not rows:
+        raise DataError(f"{path}: no data rows")
+    return Measurements.from_arrays(data[time_column], {c: data[c] for c in channels}, sigma)

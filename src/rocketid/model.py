@@ -1,0 +1,760 @@
+"""Declaring a model: states, inputs, constants, parameters, dynamics, outputs.
+
+This is the first stage of rocketid's pipeline. A :class:`Model` is a mutable
+builder in the style of Pyomo: every component is a SymPy symbol held by the
+model (and reachable as an attribute, ``m.v``), and everything attached to a
+component (bounds, guesses, measurements, results) is keyed by that symbol.
+:meth:`Model.freeze` validates the declaration and returns an immutable
+:class:`ModelSpec`, which is what every later stage consumes.
+
+Notation
+--------
+========================  ====================================================
+``t``                     time (the model's independent variable)
+``s``                     states, ``ds/dt`` their derivatives (``m.der(s)``)
+``u(t)``                  known inputs (symbolic in ``t`` or sampled)
+``p``                     estimated parameters (scalar, or knots of families)
+``l(t)``                  local parameter values: a scalar parameter is its own
+                          local value; a time family (piecewise linear on
+                          breakpoints) has the interpolated knot value
+``F(t, s, ds/dt, u, l)``  one residual per state, ``F = 0`` (explicit
+                          dynamics ``ds/dt = f`` become ``F = ds/dt - f``)
+``g_k(t, s, p)``          measured outputs, noise standard deviation sigma_k
+========================  ====================================================
+
+Examples
+--------
+>>> import sympy as sp
+>>> from rocketid.model import Model
+>>> m = Model("decay", t0=0.0, tf=2.0)
+>>> y = m.state("y", initial=1.0)
+>>> k = m.parameter("k", guess=0.5, bounds=(0.0, 10.0))
+>>> m.ode({y: -k * y})
+>>> m.output("y", y, sigma=0.01)
+>>> spec = m.freeze()
+>>> [str(s) for s in spec.parameter_symbols]
+['k']
+"""
+
+from __future__ import annotations
+
+import copy
+import hashlib
+import math
+from dataclasses import dataclass, field, replace
+from typing import Iterable, Mapping, Sequence
+
+import numpy as np
+import sympy as sp
+
+from .errors import ModelError
+
+__all__ = [
+    "Model",
+    "ModelSpec",
+    "StateSpec",
+    "ParameterSpec",
+    "FamilySpec",
+    "InputSpec",
+    "OutputSpec",
+]
+
+
+# ---------------------------------------------------------------------------
+# Immutable specification (what later stages consume)
+# ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class StateSpec:
+    """A differential state.
+
+    Attributes
+    ----------
+    symbol : sympy.Symbol
+        The state.
+    derivative : sympy.Symbol
+        The symbol that stands for ``d symbol / dt`` in residuals.
+    initial : float
+        Initial value (the guess, when ``initial_parameter`` is set).
+    initial_parameter : sympy.Symbol or None
+        Parameter holding the initial value when the initial state is free.
+    """
+
+    symbol: sp.Symbol
+    derivative: sp.Symbol
+    initial: float
+    initial_parameter: sp.Symbol | None = None
+
+    @property
+    def free(self) -> bool:
+        """Whether the initial value is estimated."""
+        return self.initial_parameter is not None
+
+
+@dataclass(frozen=True)
+class ParameterSpec:
+    """A scalar estimated parameter (also each knot of a family).
+
+    Attributes
+    ----------
+    symbol : sympy.Symbol
+    guess : float
+        Initial guess (p0).
+    lower, upper : float
+        Bounds (may be infinite).
+    nominal : float
+        Typical magnitude, used when parameters are scaled.
+    family : sympy.Symbol or None
+        The time family the parameter is a knot of, if any.
+    """
+
+    symbol: sp.Symbol
+    guess: float
+    lower: float = -math.inf
+    upper: float = math.inf
+    nominal: float = 1.0
+    family: sp.Symbol | None = None
+
+
+@dataclass(frozen=True)
+class FamilySpec:
+    """A time-varying parameter, piecewise linear in time on breakpoints (7.4).
+
+    Attributes
+    ----------
+    symbol : sympy.Symbol
+        The local value ``l(t)`` used in expressions.
+    breakpoints : tuple of float
+        Knot times, increasing, the first at ``t0`` and the last at ``tf``.
+    knots : tuple of sympy.Symbol
+        The parameter whose value the family takes at each breakpoint; tied
+        knots (the chapter's ``CL0 = CL1``) share one parameter.
+    """
+
+    symbol: sp.Symbol
+    breakpoints: tuple[float, ...]
+    knots: tuple[sp.Symbol, ...]
+
+    def weights(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Interpolation weights at times ``t``.
+
+        Returns
+        -------
+        left, right : ndarray of int, shape (n,)
+            Index of the knot at the start and end of the segment holding t.
+        w_right : ndarray, shape (n,)
+            Weight of the right knot (the left one has ``1 - w_right``).
+        """
+        bp = np.asarray(self.breakpoints)
+        t = np.asarray(t, dtype=float)
+        seg = np.clip(np.searchsorted(bp, t, side="right") - 1, 0, len(bp) - 2)
+        w = (t - bp[seg]) / (bp[seg + 1] - bp[seg])
+        return seg, seg + 1, w
+
+    def evaluate(self, t: np.ndarray, values: Mapping[sp.Symbol, float]) -> np.ndarray:
+        """The family's value at times ``t`` for parameter ``values``."""
+        knot_vals = np.array([float(values[k]) for k in self.knots])
+        return np.interp(np.asarray(t, dtype=float), np.asarray(self.breakpoints), knot_vals)
+
+
+@dataclass(frozen=True)
+class InputSpec:
+    """A known input ``u(t)``: a SymPy expression of ``t``, or sampled values.
+
+    Attributes
+    ----------
+    symbol : sympy.Symbol
+    expr : sympy.Expr or None
+        Expression in the model's time symbol.
+    times, values : tuple of float
+        Samples, linearly interpolated (when ``expr`` is None).
+    breakpoints : tuple of float
+        Times where the input has a kink or jump (simulators split there).
+    """
+
+    symbol: sp.Symbol
+    expr: sp.Expr | None
+    times: tuple[float, ...] = ()
+    values: tuple[float, ...] = ()
+    breakpoints: tuple[float, ...] = ()
+
+
+@dataclass(frozen=True)
+class OutputSpec:
+    """A measured output ``g(t, s, p)`` with noise standard deviation ``sigma``."""
+
+    name: str
+    expr: sp.Expr
+    sigma: float
+
+
+@dataclass(frozen=True)
+class ModelSpec:
+    """An immutable, validated model: the value handed to every later stage.
+
+    Build one with :meth:`Model.freeze`; get an editable copy back with
+    :meth:`to_model` (to add a physical effect and refit).
+    """
+
+    name: str
+    t: sp.Symbol
+    t0: float
+    tf: float
+    states: tuple[StateSpec, ...]
+    inputs: tuple[InputSpec, ...]
+    constants: tuple[tuple[sp.Symbol, float], ...]
+    parameters: tuple[ParameterSpec, ...]
+    families: tuple[FamilySpec, ...]
+    definitions: tuple[tuple[sp.Symbol, sp.Expr], ...]
+    equations: tuple[sp.Expr, ...]
+    outputs: tuple[OutputSpec, ...]
+    description: str = ""
+    _builder: "Model | None" = field(default=None, repr=False, compare=False)
+
+    # -- symbols -----------------------------------------------------------
+    @property
+    def state_symbols(self) -> tuple[sp.Symbol, ...]:
+        return tuple(s.symbol for s in self.states)
+
+    @property
+    def derivative_symbols(self) -> tuple[sp.Symbol, ...]:
+        return tuple(s.derivative for s in self.states)
+
+    @property
+    def parameter_symbols(self) -> tuple[sp.Symbol, ...]:
+        """All estimated parameters, in the order of the decision vector."""
+        return tuple(p.symbol for p in self.parameters)
+
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        return tuple(str(p.symbol) for p in self.parameters)
+
+    @property
+    def input_symbols(self) -> tuple[sp.Symbol, ...]:
+        return tuple(u.symbol for u in self.inputs)
+
+    @property
+    def output_names(self) -> tuple[str, ...]:
+        return tuple(o.name for o in self.outputs)
+
+    @property
+    def local_symbols(self) -> tuple[sp.Symbol, ...]:
+        """Symbols of local parameter values ``l``: families, then scalar parameters
+        that are not knots of a family and not free initial states."""
+        fam = tuple(f.symbol for f in self.families)
+        init = {s.initial_parameter for s in self.states if s.free}
+        scal = tuple(p.symbol for p in self.parameters if p.family is None and p.symbol not in init)
+        return fam + scal
+
+    def parameter(self, symbol: sp.Symbol | str) -> ParameterSpec:
+        """The :class:`ParameterSpec` of ``symbol`` (a name is accepted too)."""
+        sym = self.symbol(symbol)
+        for p in self.parameters:
+            if p.symbol == sym:
+                return p
+        raise ModelError(f"{sym} is not an estimated parameter of model {self.name!r}; "
+                         f"its parameters are {', '.join(self.parameter_names)}")
+
+    def family(self, symbol: sp.Symbol | str) -> FamilySpec:
+        """The :class:`FamilySpec` whose local value is ``symbol``."""
+        sym = self.symbol(symbol)
+        for f in self.families:
+            if f.symbol == sym:
+                return f
+        raise ModelError(f"{sym} is not a time family of model {self.name!r}")
+
+    def symbol(self, key: sp.Symbol | str) -> sp.Symbol:
+        """Resolve a component by symbol or name; unknown keys are an error that names them."""
+        table = self._symbol_table()
+        if isinstance(key, sp.Symbol):
+            if key in table.values():
+                return key
+            raise ModelError(f"symbol {key} is not a component of model {self.name!r}")
+        if isinstance(key, str):
+            if key in table:
+                return table[key]
+            import difflib
+            close = difflib.get_close_matches(key, list(table), n=3)
+            hint = f"; did you mean {', '.join(close)}?" if close else ""
+            raise ModelError(f"model {self.name!r} has no component named {key!r}{hint}")
+        raise ModelError(f"expected a SymPy symbol or a name, got {type(key).__name__}")
+
+    def _symbol_table(self) -> dict[str, sp.Symbol]:
+        syms = [self.t, *self.state_symbols, *self.derivative_symbols, *self.input_symbols,
+                *(c for c, _ in self.constants), *self.parameter_symbols,
+                *(f.symbol for f in self.families), *(d for d, _ in self.definitions)]
+        return {str(s): s for s in syms}
+
+    # -- parameter vectors -------------------------------------------------
+    @property
+    def guess(self) -> np.ndarray:
+        """p0, shape (n_p,)."""
+        return np.array([p.guess for p in self.parameters], dtype=float)
+
+    @property
+    def lower(self) -> np.ndarray:
+        return np.array([p.lower for p in self.parameters], dtype=float)
+
+    @property
+    def upper(self) -> np.ndarray:
+        return np.array([p.upper for p in self.parameters], dtype=float)
+
+    @property
+    def nominal(self) -> np.ndarray:
+        return np.array([p.nominal for p in self.parameters], dtype=float)
+
+    def parameter_vector(self, values: Mapping[sp.Symbol | str, float] | Sequence[float] | np.ndarray | None = None) -> np.ndarray:
+        """A full parameter vector: p0 updated by ``values`` (a mapping keyed by
+        symbol or name, or a full sequence in :attr:`parameter_symbols` order)."""
+        if values is None:
+            return self.guess
+        if isinstance(values, Mapping):
+            p = self.guess.copy()
+            index = {s: i for i, s in enumerate(self.parameter_symbols)}
+            for key, val in values.items():
+                sym = self.symbol(key)
+                if sym not in index:
+                    raise ModelError(f"{sym} is not an estimated parameter of model {self.name!r}; "
+                                     f"its parameters are {', '.join(self.parameter_names)}")
+                p[index[sym]] = float(val)
+            return p
+        p = np.asarray(values, dtype=float).ravel()
+        if p.shape != (len(self.parameters),):
+            raise ModelError(f"parameter vector has {p.size} values; model {self.name!r} has "
+                             f"{len(self.parameters)} ({', '.join(self.parameter_names)})")
+        return p
+
+    def parameter_dict(self, p: Sequence[float]) -> dict[sp.Symbol, float]:
+        """``{symbol: value}`` for a parameter vector."""
+        return {s: float(v) for s, v in zip(self.parameter_symbols, p)}
+
+    def initial_state(self, p: Sequence[float] | None = None) -> np.ndarray:
+        """Initial state vector, with free initial values taken from ``p``."""
+        p = self.guess if p is None else np.asarray(p, dtype=float)
+        index = {s: i for i, s in enumerate(self.parameter_symbols)}
+        return np.array([p[index[s.initial_parameter]] if s.free else s.initial
+                         for s in self.states], dtype=float)
+
+    # -- expressions ---------------------------------------------------------
+    def expand(self, expr: sp.Expr) -> sp.Expr:
+        """Substitute definitions and constants: the expression in terms of
+        t, states, derivatives, inputs and local parameters only."""
+        expr = sp.sympify(expr)
+        for sym, val in reversed(self.definitions):
+            expr = expr.xreplace({sym: val})
+        return expr.xreplace({c: sp.Float(v) for c, v in self.constants})
+
+    @property
+    def breakpoints(self) -> tuple[float, ...]:
+        """Times where the right-hand side has kinks (families and inputs)."""
+        pts = {self.t0, self.tf}
+        for f in self.families:
+            pts.update(f.breakpoints)
+        for u in self.inputs:
+            pts.update(u.breakpoints)
+        return tuple(sorted(b for b in pts if self.t0 <= b <= self.tf))
+
+    def input_values(self, t: np.ndarray) -> np.ndarray:
+        """Inputs evaluated at times t, shape (n, n_inputs)."""
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        out = np.empty((t.size, len(self.inputs)))
+        for j, u in enumerate(self.inputs):
+            if u.expr is not None:
+                fn = sp.lambdify(self.t, u.expr, modules="numpy")
+                out[:, j] = np.broadcast_to(np.asarray(fn(t), dtype=float), t.shape)
+            else:
+                out[:, j] = np.interp(t, u.times, u.values)
+        return out
+
+    def fingerprint(self) -> str:
+        """A content hash of everything generated code depends on."""
+        parts = [
+            "states", [(s.symbol, s.derivative) for s in self.states],
+            "inputs", [u.symbol for u in self.inputs],
+            "locals", list(self.local_symbols),
+            "equations", [self.expand(e) for e in self.equations],
+            "outputs", [(o.name, self.expand(o.expr)) for o in self.outputs],
+            "time", self.t,
+        ]
+        return hashlib.sha256(sp.srepr(parts).encode()).hexdigest()
+
+    def to_model(self) -> "Model":
+        """An editable :class:`Model` with this specification's content."""
+        if self._builder is None:
+            raise ModelError("this ModelSpec was not made by Model.freeze()")
+        return self._builder.copy()
+
+    def with_guess(self, values: Mapping[sp.Symbol | str, float] | Sequence[float]) -> "ModelSpec":
+        """A copy whose initial guesses are replaced."""
+        p = self.parameter_vector(values)
+        params = tuple(replace(ps, guess=float(v)) for ps, v in zip(self.parameters, p))
+        new = replace(self, parameters=params)
+        _check_guesses(new)
+        return new
+
+    def summary(self) -> str:
+        """A short description of the model."""
+        lines = [f"Model {self.name!r}: t in [{self.t0:g}, {self.tf:g}]",
+                 f"  states     : {', '.join(map(str, self.state_symbols))}",
+                 f"  inputs     : {', '.join(map(str, self.input_symbols)) or '-'}",
+                 f"  parameters : {', '.join(self.parameter_names)}",
+                 f"  outputs    : {', '.join(f'{o.name} (sigma {o.sigma:g})' for o in self.outputs)}"]
+        for f in self.families:
+            lines.append(f"  family {f.symbol}: breakpoints {list(f.breakpoints)} -> knots "
+                         f"{', '.join(map(str, f.knots))}")
+        return "\n".join(lines)
+
+
+# ---------------------------------------------------------------------------
+# The builder
+# ---------------------------------------------------------------------------
+
+
+def _float(value, what: str) -> float:
+    try:
+        out = float(value)
+    except (TypeError, ValueError):
+        raise ModelError(f"{what} must be a number, got {value!r}") from None
+    if math.isnan(out):
+        raise ModelError(f"{what} is NaN")
+    return out
+
+
+class Model:
+    """A mutable model declaration (the builder of a :class:`ModelSpec`).
+
+    Parameters
+    ----------
+    name : str
+        Model name (used in reports and cache keys).
+    t0, tf : float
+        Time horizon.
+    time : str
+        Name of the time symbol.
+    description : str
+        Free text shown in summaries.
+    """
+
+    def __init__(self, name: str, t0: float, tf: float, *, time: str = "t", description: str = ""):
+        t0 = _float(t0, "t0")
+        tf = _float(tf, "tf")
+        if not tf > t0:
+            raise ModelError(f"the time horizon must have tf > t0, got t0={t0}, tf={tf}")
+        self.name = str(name)
+        self.description = description
+        self.t0, self.tf = t0, tf
+        self.t = sp.Symbol(time)
+        self._names: dict[str, sp.Symbol] = {time: self.t}
+        self._states: list[StateSpec] = []
+        self._inputs: list[InputSpec] = []
+        self._constants: list[tuple[sp.Symbol, float]] = []
+        self._parameters: list[ParameterSpec] = []
+        self._families: list[FamilySpec] = []
+        self._definitions: list[tuple[sp.Symbol, sp.Expr]] = []
+        self._equations: dict[sp.Symbol, sp.Expr] = {}
+        self._outputs: list[OutputSpec] = []
+
+    # -- attribute access ----------------------------------------------------
+    def __getattr__(self, name: str) -> sp.Symbol:
+        names = self.__dict__.get("_names")
+        if names is not None and name in names:
+            return names[name]
+        raise AttributeError(f"model has no component named {name!r}")
+
+    def copy(self) -> "Model":
+        """An independent copy (SymPy expressions are immutable and shared)."""
+        new = copy.copy(self)
+        new._names = dict(self._names)
+        new._states = list(self._states)
+        new._inputs = list(self._inputs)
+        new._constants = list(self._constants)
+        new._parameters = list(self._parameters)
+        new._families = list(self._families)
+        new._definitions = list(self._definitions)
+        new._equations = dict(self._equations)
+        new._outputs = list(self._outputs)
+        return new
+
+    def _new_symbol(self, name: str) -> sp.Symbol:
+        if not isinstance(name, str) or not name.isidentifier():
+            raise ModelError(f"component names must be Python identifiers, got {name!r}")
+        if name in self._names:
+            raise ModelError(f"model {self.name!r} already has a component named {name!r}")
+        sym = sp.Symbol(name)
+        self._names[name] = sym
+        return sym
+
+    def _state(self, state: sp.Symbol | str) -> StateSpec:
+        sym = self._names.get(state) if isinstance(state, str) else state
+        for s in self._states:
+            if s.symbol == sym:
+                return s
+        raise ModelError(f"{state} is not a state of model {self.name!r}; its states are "
+                         f"{', '.join(str(s.symbol) for s in self._states) or 'none yet'}")
+
+    # -- components ------------------------------------------------------------
+    def state(self, name: str, initial: float, *, free: bool = False,
+              bounds: tuple[float, float] = (-math.inf, math.inf), nominal: float | None = None) -> sp.Symbol:
+        """Declare a state with its initial value.
+
+        Parameters
+        ----------
+        name : str
+        initial : float
+            Initial value at ``t0`` (the guess when ``free``).
+        free : bool
+            Estimate the initial value: a parameter ``<name>_0`` is created.
+        bounds, nominal
+            Bounds and magnitude of that parameter.
+
+        Returns
+        -------
+        sympy.Symbol
+        """
+        sym = self._new_symbol(name)
+        der = self._new_symbol(f"d{name}_dt")
+        initial = _float(initial, f"initial value of state {name}")
+        ipar = None
+        if free:
+            ipar = self._add_parameter(f"{name}_0", initial, bounds, nominal)
+        self._states.append(StateSpec(sym, der, initial, ipar))
+        return sym
+
+    def der(self, state: sp.Symbol | str) -> sp.Symbol:
+        """The symbol standing for ``d state / dt`` (use it in implicit residuals)."""
+        return self._state(state).derivative
+
+    def input(self, name: str, expr: sp.Expr | None = None, *, times: Sequence[float] | None = None,
+              values: Sequence[float] | None = None, breakpoints: Iterable[float] = ()) -> sp.Symbol:
+        """Declare a known input: ``expr`` (a SymPy expression of ``m.t``) or
+        sampled ``times``/``values`` (linearly interpolated).
+
+        ``breakpoints`` lists times where the input has a kink; sampled inputs
+        use their sample times.
+        """
+        sym = self._new_symbol(name)
+        if (expr is None) == (times is None):
+            raise ModelError(f"input {name}: give either expr=... or times=/values=, not both or neither")
+        if expr is not None:
+            expr = sp.sympify(expr)
+            extra = expr.free_symbols - {self.t}
+            if extra:
+                raise ModelError(f"input {name} may depend on {self.t} only; it uses {', '.join(map(str, extra))}")
+            self._inputs.append(InputSpec(sym, expr, breakpoints=tuple(sorted(float(b) for b in breakpoints))))
+        else:
+            tt = np.asarray(times, dtype=float).ravel()
+            vv = np.asarray(values, dtype=float).ravel()
+            if tt.shape != vv.shape or tt.size < 2:
+                raise ModelError(f"input {name}: times and values must be 1-D of equal length >= 2")
+            if not (np.all(np.isfinite(tt)) and np.all(np.isfinite(vv))):
+                raise ModelError(f"input {name}: times and values must be finite (found NaN or inf)")
+            if np.any(np.diff(tt) <= 0):
+                raise ModelError(f"input {name}: times must be strictly increasing")
+            self._inputs.append(InputSpec(sym, None, tuple(tt), tuple(vv), tuple(tt)))
+        return sym
+
+    def constant(self, name: str, value: float) -> sp.Symbol:
+        """Declare a named constant (substituted by its value in generated code)."""
+        sym = self._new_symbol(name)
+        self._constants.append((sym, _float(value, f"constant {name}")))
+        return sym
+
+    def parameter(self, name: str, guess: float, *, bounds: tuple[float, float] = (-math.inf, math.inf),
+                  nominal: float | None = None) -> sp.Symbol:
+        """Declare a scalar parameter to estimate, with its guess and bounds."""
+        return self._add_parameter(name, guess, bounds, nominal)
+
+    def _add_parameter(self, name, guess, bounds, nominal, family=None) -> sp.Symbol:
+        sym = self._new_symbol(name)
+        guess = _float(guess, f"guess of parameter {name}")
+        try:
+            lo, hi = (_float(b, f"bound of parameter {name}") for b in bounds)
+        except (TypeError, ValueError):
+            raise ModelError(f"bounds of parameter {name} must be a pair (lower, upper), got {bounds!r}") from None
+        if lo > hi:
+            raise ModelError(f"parameter {name}: lower bound {lo} exceeds upper bound {hi}")
+        if nominal is None:
+            nominal = abs(guess) if guess != 0 else 1.0
+        self._parameters.append(ParameterSpec(sym, guess, lo, hi, _float(nominal, f"nominal of {name}"), family))
+        return sym
+
+    def piecewise_linear(self, name: str, breakpoints: Sequence[float], guess: float | Sequence[float], *,
+                         bounds: tuple[float, float] = (-math.inf, math.inf),
+                         ties: Sequence[Sequence[int]] = (), nominal: float | None = None) -> sp.Symbol:
+        """Declare a time-varying parameter, piecewise linear in time (7.4).
+
+        Parameters
+        ----------
+        name : str
+            Name of the family; knots are named ``<name>0``, ``<name>1``, ...
+            (a family whose knots are all tied is constant in time: it is
+            declared as one scalar parameter named ``<name>``).
+        breakpoints : sequence of float
+            Knot times, strictly increasing, from ``t0`` to ``tf``.
+        guess : float or sequence of float
+            Guess per knot (or one value for all).
+        bounds : (float, float)
+            Bounds of every knot value.
+        ties : sequence of sequences of int
+            Groups of knot indices that share one value, e.g. ``[(0, 1)]``.
+
+        Returns
+        -------
+        sympy.Symbol
+            The family's local value, to use in expressions.
+        """
+        bp = np.asarray(breakpoints, dtype=float).ravel()
+        if bp.size < 2 or np.any(np.diff(bp) <= 0):
+            raise ModelError(f"family {name}: breakpoints must be strictly increasing, at least two")
+        if abs(bp[0] - self.t0) > 1e-12 or abs(bp[-1] - self.tf) > 1e-12:
+            raise ModelError(f"family {name}: breakpoints must start at t0={self.t0:g} and end at tf={self.tf:g}")
+        g = np.broadcast_to(np.asarray(guess, dtype=float), bp.shape) if np.ndim(guess) == 0 else np.asarray(guess, dtype=float)
+        if g.shape != bp.shape:
+            raise ModelError(f"family {name}: {g.size} guesses for {bp.size} breakpoints")
+        owner = list(range(bp.size))
+        for group in ties:
+            group = sorted(int(i) for i in group)
+            if any(i < 0 or i >= bp.size for i in group):
+                raise ModelError(f"family {name}: tie {group} refers to a knot outside 0..{bp.size - 1}")
+            for i in group:
+                owner[i] = owner[group[0]]
+        if len(set(owner)) == 1:
+            # all knots tied: the family is a constant, declared as one scalar parameter
+            if np.ptp(g) != 0:
+                raise ModelError(f"family {name}: all knots are tied but their guesses differ ({list(g)})")
+            return self._add_parameter(name, g[0], bounds, nominal)
+        fam = self._new_symbol(name)
+        knot_syms: dict[int, sp.Symbol] = {}
+        for i in range(bp.size):
+            o = owner[i]
+            if o not in knot_syms:
+                knot_syms[o] = self._add_parameter(f"{name}{o}", g[o], bounds, nominal, family=fam)
+        self._families.append(FamilySpec(fam, tuple(bp), tuple(knot_syms[owner[i]] for i in range(bp.size))))
+        return fam
+
+    def define(self, name: str, expr: sp.Expr) -> sp.Symbol:
+        """Name an intermediate expression (air density, Mach, dynamic pressure...).
+
+        The symbol can be used in dynamics and outputs and is substituted before
+        differentiation; diagnostics evaluate definitions along trajectories.
+        """
+        sym = self._new_symbol(name)
+        self._definitions.append((sym, sp.sympify(expr)))
+        return sym
+
+    # -- equations ---------------------------------------------------------------
+    def ode(self, rhs: Mapping[sp.Symbol, sp.Expr]) -> None:
+        """Explicit dynamics ``d state/dt = rhs`` for each state given."""
+        for state, expr in rhs.items():
+            s = self._state(state)
+            self._equations[s.symbol] = s.derivative - sp.sympify(expr)
+
+    def implicit(self, residuals: Mapping[sp.Symbol, sp.Expr | sp.Eq]) -> None:
+        """Implicit dynamics ``F(t, s, ds/dt, u, l) = 0``, one residual per state.
+
+        A residual may be an expression (meaning ``expr = 0``) or a
+        :class:`sympy.Eq`. It must contain the state's derivative symbol
+        (``m.der(state)``), linearly.
+        """
+        for state, expr in residuals.items():
+            s = self._state(state)
+            if isinstance(expr, sp.Equality):
+                expr = expr.lhs - expr.rhs
+            expr = sp.sympify(expr)
+            if s.derivative not in expr.free_symbols:
+                raise ModelError(f"the implicit equation given for {s.symbol} does not contain "
+                                 f"{s.derivative}; use m.der({s.symbol}) in it")
+            self._equations[s.symbol] = expr
+
+    def add_term(self, state: sp.Symbol | str, term: sp.Expr) -> None:
+        """Add ``term`` to the right-hand side of ``d state/dt`` (for implicit
+        equations the term is scaled by the derivative's coefficient)."""
+        s = self._state(state)
+        if s.symbol not in self._equations:
+            raise ModelError(f"state {s.symbol} has no equation yet; declare it with ode() or implicit() first")
+        eq = self._equations[s.symbol]
+        coeff = sp.diff(eq, s.derivative)
+        self._equations[s.symbol] = eq - coeff * sp.sympify(term)
+
+    def substitute(self, mapping: Mapping[sp.Symbol, sp.Expr]) -> None:
+        """Replace symbols by expressions in every equation, definition and output."""
+        mapping = {k: sp.sympify(v) for k, v in mapping.items()}
+        self._equations = {k: e.xreplace(mapping) for k, e in self._equations.items()}
+        self._definitions = [(s, e.xreplace(mapping)) for s, e in self._definitions]
+        self._outputs = [replace(o, expr=o.expr.xreplace(mapping)) for o in self._outputs]
+
+    def output(self, name: str, expr: sp.Expr, sigma: float) -> None:
+        """Declare a measured output (a data column named ``name``) with noise sigma."""
+        if any(o.name == name for o in self._outputs):
+            raise ModelError(f"model {self.name!r} already has an output named {name!r}")
+        sigma = _float(sigma, f"sigma of output {name}")
+        if not (sigma > 0 and math.isfinite(sigma)):
+            raise ModelError(f"sigma of output {name} must be positive and finite, got {sigma}")
+        self._outputs.append(OutputSpec(str(name), sp.sympify(expr), sigma))
+
+    def set_sigma(self, name: str, sigma: float) -> None:
+        """Change the noise standard deviation of an output."""
+        for i, o in enumerate(self._outputs):
+            if o.name == name:
+                sigma = _float(sigma, f"sigma of output {name}")
+                if not (sigma > 0 and math.isfinite(sigma)):
+                    raise ModelError(f"sigma of output {name} must be positive and finite, got {sigma}")
+                self._outputs[i] = replace(o, sigma=sigma)
+                return
+        raise ModelError(f"model {self.name!r} has no output named {name!r}")
+
+    # -- freeze ------------------------------------------------------------------
+    def freeze(self) -> ModelSpec:
+        """Validate and return the immutable :class:`ModelSpec`."""
+        if not self._states:
+            raise ModelError(f"model {self.name!r} has no states")
+        missing = [str(s.symbol) for s in self._states if s.symbol not in self._equations]
+        if missing:
+            raise ModelError(f"model {self.name!r}: no equation for state(s) {', '.join(missing)}; "
+                             "add them with m.ode({state: rhs}) or m.implicit({state: residual})")
+        if not self._outputs:
+            raise ModelError(f"model {self.name!r} has no measured outputs; declare them with m.output(...)")
+        spec = ModelSpec(
+            name=self.name, t=self.t, t0=self.t0, tf=self.tf,
+            states=tuple(self._states), inputs=tuple(self._inputs),
+            constants=tuple(self._constants), parameters=tuple(self._parameters),
+            families=tuple(self._families), definitions=tuple(self._definitions),
+            equations=tuple(self._equations[s.symbol] for s in self._states),
+            outputs=tuple(self._outputs), description=self.description, _builder=self.copy(),
+        )
+        _check_symbols(spec)
+        _check_guesses(spec)
+        return spec
+
+
+def _check_symbols(spec: ModelSpec) -> None:
+    allowed_dyn = ({spec.t} | set(spec.state_symbols) | set(spec.derivative_symbols)
+                   | set(spec.input_symbols) | set(spec.local_symbols))
+    for s, eq in zip(spec.states, spec.equations):
+        extra = spec.expand(eq).free_symbols - allowed_dyn
+        if extra:
+            raise ModelError(_unknown_msg(spec, f"the equation of {s.symbol}", extra))
+        d = sp.diff(spec.expand(eq), s.derivative)
+        if set(spec.derivative_symbols) & d.free_symbols:
+            raise ModelError(f"the equation of {s.symbol} is not linear in {s.derivative}")
+    allowed_out = ({spec.t} | set(spec.state_symbols) | set(spec.derivative_symbols)
+                   | {p.symbol for p in spec.parameters if p.family is None})
+    for o in spec.outputs:
+        extra = spec.expand(o.expr).free_symbols - allowed_out
+        if extra:
+            raise ModelError(_unknown_msg(spec, f"output {o.name}", extra)
+                             + " (outputs may use t, states, their derivatives and scalar parameters)")
+
+
+def _unknown_msg(spec: ModelSpec, where: str, extra: set) -> str:
+    names = ", ".join(sorted(map(str, extra)))
+    return (f"{where} of model {spec.name!r} uses {names}, which is not declared there; declare it "
+            "with m.state, m.input, m.constant, m.parameter, m.piecewise_linear or m.define")
+
+
+def _check_guesses(spec: ModelSpec) -> None:
+    for p in spec.parameters:
+        if not (p.lower <= p.guess <= p.upper):
+            raise ModelError(f"the guess {p.guess:g} of parameter {p.symbol} lies outside its bounds "
+                             f"[{p.lower:g}, {p.upper:g}]; move the guess inside or widen the bounds")

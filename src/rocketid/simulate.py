@@ -1,0 +1,243 @@
+"""High-accuracy simulation of a model with SciPy, and synthetic measurements.
+
+This is the source of truth data. It shares nothing with the collocation
+code used to estimate: it integrates the model's equations, solved for the
+derivatives, with ``scipy.integrate.solve_ivp``.
+
+Two details make tight tolerances meaningful on ascent models (METHOD.md
+section 1):
+
+* the integrator works on deviations from the initial state, ``s - s(t0)``,
+  so that a flight-path angle near 1.57 rad does not eat the relative
+  tolerance;
+* an implicit equation ``a(s) ds/dt = b(s)`` whose coefficient vanishes
+  (``v dtheta/dt = ...`` at rest) is guarded: while ``|a|`` is below
+  ``guard`` the derivative is held at zero. At a launch from rest this picks
+  the solution that leaves the pad vertically (the constant ``C = 0`` of the
+  homogeneous ``C t^(g/a)`` family).
+
+The integration is split at every breakpoint of the model (parameter
+families, input kinks), where the right-hand side is not smooth.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Mapping, Sequence
+
+import numpy as np
+import sympy as sp
+from scipy.integrate import solve_ivp
+
+from .data import Channel, Measurements
+from .errors import ModelError, RocketidError, SettingsError
+from .model import ModelSpec
+
+__all__ = ["Trajectory", "simulate", "simulate_measurements"]
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """A simulated trajectory.
+
+    Attributes
+    ----------
+    spec : ModelSpec
+    p : ndarray, shape (n_p,)
+        Parameters it was simulated with.
+    times : ndarray, shape (n,)
+    states : ndarray, shape (n, n_states)
+    success : bool
+    message : str
+    """
+
+    spec: ModelSpec
+    p: np.ndarray
+    times: np.ndarray
+    states: np.ndarray
+    success: bool = True
+    message: str = ""
+
+    def value(self, symbol: sp.Symbol | str) -> np.ndarray:
+        """A state's history, or a definition/output expression evaluated along it."""
+        sym = self.spec.symbol(symbol)
+        if sym in self.spec.state_symbols:
+            return self.states[:, self.spec.state_symbols.index(sym)]
+        for d, expr in self.spec.definitions:
+            if d == sym:
+                return evaluate_along(self.spec, expr, self.times, self.states, self.p)
+        raise ModelError(f"{sym} is not a state or definition of model {self.spec.name!r}")
+
+    def outputs(self) -> dict[str, np.ndarray]:
+        """Each output's noise-free values at :attr:`times`."""
+        return {o.name: evaluate_along(self.spec, o.expr, self.times, self.states, self.p)
+                for o in self.spec.outputs}
+
+
+def _locals_at(spec: ModelSpec, t: np.ndarray, p: np.ndarray) -> list[np.ndarray]:
+    """Local parameter values (families interpolated) at times t."""
+    values = spec.parameter_dict(p)
+    fams = {f.symbol: f for f in spec.families}
+    out = []
+    for sym in spec.local_symbols:
+        if sym in fams:
+            out.append(fams[sym].evaluate(t, values))
+        else:
+            out.append(np.full(np.shape(t), values[sym]))
+    return out
+
+
+def evaluate_along(spec: ModelSpec, expr: sp.Expr, times: np.ndarray, states: np.ndarray,
+                   p: np.ndarray, derivatives: np.ndarray | None = None) -> np.ndarray:
+    """Evaluate an expression of (t, states, derivatives, inputs, parameters) along a trajectory."""
+    expr = spec.expand(expr)
+    times = np.asarray(times, dtype=float)
+    args = [spec.t, *spec.state_symbols, *spec.derivative_symbols, *spec.input_symbols, *spec.local_symbols]
+    # scalar parameters may appear directly (outputs): they are local symbols too
+    fn = sp.lambdify(args, expr, modules="numpy")
+    ders = derivatives if derivatives is not None else np.full_like(states, np.nan)
+    with np.errstate(all="ignore"):
+        val = fn(times, *states.T, *ders.T, *spec.input_values(times).T, *_locals_at(spec, times, p))
+    return np.broadcast_to(np.asarray(val, dtype=float), times.shape).copy()
+
+
+class _RHS:
+    """``ds/dt`` from the residuals ``F = A(s) ds/dt + b(s)``, with the guard."""
+
+    def __init__(self, spec: ModelSpec, p: np.ndarray, guard: float):
+        self.spec = spec
+        ders = spec.derivative_symbols
+        F = [spec.expand(e) for e in spec.equations]
+        A = sp.Matrix([[sp.diff(f, d) for d in ders] for f in F])
+        b = sp.Matrix([f.xreplace({d: 0 for d in ders}) for f in F])
+        if any(dd in A.free_symbols for dd in ders):
+            raise ModelError("the equations are not linear in the state derivatives")
+        self.diagonal = all(A[i, j] == 0 for i in range(len(F)) for j in range(len(F)) if i != j)
+        args = [spec.t, *spec.state_symbols, *spec.input_symbols, *spec.local_symbols]
+        exprs = list(A) + list(b)
+        try:
+            self._fn = sp.lambdify(args, exprs, modules=["math"], cse=True)
+            self._fn(spec.t0 + 0.0, *([0.5] * (len(args) - 1)))
+        except (TypeError, NameError, ValueError, ZeroDivisionError, OverflowError):
+            self._fn = sp.lambdify(args, exprs, modules="numpy", cse=True)
+        self.n = len(F)
+        self.p = p
+        self.guard = guard
+        self.values = spec.parameter_dict(p)
+        self.families = {f.symbol: f for f in spec.families}
+        self._inputs = []
+        for u in spec.inputs:
+            if u.expr is not None:
+                f = sp.lambdify(spec.t, u.expr, modules=["math"])
+                self._inputs.append(f)
+            else:
+                tt, vv = np.asarray(u.times), np.asarray(u.values)
+                self._inputs.append(lambda t, tt=tt, vv=vv: float(np.interp(t, tt, vv)))
+        self.s0 = None
+        self.guarded = False
+
+    def locals_(self, t: float) -> list[float]:
+        out = []
+        for sym in self.spec.local_symbols:
+            if sym in self.families:
+                out.append(float(self.families[sym].evaluate(t, self.values)))
+            else:
+                out.append(self.values[sym])
+        return out
+
+    def __call__(self, t: float, ds: np.ndarray) -> np.ndarray:
+        s = self.s0 + ds
+        vals = self._fn(t, *s, *(f(t) for f in self._inputs), *self.locals_(t))
+        n = self.n
+        A = np.asarray(vals[: n * n], dtype=float).reshape(n, n)
+        b = np.asarray(vals[n * n:], dtype=float)
+        if self.diagonal:
+            a = np.diag(A)
+            small = np.abs(a) < self.guard
+            out = np.where(small, 0.0, -b / np.where(small, 1.0, a))
+            if small.any():
+                self.guarded = True
+            return out
+        return np.linalg.solve(A, -b)
+
+
+def simulate(spec: ModelSpec, p: Sequence[float] | Mapping | None = None, times: Sequence[float] | None = None,
+             *, rtol: float = 1e-12, atol: float = 1e-12, method: str = "DOP853",
+             initial_state: Sequence[float] | None = None, guard: float = 1e-9) -> Trajectory:
+    """Integrate ``spec`` at parameters ``p`` with SciPy.
+
+    Parameters
+    ----------
+    spec : ModelSpec
+    p : mapping or sequence, optional
+        Parameters (default: the model's guesses). A mapping may give a subset.
+    times : sequence of float, optional
+        Output times (default: 1001 points over the horizon).
+    rtol, atol : float
+        Tolerances of ``solve_ivp`` (on deviations from the initial state).
+    method : str
+        ``solve_ivp`` method.
+    initial_state : sequence of float, optional
+        Overrides the model's initial state (Table 7.3's perturbed starts).
+    guard : float
+        Below this magnitude an implicit derivative coefficient is treated as zero.
+
+    Returns
+    -------
+    Trajectory
+    """
+    pvec = spec.parameter_vector(p)
+    if times is None:
+        times = np.linspace(spec.t0, spec.tf, 1001)
+    times = np.asarray(times, dtype=float)
+    if times.ndim != 1 or np.any(np.diff(times) < 0):
+        raise SettingsError("simulation times must be a sorted 1-D sequence")
+    if times.size and (times[0] < spec.t0 - 1e-12 or times[-1] > spec.tf + 1e-12):
+        raise SettingsError(f"simulation times must lie in [{spec.t0:g}, {spec.tf:g}]")
+    s0 = spec.initial_state(pvec) if initial_state is None else np.asarray(initial_state, dtype=float)
+    rhs = _RHS(spec, pvec, guard)
+    rhs.s0 = s0
+    bps = [b for b in spec.breakpoints if spec.t0 <= b <= spec.tf]
+    out = np.full((times.size, s0.size), np.nan)
+    ds = np.zeros_like(s0)
+    ok, msg = True, "integration successful"
+    for a, b in zip(bps[:-1], bps[1:]):
+        sel = (times >= a) & (times <= b) if b == bps[-1] else (times >= a) & (times < b)
+        sol = solve_ivp(rhs, (a, b), ds, method=method, rtol=rtol, atol=atol, dense_output=True)
+        if not sol.success:
+            ok, msg = False, f"integration failed on [{a:g}, {b:g}]: {sol.message}"
+            break
+        if sel.any():
+            out[sel] = s0 + sol.sol(times[sel]).T
+        ds = sol.y[:, -1]
+    if ok and rhs.guarded:
+        msg += f"; implicit derivatives held at zero where their coefficient was below {guard:g} (singular start)"
+    return Trajectory(spec, pvec, times, out, ok, msg)
+
+
+def simulate_measurements(spec: ModelSpec, p: Sequence[float] | Mapping | None = None,
+                          times: Sequence[float] | None = None, *, seed: int | None = 0,
+                          noise: bool = True, rtol: float = 1e-12, atol: float = 1e-12,
+                          sigma: Mapping[str, float] | None = None) -> Measurements:
+    """Synthetic measurements: a high-accuracy simulation plus seeded Gaussian noise.
+
+    Noise is drawn with ``numpy.random.default_rng(seed)``, channel after
+    channel in the order of the model's outputs, N(0, sigma^2) with each
+    output's sigma (or ``sigma[name]``).
+
+    Returns
+    -------
+    Measurements
+    """
+    traj = simulate(spec, p, times, rtol=rtol, atol=atol)
+    if not traj.success:
+        raise RocketidError(f"cannot make measurements: {traj.message}")
+    rng = np.random.default_rng(seed)
+    sigma = dict(sigma or {})
+    chans = []
+    for name, y in traj.outputs().items():
+        sd = sigma.get(name, next(o.sigma for o in spec.outputs if o.name == name))
+        val = y + rng.normal(0.0, sd, y.size) if noise else y
+        chans.append(Channel(name, traj.times, val, sd))
+    return Measurements(tuple(chans))

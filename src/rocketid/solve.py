@@ -1,0 +1,531 @@
+"""Solving the NLP with IPOPT through cyipopt, and the estimation result.
+
+The adapter composes with the solver: it holds a
+:class:`~rocketid.nlp.CollocationNLP` and builds a ``cyipopt.Problem`` from
+it (the binding is not subclassed). IPOPT options pass through one checked
+mapping, :func:`check_ipopt_options`, which knows the options' types and
+names the close matches of a misspelt one.
+
+:func:`estimate` runs the pipeline from a model and data to an
+:class:`EstimationResult`: generate code (cached), transcribe, build the NLP,
+initialize the states from a simulation at the initial guess, solve.
+"""
+
+from __future__ import annotations
+
+import difflib
+import json
+import math
+import time
+import warnings
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+import sympy as sp
+
+from .codegen import generate
+from .collocation.transcription import Mesh, Transcription, transcribe, uniform_mesh
+from .data import Measurements
+from .errors import DataError, ModelError, SettingsError, SolverError
+from .model import ModelSpec
+from .nlp import CollocationNLP, ParameterTransform
+
+__all__ = ["IPOPT_OPTIONS", "check_ipopt_options", "NLPSolution", "solve_nlp", "EstimationResult",
+           "estimate", "prepare", "default_mesh", "Prepared"]
+
+_S, _I, _F = "str", "int", "float"
+IPOPT_OPTIONS: dict[str, str] = {
+    # termination
+    "tol": _F, "max_iter": _I, "max_wall_time": _F, "max_cpu_time": _F, "dual_inf_tol": _F,
+    "constr_viol_tol": _F, "compl_inf_tol": _F, "acceptable_tol": _F, "acceptable_iter": _I,
+    "acceptable_constr_viol_tol": _F, "acceptable_dual_inf_tol": _F, "acceptable_obj_change_tol": _F,
+    # output
+    "print_level": _I, "print_user_options": _S, "print_options_documentation": _S, "print_timing_statistics": _S,
+    "output_file": _S, "file_print_level": _I, "sb": _S, "print_frequency_iter": _I,
+    # NLP
+    "bound_relax_factor": _F, "honor_original_bounds": _S, "nlp_lower_bound_inf": _F, "nlp_upper_bound_inf": _F,
+    "fixed_variable_treatment": _S, "jac_c_constant": _S, "jac_d_constant": _S, "hessian_constant": _S,
+    "check_derivatives_for_naninf": _S, "nlp_scaling_method": _S, "obj_scaling_factor": _F,
+    "nlp_scaling_max_gradient": _F,
+    # initialization and warm start
+    "bound_push": _F, "bound_frac": _F, "slack_bound_push": _F, "slack_bound_frac": _F,
+    "constr_mult_init_max": _F, "bound_mult_init_val": _F, "bound_mult_init_method": _S,
+    "warm_start_init_point": _S, "warm_start_bound_push": _F, "warm_start_bound_frac": _F,
+    "warm_start_slack_bound_push": _F, "warm_start_slack_bound_frac": _F, "warm_start_mult_bound_push": _F,
+    "warm_start_mult_init_max": _F,
+    # barrier
+    "mu_strategy": _S, "mu_oracle": _S, "mu_init": _F, "mu_min": _F, "mu_target": _F,
+    "mehrotra_algorithm": _S, "adaptive_mu_globalization": _S,
+    # line search, restoration
+    "accept_every_trial_step": _S, "max_soc": _I, "watchdog_shortened_iter_trigger": _I,
+    "expect_infeasible_problem": _S, "start_with_resto": _S, "required_infeasibility_reduction": _F,
+    "alpha_for_y": _S, "recalc_y": _S,
+    # linear solver, Hessian
+    "linear_solver": _S, "mumps_mem_percent": _I, "mumps_pivtol": _F, "mumps_pivtolmax": _F,
+    "hessian_approximation": _S, "limited_memory_max_history": _I,
+    "derivative_test": _S, "derivative_test_tol": _F, "derivative_test_perturbation": _F,
+    "derivative_test_print_all": _S, "timing_statistics": _S,
+}
+
+DEFAULT_IPOPT = {"tol": 1e-8, "print_level": 0, "sb": "yes", "max_iter": 500, "mu_strategy": "adaptive"}
+
+
+def check_ipopt_options(options: Mapping[str, Any] | None) -> dict[str, Any]:
+    """Validate IPOPT options against the known table; returns a typed copy.
+
+    Raises
+    ------
+    SettingsError
+        For an unknown name (with close matches) or a value of the wrong type.
+    """
+    out: dict[str, Any] = {}
+    for name, value in (options or {}).items():
+        kind = IPOPT_OPTIONS.get(name)
+        if kind is None:
+            close = difflib.get_close_matches(name, list(IPOPT_OPTIONS), n=3)
+            hint = f"; did you mean {', '.join(close)}?" if close else ""
+            raise SettingsError(f"unknown IPOPT option {name!r}{hint} (rocketid passes only the options it knows: "
+                                "see rocketid.solve.IPOPT_OPTIONS)")
+        try:
+            if kind == _I:
+                if isinstance(value, bool) or float(value) != int(value):
+                    raise ValueError
+                value = int(value)
+            elif kind == _F:
+                value = float(value)
+                if math.isnan(value):
+                    raise ValueError
+            else:
+                if not isinstance(value, str):
+                    raise ValueError
+        except (TypeError, ValueError):
+            raise SettingsError(f"IPOPT option {name!r} takes a{'n' if kind == _I else ''} {kind}, got {value!r}") from None
+        out[name] = value
+    return out
+
+
+@dataclass(frozen=True)
+class NLPSolution:
+    """What IPOPT returned for one NLP solve.
+
+    Attributes
+    ----------
+    x : ndarray
+        Primal solution (the NLP's decision vector).
+    mult_g : ndarray
+        Constraint multipliers.
+    mult_x_L, mult_x_U : ndarray
+        Bound multipliers.
+    status : int
+        IPOPT's return status (0: solved, 1: solved to acceptable level).
+    message : str
+    iterations : int
+    objective : float
+    solve_s : float
+        Wall time of the IPOPT call alone.
+    """
+
+    x: np.ndarray
+    mult_g: np.ndarray
+    mult_x_L: np.ndarray
+    mult_x_U: np.ndarray
+    status: int
+    message: str
+    iterations: int
+    objective: float
+    solve_s: float
+
+    @property
+    def success(self) -> bool:
+        return self.status in (0, 1)
+
+
+class _IpoptAdapter:
+    """The callbacks cyipopt calls, delegating to the NLP; counts iterations."""
+
+    def __init__(self, nlp: CollocationNLP):
+        self.nlp = nlp
+        self.iterations = 0
+        self.objective = nlp.objective
+        self.gradient = nlp.gradient
+        self.constraints = nlp.constraints
+        self.jacobian = nlp.jacobian
+        self.jacobianstructure = nlp.jacobianstructure
+        self.hessian = nlp.hessian
+        self.hessianstructure = nlp.hessianstructure
+
+    def intermediate(self, alg_mod, iter_count, *args):
+        self.iterations = int(iter_count)
+        return True
+
+
+def solve_nlp(nlp: CollocationNLP, x0: np.ndarray, *, options: Mapping[str, Any] | None = None,
+              warm: NLPSolution | None = None) -> NLPSolution:
+    """Solve ``nlp`` from ``x0`` with IPOPT (through cyipopt).
+
+    Parameters
+    ----------
+    nlp : CollocationNLP
+    x0 : ndarray, shape (nlp.n,)
+    options : mapping, optional
+        IPOPT options (checked by :func:`check_ipopt_options`), over rocketid's defaults.
+    warm : NLPSolution, optional
+        A previous solution of a problem with the same structure: its
+        multipliers warm-start IPOPT (``warm_start_init_point = yes``).
+
+    Returns
+    -------
+    NLPSolution
+    """
+    try:
+        import cyipopt
+    except ImportError as exc:  # pragma: no cover - depends on the installation
+        raise SolverError("cyipopt is not installed: `pip install cyipopt-wheels` (bundled Ipopt) or "
+                          "`pip install cyipopt` with a system Ipopt (see docs/install.md)") from exc
+    opts = dict(DEFAULT_IPOPT)
+    if warm is not None:
+        opts.update({"warm_start_init_point": "yes", "warm_start_bound_push": 1e-9, "warm_start_bound_frac": 1e-9,
+                     "warm_start_slack_bound_push": 1e-9, "warm_start_slack_bound_frac": 1e-9,
+                     "warm_start_mult_bound_push": 1e-9, "mu_init": 1e-6, "mu_strategy": "monotone"})
+    opts.update(check_ipopt_options(options))
+    x0 = np.asarray(x0, dtype=float)
+    if x0.shape != (nlp.n,):
+        raise SettingsError(f"x0 has shape {x0.shape}; the NLP has {nlp.n} variables")
+    adapter = _IpoptAdapter(nlp)
+    prob = cyipopt.Problem(n=nlp.n, m=nlp.m, problem_obj=adapter, lb=nlp.x_lower, ub=nlp.x_upper,
+                           cl=nlp.c_lower, cu=nlp.c_upper)
+    for k, v in opts.items():
+        prob.add_option(k, v)
+    if warm is not None:
+        if warm.mult_g.shape != (nlp.m,) or warm.mult_x_L.shape != (nlp.n,):
+            raise SettingsError("the warm-start solution comes from a problem of another size")
+        prob.set_problem_scaling()  # no-op, keeps cyipopt's state consistent
+        lagrange, zl, zu = warm.mult_g, warm.mult_x_L, warm.mult_x_U
+    else:
+        lagrange, zl, zu = [], [], []
+    # keep x0 strictly inside bounds (IPOPT would push it anyway)
+    x0 = np.clip(x0, nlp.x_lower, nlp.x_upper)
+    t0 = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        x, info = prob.solve(x0, lagrange=lagrange, zl=zl, zu=zu)
+    solve_s = time.perf_counter() - t0
+    msg = info["status_msg"]
+    msg = msg.decode() if isinstance(msg, bytes) else str(msg)
+    prob.close()
+    return NLPSolution(np.asarray(x), np.asarray(info["mult_g"]), np.asarray(info["mult_x_L"]),
+                       np.asarray(info["mult_x_U"]), int(info["status"]), msg, adapter.iterations,
+                       float(info["obj_val"]), solve_s)
+
+
+# ---------------------------------------------------------------------------
+# Pipeline: model + data -> result
+# ---------------------------------------------------------------------------
+
+
+def default_mesh(spec: ModelSpec, K: int = 3, element_length: float | None = None, refine_first: int = 3) -> Mesh:
+    """A mesh of about 1 s elements (or ``element_length``) that puts every family
+    breakpoint on a boundary, with the first element graded (singular starts).
+
+    RA-66 gets 66 elements of 1 s, the first split in 4 (see docs/accuracy.md).
+    """
+    from .collocation.transcription import graded_mesh
+    span = spec.tf - spec.t0
+    h = element_length if element_length is not None else min(1.0, span / 20)
+    bps = sorted(set(np.round(np.asarray(spec.breakpoints + tuple(b for f in spec.families for b in f.breakpoints)), 12)))
+    bps = [b for b in bps if spec.t0 <= b <= spec.tf]
+    fam_bps = sorted({float(b) for f in spec.families for b in f.breakpoints} | {spec.t0, spec.tf})
+    bounds = [fam_bps[0]]
+    for a, b in zip(fam_bps[:-1], fam_bps[1:]):
+        n = max(1, int(math.ceil((b - a) / h - 1e-9)))
+        bounds.extend(np.linspace(a, b, n + 1)[1:])
+    bounds = np.array(bounds)
+    if refine_first > 0:
+        h0 = bounds[1] - bounds[0]
+        w = 4.0 ** np.arange(refine_first + 1, dtype=float)
+        cuts = bounds[0] + h0 * np.cumsum(w)[:-1] / w.sum()
+        bounds = np.concatenate([[bounds[0]], cuts, bounds[1:]])
+    return Mesh(bounds, K)
+
+
+@dataclass(frozen=True)
+class Prepared:
+    """A model collocated on a mesh against data: ready to solve.
+
+    Attributes
+    ----------
+    spec, measurements, transcription, nlp
+    setup_s : float
+        Wall time from the model to the ready NLP (code generation included).
+    codegen_cached : bool
+    """
+
+    spec: ModelSpec
+    measurements: Measurements
+    transcription: Transcription
+    nlp: CollocationNLP
+    setup_s: float
+    codegen_cached: bool
+
+    def initial_states(self, p: np.ndarray) -> tuple[np.ndarray, str]:
+        """Node states from a simulation at ``p`` (falls back to the initial state
+        where the simulation fails); returns (states, note)."""
+        from .simulate import simulate
+        times = self.transcription.mesh.node_times
+        traj = simulate(self.spec, p, times, rtol=1e-8, atol=1e-8)
+        S = traj.states.copy()
+        note = ""
+        if not traj.success or not np.all(np.isfinite(S)):
+            good = np.all(np.isfinite(S), axis=1)
+            last = S[good][-1] if good.any() else self.spec.initial_state(p)
+            S[~good] = last
+            note = f"the initial-guess simulation failed ({traj.message}); states initialized by holding its last value"
+        return S, note
+
+
+def prepare(spec: ModelSpec, data: Measurements, *, mesh: Mesh | None = None) -> Prepared:
+    """Generate code, transcribe, and build the NLP (7.5) for ``spec`` and ``data``."""
+    if not isinstance(spec, ModelSpec):
+        raise ModelError(f"expected a ModelSpec (call Model.freeze()), got {type(spec).__name__}")
+    if not isinstance(data, Measurements):
+        raise DataError(f"expected Measurements (rocketid.data.read_csv or Measurements.from_arrays), got "
+                        f"{type(data).__name__}")
+    t0 = time.perf_counter()
+    gen = generate(spec)
+    mesh = mesh if mesh is not None else default_mesh(spec)
+    tr = transcribe(spec, data, mesh)
+    nlp = CollocationNLP(tr, gen, data)
+    return Prepared(spec, data, tr, nlp, time.perf_counter() - t0, gen.cached)
+
+
+@dataclass(frozen=True)
+class EstimationResult:
+    """The result of an estimation.
+
+    Attributes
+    ----------
+    success : bool
+    status : int
+        IPOPT's return status.
+    message : str
+    p : ndarray, shape (n_p,)
+        Estimated parameters (full physical vector).
+    objective : float
+        J at the solution (7.5).
+    iterations : int
+    x : ndarray
+        NLP solution vector.
+    solution : NLPSolution
+    prepared : Prepared
+    timings : dict
+        ``setup_s`` (model to ready NLP) and ``solve_s`` (the IPOPT call alone).
+    notes : tuple of str
+    """
+
+    success: bool
+    status: int
+    message: str
+    p: np.ndarray
+    objective: float
+    iterations: int
+    x: np.ndarray
+    solution: NLPSolution
+    prepared: Prepared
+    timings: dict
+    notes: tuple = ()
+
+    @property
+    def spec(self) -> ModelSpec:
+        return self.prepared.spec
+
+    @property
+    def nlp(self) -> CollocationNLP:
+        return self.prepared.nlp
+
+    @property
+    def parameters(self) -> dict[sp.Symbol, float]:
+        """``{symbol: estimate}``."""
+        return self.spec.parameter_dict(self.p)
+
+    def value(self, symbol: sp.Symbol | str) -> float | np.ndarray:
+        """A parameter's estimate, or a state's values at the mesh nodes."""
+        sym = self.spec.symbol(symbol)
+        if sym in self.spec.parameter_symbols:
+            return float(self.p[self.spec.parameter_symbols.index(sym)])
+        if sym in self.spec.state_symbols:
+            return self.state_trajectories[:, self.spec.state_symbols.index(sym)]
+        raise ModelError(f"{sym} is not a parameter or state of model {self.spec.name!r}")
+
+    @property
+    def node_times(self) -> np.ndarray:
+        return self.prepared.transcription.mesh.node_times
+
+    @cached_property
+    def state_trajectories(self) -> np.ndarray:
+        """States at the mesh nodes, shape (n_nodes, n_states)."""
+        S, _ = self.prepared.transcription.layout.unpack(self.nlp.full_vector(self.x))
+        return S
+
+    def states_at(self, times: Sequence[float]) -> np.ndarray:
+        """The collocation polynomial's states at ``times``, shape (n, n_states)."""
+        return self.prepared.transcription.states_at(self.nlp.full_vector(self.x), np.asarray(times, float))
+
+    @cached_property
+    def residuals(self) -> dict[str, np.ndarray]:
+        """Model minus measurement at each channel's samples."""
+        return dict(zip(self.nlp.channel_names, self.nlp.residuals(self.x)))
+
+    @cached_property
+    def predictions(self) -> dict[str, np.ndarray]:
+        """Model outputs at each channel's samples."""
+        return dict(zip(self.nlp.channel_names, self.nlp.outputs(self.x)))
+
+    @property
+    def n_data(self) -> int:
+        return self.nlp.n_residuals
+
+    @property
+    def n_estimated(self) -> int:
+        return self.nlp.transform.P.shape[1]
+
+    @property
+    def chi2_per_dof(self) -> float:
+        """``2 J / (n_data - n_estimated)``: near 1 when the model fits to the noise."""
+        return 2.0 * self.objective / max(1, self.n_data - self.n_estimated)
+
+    @cached_property
+    def rms(self) -> dict[str, float]:
+        """Root-mean-square residual per channel."""
+        return {k: float(np.sqrt(np.mean(r ** 2))) for k, r in self.residuals.items()}
+
+    def active_bounds(self, rtol: float = 1e-6) -> list[tuple[sp.Symbol, str]]:
+        """Parameters at (or within ``rtol`` of the span of) a bound."""
+        out = []
+        for s, v, lo, hi in zip(self.spec.parameter_symbols, self.p, self.spec.lower, self.spec.upper):
+            span = (hi - lo) if np.isfinite(hi - lo) else max(1.0, abs(v))
+            if np.isfinite(lo) and v - lo <= rtol * span:
+                out.append((s, "lower"))
+            elif np.isfinite(hi) and hi - v <= rtol * span:
+                out.append((s, "upper"))
+        return out
+
+    def summary(self) -> str:
+        """Fixed sections: problem, solver, parameters, fit; then numbered notes."""
+        tr = self.prepared.transcription
+        lines = [f"rocketid estimation: {self.spec.name}",
+                 "=" * 60,
+                 "Problem",
+                 f"  mesh          : {tr.mesh.describe()}",
+                 f"  NLP           : {self.nlp.n} variables, {self.nlp.m} constraints, "
+                 f"{len(self.nlp.jacobianstructure()[0])} Jacobian and {len(self.nlp.hessianstructure()[0])} Hessian non-zeros",
+                 f"  data          : {self.n_data} values in {len(self.nlp.channel_names)} channels "
+                 f"({', '.join(self.nlp.channel_names)})",
+                 "Solver",
+                 f"  status        : {'converged' if self.success else 'FAILED'} ({self.status}: {self.message})",
+                 f"  iterations    : {self.iterations}",
+                 f"  time          : setup {self.timings['setup_s']:.3f} s, IPOPT {self.timings['solve_s']:.3f} s",
+                 "Parameters",
+                 f"  {'name':<10}{'estimate':>14}{'guess':>12}{'lower':>10}{'upper':>10}"]
+        for ps, v in zip(self.spec.parameters, self.p):
+            lines.append(f"  {str(ps.symbol):<10}{v:>14.6g}{ps.guess:>12.4g}{ps.lower:>10.3g}{ps.upper:>10.3g}")
+        lines += ["Fit",
+                  f"  objective J   : {self.objective:.6g}",
+                  f"  chi2 / dof    : {self.chi2_per_dof:.4f}  (2J / ({self.n_data} - {self.n_estimated}))",
+                  "  RMS residual  : " + ", ".join(f"{k} {v:.4g}" for k, v in self.rms.items())]
+        notes = list(self.notes)
+        if not self.success:
+            notes.insert(0, f"IPOPT did not converge: {self.message}. The estimates are the last iterate, not an optimum.")
+        for s, side in self.active_bounds():
+            notes.append(f"{s} is at its {side} bound: the estimate is limited by the bound, not by the data.")
+        if self.success and self.chi2_per_dof > 1.5:
+            notes.append(f"chi2/dof = {self.chi2_per_dof:.3g} is well above 1: the model does not fit to the noise "
+                         "level (a missing effect or wrong sigma); see `rocketid diagnose`.")
+        if notes:
+            lines.append("Notes")
+            lines += [f"  [{i}] {n}" for i, n in enumerate(notes, 1)]
+        return "\n".join(lines)
+
+    def to_dict(self) -> dict:
+        """A JSON-ready dictionary (``success``, ``parameters``, ``objective``, ...)."""
+        return {
+            "model": self.spec.name,
+            "success": bool(self.success),
+            "status": self.status,
+            "message": self.message,
+            "parameters": {str(k): float(v) for k, v in self.parameters.items()},
+            "objective": float(self.objective),
+            "chi2_per_dof": float(self.chi2_per_dof),
+            "iterations": int(self.iterations),
+            "rms": self.rms,
+            "n_data": int(self.n_data),
+            "mesh": {"n_elements": int(self.prepared.transcription.mesh.n_elements),
+                     "K": int(self.prepared.transcription.mesh.K)},
+            "timings": {k: float(v) for k, v in self.timings.items()},
+            "notes": list(self.notes),
+        }
+
+    def to_json(self, path) -> None:
+        """Write :meth:`to_dict` as JSON."""
+        from pathlib import Path
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
+        Path(path).write_text(json.dumps(self.to_dict(), indent=2))
+
+
+def estimate(spec: ModelSpec, data: Measurements, *, guess: Mapping | Sequence[float] | None = None,
+             mesh: Mesh | None = None, options: Mapping[str, Any] | None = None,
+             warm_start: EstimationResult | None = None, prepared: Prepared | None = None) -> EstimationResult:
+    """Estimate all parameters of ``spec`` from ``data`` (the NLP (7.5)).
+
+    Parameters
+    ----------
+    spec : ModelSpec
+    data : Measurements
+    guess : mapping or sequence, optional
+        Initial guess (default: the model's p0).
+    mesh : Mesh, optional
+        Discretization (default: :func:`default_mesh`).
+    options : mapping, optional
+        IPOPT options.
+    warm_start : EstimationResult, optional
+        Start from a previous solution of the same problem (primal and dual).
+    prepared : Prepared, optional
+        Reuse an already built NLP (same spec, data and mesh).
+
+    Returns
+    -------
+    EstimationResult
+        ``success`` is False (with a note) when IPOPT fails; never raises for
+        a non-converged solve.
+    """
+    if prepared is None:
+        prepared = prepare(spec, data, mesh=mesh)
+    nlp = prepared.nlp
+    notes = []
+    p0 = spec.parameter_vector(guess)
+    lo, hi = spec.lower, spec.upper
+    bad = [(str(s), v, a, b) for s, v, a, b in zip(spec.parameter_symbols, p0, lo, hi) if not a <= v <= b]
+    if bad:
+        s, v, a, b = bad[0]
+        raise ModelError(f"the guess {v:g} of parameter {s} lies outside its bounds [{a:g}, {b:g}]; "
+                         "move the guess inside or widen the bounds")
+    warm = None
+    if warm_start is not None:
+        x0 = warm_start.x.copy()
+        warm = warm_start.solution
+        if guess is not None:
+            x0[nlp.n_states_vars:] = p0
+    else:
+        S, note = prepared.initial_states(p0)
+        if note:
+            notes.append(note)
+        x0 = nlp.initial_x(S, p0)
+    sol = solve_nlp(nlp, x0, options=options, warm=warm)
+    p = spec.parameter_vector(nlp.transform.P @ sol.x[nlp.n_states_vars:] + nlp.transform.c)
+    if not np.all(np.isfinite(sol.x)):
+        notes.append("the solver returned non-finite values")
+    return EstimationResult(
+        success=sol.success and bool(np.all(np.isfinite(sol.x))), status=sol.status, message=sol.message, p=p,
+        objective=sol.objective, iterations=sol.iterations, x=sol.x, solution=sol, prepared=prepared,
+        timings={"setup_s": prepared.setup_s, "solve_s": sol.solve_s}, notes=tuple(notes))
