@@ -630,7 +630,7 @@ class Model:
             o = owner[i]
             if o not in knot_syms:
                 knot_syms[o] = self._add_parameter(f"{name}{o}", g[o], bounds, nominal, family=fam)
-        self._families.append(FamilySpec(fam, tuple(bp), tuple(knot_syms[owner[i]] for i in range(bp.size))))
+        self._families.append(FamilySpec(fam, tuple(float(b) for b in bp), tuple(knot_syms[owner[i]] for i in range(bp.size))))
         return fam
 
     def define(self, name: str, expr: sp.Expr) -> sp.Symbol:

@@ -85,6 +85,7 @@ def ra66_times() -> np.ndarray:
     return np.arange(1, 6601) * 0.01
 
 
-def ra66_mesh(n_elements: int = 66, K: int = 3, refine_first: int = 3) -> Mesh:
-    """rocketid's default RA-66 mesh: 1 s elements, the first split geometrically."""
+def ra66_mesh(n_elements: int = 66, K: int = 4, refine_first: int = 0) -> Mesh:
+    """RA-66 meshes: by default rocketid's (66 elements of 1 s, K = 4); the
+    chapter-like baseline is ``ra66_mesh(K=3)``."""
     return graded_mesh(0.0, 66.0, n_elements, K, refine_first=refine_first)
