@@ -50,6 +50,8 @@ class Trajectory:
     states : ndarray, shape (n, n_states)
     success : bool
     message : str
+    derivatives : ndarray, shape (n, n_states), or None
+        ``ds/dt`` at :attr:`times`, when an output uses a state derivative.
     """
 
     spec: ModelSpec
@@ -58,6 +60,7 @@ class Trajectory:
     states: np.ndarray
     success: bool = True
     message: str = ""
+    derivatives: np.ndarray | None = None
 
     def value(self, symbol: sp.Symbol | str) -> np.ndarray:
         """A state's history, or a definition/output expression evaluated along it."""
@@ -71,7 +74,7 @@ class Trajectory:
 
     def outputs(self) -> dict[str, np.ndarray]:
         """Each output's noise-free values at :attr:`times`."""
-        return {o.name: evaluate_along(self.spec, o.expr, self.times, self.states, self.p)
+        return {o.name: evaluate_along(self.spec, o.expr, self.times, self.states, self.p, self.derivatives)
                 for o in self.spec.outputs}
 
 
@@ -213,7 +216,14 @@ def simulate(spec: ModelSpec, p: Sequence[float] | Mapping | None = None, times:
         ds = sol.y[:, -1]
     if ok and rhs.guarded:
         msg += f"; implicit derivatives held at zero where their coefficient was below {guard:g} (singular start)"
-    return Trajectory(spec, pvec, times, out, ok, msg)
+    ders = None
+    if any(set(spec.derivative_symbols) & spec.expand(o.expr).free_symbols for o in spec.outputs):
+        # outputs such as x + b dx/dt need ds/dt along the trajectory
+        ders = np.full_like(out, np.nan)
+        for i, (ti, si) in enumerate(zip(times, out)):
+            if np.all(np.isfinite(si)):
+                ders[i] = rhs(float(ti), si - s0)
+    return Trajectory(spec, pvec, times, out, ok, msg, ders)
 
 
 def simulate_measurements(spec: ModelSpec, p: Sequence[float] | Mapping | None = None,
