@@ -30,7 +30,7 @@ Notation
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 
 import numpy as np
@@ -187,6 +187,9 @@ class _Channel:
     u0: np.ndarray
     data: np.ndarray
     n: int
+    Mu_full: sps.csr_matrix   # u = Mu_full w (before the transform)
+    sel: sps.csr_matrix | None
+    c0: float
 
 
 class CollocationNLP:
@@ -296,6 +299,7 @@ class CollocationNLP:
             lin = bool(g.OUTPUT_LINEAR[k])
             G = g0 = None
             nsamp = omap.times.size
+            sel, c0 = None, 0.0
             if lin:
                 # y = sum_a c_a u_a + c0, constant c: fold into one sparse matrix
                 Uz = np.zeros((1, tr.nu))
@@ -307,7 +311,8 @@ class CollocationNLP:
                                      shape=(nsamp, nsamp * tr.nu))
                 G = (sel @ Mu).tocsr()
                 g0 = sel @ u0 + c0
-            chans.append(_Channel(omap.name, k, ch.values, float(sigma), lin, G, g0, Mu, u0, omap.data, nsamp))
+            chans.append(_Channel(omap.name, k, ch.values, float(sigma), lin, G, g0, Mu, u0, omap.data, nsamp,
+                                  omap.Mu, sel, c0))
         self._channels = tuple(chans)
         self.n_residuals = sum(c.n for c in chans)
 
@@ -461,6 +466,40 @@ class CollocationNLP:
     def sigma_vector(self) -> np.ndarray:
         """Noise standard deviation of every stacked residual."""
         return np.concatenate([np.full(ch.n, ch.sigma) for ch in self._channels])
+
+    def with_offset(self, c: np.ndarray) -> "CollocationNLP":
+        """The same transformed problem with a new offset ``c`` in ``p = P r + c``.
+
+        Only the offset-dependent vectors are recomputed (no structure, no
+        expansion matrices): this is the cheap path of the sampling loop,
+        where (7.9) is re-solved for many values of the fixed ``q2``.
+        """
+        import copy
+        c = np.asarray(c, dtype=float)
+        if c.shape != self.transform.c.shape:
+            raise SettingsError(f"offset has shape {c.shape}, expected {self.transform.c.shape}")
+        new = copy.copy(self)
+        new.transform = ParameterTransform(self.transform.P, c, self.transform.names)
+        tr = self.transcription
+        nsv = self.n_states_vars
+        w0 = np.concatenate([np.zeros(nsv), c])
+        new.w0 = w0
+        new._z0 = tr.Mz @ w0
+        new._ic_off = tr.ic_offset - tr.ic_matrix @ w0
+        chans = []
+        for ch in self._channels:
+            u0 = ch.Mu_full @ w0
+            g0 = (ch.sel @ u0 + ch.c0) if ch.linear else None
+            chans.append(replace(ch, u0=u0, g0=g0))
+        new._channels = tuple(chans)
+        new._obj_templates = [(chans[[c_.index for c_ in chans].index(t[0].index)],) + tuple(t[1:])
+                              for t in self._obj_templates]
+        if self._lin_bounded is not None:
+            lo, hi = self.spec.lower, self.spec.upper
+            b = self._lin_bounded
+            new.c_lower = np.concatenate([self.c_lower[:self.m_ic + self.m_col], (lo - c)[b]])
+            new.c_upper = np.concatenate([self.c_upper[:self.m_ic + self.m_col], (hi - c)[b]])
+        return new
 
     def with_transform(self, transform: ParameterTransform) -> "CollocationNLP":
         """The same problem with parameters ``p = P r + c`` (for (7.9))."""

@@ -1,0 +1,251 @@
+"""Sensitivities and the reduced Hessian (7.6) from the KKT blocks, with one sparse LU.
+
+At a point ``(gamma, p)`` that satisfies the collocation equations, the
+equality constraints of (7.5) are ``c(gamma, p) = 0`` and ``h(gamma, p) - y = 0``.
+With ``w = (gamma, y)``, the Jacobian ``J_w`` of these constraints with
+respect to ``w`` is square and (for a well-posed model) non-singular::
+
+    J_w = [ c_gamma   0 ]       J_p = [ c_p ]
+          [ h_gamma  -I ]             [ h_p ]
+
+and the null-space basis of the constraint Jacobian, ordered ``(p, gamma, y)``,
+is ``Z = [I ; -J_w^{-1} J_p]`` (7.6). The reduced Hessian of the Lagrangian of
+(7.5) is ``H_r = Z^T diag(0, 0, Cy^-1) Z``; the ``y`` rows of ``Z`` are the
+output sensitivity ``S = dy/dp``, so ``H_r = S^T Cy^-1 S``.
+
+:func:`sensitivity_at` factors ``J_w`` once with ``scipy.sparse.linalg.splu``
+and back-solves for all parameter columns at once. It refuses, with a
+:class:`~rocketid.errors.SensitivityError` that says why, where ``J_w`` is
+singular or the point does not satisfy the collocation equations.
+
+Notation
+--------
+===============  ===========================================================
+``gamma``        state values at all nodes (the collocation variables)
+``y``            outputs at all samples, all channels stacked
+``S``            ``dy/dp``, shape (ny, n_p)
+``dgamma/dp``    state sensitivities, shape (n_nodes, n_states, n_p)
+``Cy``           diagonal noise covariance, ``diag(sigma^2)``
+``H_r``          reduced Hessian (Fisher information), (n_p, n_p)
+===============  ===========================================================
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sps
+import scipy.sparse.linalg as spla
+
+from .errors import SensitivityError
+from .nlp import CollocationNLP, ParameterTransform
+from .solve import EstimationResult, Prepared
+
+__all__ = ["Sensitivity", "sensitivity_at", "sensitivity_of", "solve_collocation"]
+
+
+@dataclass(frozen=True)
+class Sensitivity:
+    """Output and state sensitivities and the reduced Hessian at one point.
+
+    Attributes
+    ----------
+    p : ndarray, shape (n_p,)
+        Where it was formed.
+    parameter_names : tuple of str
+    S : ndarray, shape (ny, n_p)
+        Output sensitivity ``dy/dp``, channels stacked in the NLP's order.
+    state_sensitivity : ndarray, shape (n_nodes, n_states, n_p)
+        ``dgamma/dp`` at the mesh nodes.
+    Z : ndarray, shape (n_p + n_gamma + ny, n_p)
+        The null-space basis of (7.6), ordered ``(p, gamma, y)``.
+    sigma : ndarray, shape (ny,)
+        Noise standard deviation of each output value.
+    H_r : ndarray, shape (n_p, n_p)
+        Reduced Hessian ``Z^T diag(0, 0, Cy^-1) Z``.
+    channel_slices : dict
+        ``{channel: slice}`` into the rows of ``S``.
+    gamma : ndarray
+        The collocation state values used.
+    formed_s : float
+        Wall time of forming ``J_w``, the LU and the back-solves.
+    notes : tuple of str
+    """
+
+    p: np.ndarray
+    parameter_names: tuple
+    S: np.ndarray
+    state_sensitivity: np.ndarray
+    Z: np.ndarray
+    sigma: np.ndarray
+    H_r: np.ndarray
+    channel_slices: dict
+    gamma: np.ndarray
+    formed_s: float
+    notes: tuple = ()
+
+    @property
+    def n_parameters(self) -> int:
+        return self.p.size
+
+    def output_sensitivity(self, channel: str) -> np.ndarray:
+        """Rows of ``S`` for one channel, shape (n_samples, n_p)."""
+        return self.S[self.channel_slices[channel]]
+
+    @property
+    def condition_number(self) -> float:
+        """``lambda_max / lambda_min`` of ``H_r`` (inf when singular)."""
+        ev = np.linalg.eigvalsh(self.H_r)
+        return float(ev[-1] / ev[0]) if ev[0] > 0 else float("inf")
+
+
+def _full(nlp: CollocationNLP) -> CollocationNLP:
+    """The untransformed NLP (7.5) of the same transcription."""
+    if nlp.transform.is_identity:
+        return nlp
+    return nlp.with_transform(ParameterTransform.identity(nlp.spec.parameter_names))
+
+
+def solve_collocation(nlp: CollocationNLP, p: np.ndarray, gamma0: np.ndarray, *, tol: float = 1e-9,
+                      max_iter: int = 30) -> np.ndarray:
+    """Newton's method on ``c(gamma, p) = 0`` for fixed ``p`` (a feasible point of (7.5)).
+
+    Parameters
+    ----------
+    nlp : CollocationNLP
+        Untransformed NLP.
+    p : ndarray, shape (n_p,)
+    gamma0 : ndarray, shape (n_gamma,)
+        Starting state values (e.g. from a simulation at ``p``).
+
+    Returns
+    -------
+    ndarray
+        ``gamma`` with ``max |c| <= tol * (1 + max |gamma|)``.
+    """
+    nsv = nlp.n_states_vars
+    x = np.concatenate([np.asarray(gamma0, float), np.asarray(p, float)])
+    m_eq = nlp.m_ic + nlp.m_col
+    scale = 1.0 + np.max(np.abs(gamma0))
+    for it in range(max_iter):
+        c = nlp.constraints(x)[:m_eq]
+        if not np.all(np.isfinite(c)):
+            raise SensitivityError("the collocation equations are not finite at this point (the trajectory left "
+                                   "the model's domain); start from a feasible trajectory")
+        if np.max(np.abs(c)) <= tol * scale:
+            return x[:nsv]
+        J = nlp.jacobian_matrix(x)[:m_eq, :nsv].tocsc()
+        try:
+            dx = spla.splu(J).solve(-c)
+        except RuntimeError as exc:
+            raise SensitivityError(f"the collocation Jacobian d c / d gamma is singular ({exc}); the "
+                                   "discretized model has no unique trajectory at these parameters") from None
+        # damped step when far away
+        step = 1.0
+        for _ in range(20):
+            xn = x.copy()
+            xn[:nsv] += step * dx
+            cn = nlp.constraints(xn)[:m_eq]
+            if np.all(np.isfinite(cn)) and np.max(np.abs(cn)) < np.max(np.abs(c)) * (1 - 1e-4 * step) + tol * scale:
+                break
+            step *= 0.5
+        x = xn
+    raise SensitivityError(f"Newton's method on the collocation equations did not converge in {max_iter} "
+                           "iterations: the parameters give no trajectory close to the starting one")
+
+
+def sensitivity_at(prepared: Prepared, p: np.ndarray | None = None, *, gamma: np.ndarray | None = None,
+                   solve: bool = True) -> Sensitivity:
+    """Form ``S``, ``Z`` and ``H_r`` at parameters ``p`` (7.6).
+
+    Parameters
+    ----------
+    prepared : Prepared
+        The model collocated against the data (``rocketid.prepare``).
+    p : ndarray, optional
+        Parameters (default: the model's guess).
+    gamma : ndarray, optional
+        Collocation state values at ``p``; by default from a simulation at
+        ``p`` refined by Newton's method on the collocation equations.
+    solve : bool
+        Refine ``gamma`` by Newton's method (set False only when ``gamma``
+        already satisfies the equations, e.g. at a converged fit).
+
+    Returns
+    -------
+    Sensitivity
+
+    Raises
+    ------
+    SensitivityError
+        Singular ``J_w``, or a point that does not satisfy the collocation equations.
+    """
+    nlp = _full(prepared.nlp)
+    spec = prepared.spec
+    p = spec.guess if p is None else spec.parameter_vector(p)
+    lay = prepared.transcription.layout
+    if gamma is None:
+        S0, _ = prepared.initial_states(p)
+        gamma = S0.ravel()
+    if solve:
+        gamma = solve_collocation(nlp, p, gamma)
+    return _form(nlp, p, np.asarray(gamma, float))
+
+
+def sensitivity_of(fit: EstimationResult) -> Sensitivity:
+    """Sensitivities at a converged fit's solution (full parameter vector)."""
+    nlp = _full(fit.nlp)
+    w = fit.nlp.full_vector(fit.x)
+    gamma = w[:nlp.n_states_vars]
+    gamma = solve_collocation(nlp, fit.p, gamma)
+    return _form(nlp, fit.p, gamma)
+
+
+def _form(nlp: CollocationNLP, p: np.ndarray, gamma: np.ndarray) -> Sensitivity:
+    t0 = time.perf_counter()
+    nsv = nlp.n_states_vars
+    n_p = p.size
+    x = np.concatenate([gamma, p])
+    m_eq = nlp.m_ic + nlp.m_col
+    J = nlp.jacobian_matrix(x)[:m_eq].tocsc()
+    c_g, c_p = J[:, :nsv], J[:, nsv:]
+    Hy = nlp.output_jacobian(x).tocsc()
+    h_g, h_p = Hy[:, :nsv], Hy[:, nsv:]
+    ny = Hy.shape[0]
+    # the square Jacobian of (c, h - y) with respect to w = (gamma, y), and J_p
+    Jw = sps.bmat([[c_g, None], [h_g, -sps.identity(ny, format="csc")]], format="csc")
+    Jp = sps.vstack([c_p, h_p], format="csc")
+    try:
+        lu = spla.splu(Jw)
+    except RuntimeError as exc:
+        raise SensitivityError(
+            f"the Jacobian of the collocation equations with respect to the states is singular ({exc}); "
+            "the model has no unique trajectory for these parameters, so the reduced Hessian (7.6) does not exist") from None
+    sol = -lu.solve(Jp.toarray())
+    if not np.all(np.isfinite(sol)):
+        raise SensitivityError("the back-solve with the LU factors of J_w gave non-finite values "
+                               "(numerically singular Jacobian)")
+    dgamma = sol[:nsv]
+    S = sol[nsv:]
+    Z = np.vstack([np.eye(n_p), sol])
+    sigma = nlp.sigma_vector()
+    Sw = S / sigma[:, None]
+    H_r = Sw.T @ Sw
+    H_r = 0.5 * (H_r + H_r.T)
+    lay = nlp.transcription.layout
+    slices, start = {}, 0
+    for name, ch in zip(nlp.channel_names, nlp._channels):
+        slices[name] = slice(start, start + ch.n)
+        start += ch.n
+    notes = []
+    colnorm = np.linalg.norm(Sw, axis=0)
+    for name, cn in zip(nlp.spec.parameter_names, colnorm):
+        if cn == 0 or cn < 1e-12 * max(colnorm.max(), 1e-300):
+            notes.append(f"parameter {name} has no effect on the outputs (its sensitivity column is zero): "
+                         "it does not enter the model's equations or outputs, or is masked")
+    return Sensitivity(
+        p=np.asarray(p, float).copy(), parameter_names=nlp.spec.parameter_names, S=S,
+        state_sensitivity=dgamma.reshape(lay.n_nodes, lay.n_states, n_p), Z=Z, sigma=sigma, H_r=H_r,
+        channel_slices=slices, gamma=gamma, formed_s=time.perf_counter() - t0, notes=tuple(notes))
