@@ -1,0 +1,520 @@
+"""The ``rocketid`` command line.
+
+::
+
+    rocketid simulate --out ra66.csv                 # RA-66 synthetic measurements
+    rocketid estimate ra66.csv --out fit.json        # fit, print the summary, write JSON
+
+Exit codes: 0 success; 1 the command ran but its result is not valid (IPOPT
+did not converge: the JSON is still written); 2 bad input (a missing file or
+column, a malformed ``NAME=VALUE``, an unknown option). Every
+:class:`~rocketid.errors.RocketidError` and every usage error is reported as
+one ``Error: ...`` line on stderr; ``--verbose`` shows the traceback instead.
+
+Adding a command
+----------------
+A command lives in its own module ``rocketid/cli_<name>.py`` (``-`` in the
+command name becomes ``_``) that defines ``command``, a :class:`click.Command`.
+The group finds such modules by name, without importing them, and imports one
+only when its command runs or ``--help`` lists it; nothing in this file needs
+to change. Use the shared helpers below so that every command reads models,
+``NAME=VALUE`` options and errors the same way::
+
+    # rocketid/cli_reproduce.py
+    import click
+    from rocketid.cli import model_option, verbose_option, load_model
+
+    @click.command("reproduce")
+    @model_option
+    @verbose_option
+    def command(model):
+        src = load_model(model)
+        ...
+
+Shared helpers: :func:`load_model` / :func:`model_option` (``ra66`` or a model
+file), :class:`NameValue` / :func:`assignments` / :func:`parameter_values`
+(``NAME=VALUE`` options), :func:`ipopt_options`, :func:`read_data`, :func:`make_mesh`,
+:func:`write_json`, :func:`status` and :func:`progress` (stderr progress),
+:func:`verbose_option`.
+"""
+
+from __future__ import annotations
+
+import difflib
+import hashlib
+import importlib
+import importlib.util
+import json
+import math
+import os
+import pkgutil
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Iterable, Mapping, Sequence
+
+import click
+import numpy as np
+
+from .cases import ra66, ra66_times, ra66_truth
+from .data import Measurements, read_csv
+from .errors import DataError, ModelError, RocketidError, SettingsError
+from .model import Model, ModelSpec
+
+__all__ = [
+    "main", "simulate_command", "estimate_command",
+    "ModelSource", "BUILTIN_MODELS", "load_model", "model_option", "verbose_option",
+    "NameValue", "assignments", "parameter_values", "ipopt_options", "read_data", "make_mesh", "write_json",
+    "status", "progress", "LAZY_COMMANDS",
+]
+
+EXIT_OK, EXIT_NOT_CONVERGED, EXIT_BAD_INPUT = 0, 1, 2
+_VERBOSE = "rocketid.verbose"
+
+
+# ---------------------------------------------------------------------------
+# Models: a built-in name or a user file
+# ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ModelSource:
+    """A model as the command line knows it.
+
+    Attributes
+    ----------
+    spec : ModelSpec
+    label : str
+        What the user passed (``ra66`` or the file path).
+    truth : ndarray, shape (n_p,)
+        Parameters that ``rocketid simulate`` uses (RA-66: the truth; a model
+        file: its ``truth(spec)`` if defined, else the guesses p0).
+    times : ndarray, shape (n,)
+        Sample times of ``rocketid simulate`` (RA-66: 0.01 k s, k = 1..6600; a
+        model file: its ``sample_times()`` if defined, else 1001 points over
+        the horizon).
+    """
+
+    spec: ModelSpec
+    label: str
+    truth: np.ndarray
+    times: np.ndarray
+
+
+def _ra66_source() -> ModelSource:
+    spec = ra66()
+    return ModelSource(spec, "ra66", ra66_truth(spec), ra66_times())
+
+
+BUILTIN_MODELS: dict[str, Callable[[], ModelSource]] = {"ra66": _ra66_source}
+
+
+def _load_module(path: Path):
+    name = "rocketid_user_model_" + hashlib.sha256(str(path.resolve()).encode()).hexdigest()[:12]
+    spec = importlib.util.spec_from_file_location(name, path)
+    if spec is None or spec.loader is None:
+        raise ModelError(f"model file {str(path)!r} cannot be imported; it must be a Python file (.py)")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module  # dataclasses and inspect look modules up here
+    try:
+        spec.loader.exec_module(module)
+    except RocketidError:
+        raise
+    except Exception as exc:
+        sys.modules.pop(name, None)
+        raise ModelError(f"model file {str(path)!r} failed to import: {type(exc).__name__}: {exc}") from exc
+    return module
+
+
+def load_model(name_or_path: str) -> ModelSource:
+    """Resolve ``--model``: a built-in name (``ra66``) or a Python file.
+
+    A model file defines ``build_model()`` returning a :class:`ModelSpec`
+    (a :class:`Model` is frozen for you). It may also define ``truth(spec)``
+    (a parameter vector or ``{name: value}`` mapping for ``simulate``) and
+    ``sample_times()`` (the times ``simulate`` samples at).
+
+    Raises
+    ------
+    ModelError
+        Unknown name, missing file, no ``build_model``, or a file that fails.
+    """
+    key = str(name_or_path)
+    if key in BUILTIN_MODELS:
+        return BUILTIN_MODELS[key]()
+    path = Path(key)
+    if path.suffix != ".py":
+        raise ModelError(f"unknown model {key!r}: use one of {', '.join(sorted(BUILTIN_MODELS))} or the path of a "
+                         "Python file (.py) that defines build_model()")
+    if not path.is_file():
+        raise ModelError(f"model file {key!r} does not exist")
+    module = _load_module(path)
+    build = getattr(module, "build_model", None)
+    if not callable(build):
+        raise ModelError(f"model file {key!r} does not define build_model(); add a function build_model() that "
+                         "returns a ModelSpec (Model(...).freeze())")
+    try:
+        spec = build()
+        if isinstance(spec, Model):
+            spec = spec.freeze()
+    except RocketidError as exc:
+        raise type(exc)(f"model file {key!r}: {exc}") from exc
+    except Exception as exc:
+        raise ModelError(f"model file {key!r}: build_model() failed: {type(exc).__name__}: {exc}") from exc
+    if not isinstance(spec, ModelSpec):
+        raise ModelError(f"model file {key!r}: build_model() returned {type(spec).__name__}, not a ModelSpec; "
+                         "return Model(...).freeze()")
+    truth = spec.guess
+    if callable(getattr(module, "truth", None)):
+        truth = spec.parameter_vector(module.truth(spec))
+    if callable(getattr(module, "sample_times", None)):
+        times = np.asarray(module.sample_times(), dtype=float).ravel()
+    else:
+        times = np.linspace(spec.t0, spec.tf, 1001)
+    return ModelSource(spec, key, truth, times)
+
+
+# ---------------------------------------------------------------------------
+# NAME=VALUE options
+# ---------------------------------------------------------------------------
+
+
+class NameValue(click.ParamType):
+    """A ``NAME=VALUE`` option value, parsed to ``(name, value)``.
+
+    Parameters
+    ----------
+    value_type : callable
+        Converts the value text (``float`` or ``str``).
+    what : str
+        What the value is, for messages ("number", "CSV column").
+    """
+
+    name = "NAME=VALUE"
+
+    def __init__(self, value_type: Callable[[str], Any] = float, what: str = "number"):
+        self.value_type = value_type
+        self.what = what
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, tuple):
+            return value
+        text = str(value)
+        name, sep, raw = text.partition("=")
+        name, raw = name.strip(), raw.strip()
+        if not sep or not name or not raw:
+            self.fail(f"{text!r} is not NAME=VALUE (for example CD0=0.5)", param, ctx)
+        try:
+            converted = self.value_type(raw)
+        except ValueError:
+            self.fail(f"in {text!r}, {raw!r} is not a {self.what}", param, ctx)
+        if isinstance(converted, float) and not math.isfinite(converted):
+            self.fail(f"in {text!r}, the value must be finite", param, ctx)
+        return name, converted
+
+
+def assignments(pairs: Iterable[tuple[str, Any]], option: str, allowed: Sequence[str] | None = None) -> dict[str, Any]:
+    """``(name, value)`` pairs of a repeated ``NAME=VALUE`` option as a dict.
+
+    Raises
+    ------
+    SettingsError
+        A name given twice, or (with ``allowed``) a name not in ``allowed``.
+    """
+    out: dict[str, Any] = {}
+    for name, value in pairs:
+        if name in out:
+            raise SettingsError(f"{option} {name} is given twice")
+        if allowed is not None and name not in allowed:
+            raise SettingsError(f"{option} {name}={value}: {name!r} is not one of {', '.join(allowed)}")
+        out[name] = value
+    return out
+
+
+def parameter_values(spec: ModelSpec, values: Mapping[str, float], option: str,
+                     base: Sequence[float] | None = None) -> np.ndarray:
+    """A full parameter vector: ``base`` (default: the model's p0) with ``values``
+    (``{name: value}`` from a ``NAME=VALUE`` option) replacing entries.
+
+    Raises
+    ------
+    SettingsError
+        A name that is not an estimated parameter of ``spec``.
+    """
+    p = np.array(spec.guess if base is None else base, dtype=float)
+    names = spec.parameter_names
+    for name, value in values.items():
+        if name not in names:
+            close = difflib.get_close_matches(name, names, n=3)
+            hint = f"; did you mean {', '.join(close)}?" if close else f"; its parameters are {', '.join(names)}"
+            raise SettingsError(f"{option} {name}={value:g}: {name!r} is not a parameter of model {spec.name!r}{hint}")
+        p[names.index(name)] = value
+    return p
+
+
+def ipopt_options(pairs: Iterable[tuple[str, str]]) -> dict[str, Any]:
+    """``--ipopt NAME=VALUE`` pairs, checked and typed by
+    :func:`rocketid.solve.check_ipopt_options` (before any work is done)."""
+    from .solve import check_ipopt_options
+
+    raw = assignments(pairs, "--ipopt")
+    try:
+        return check_ipopt_options(raw)
+    except SettingsError as exc:
+        raise SettingsError(f"--ipopt: {exc}") from None
+
+
+# ---------------------------------------------------------------------------
+# Data, mesh, output
+# ---------------------------------------------------------------------------
+
+
+def read_data(path: str | os.PathLike, spec: ModelSpec, *, time_column: str = "t",
+              columns: Mapping[str, str] | None = None, sigma: Mapping[str, float] | None = None) -> Measurements:
+    """Read a CSV with one column per model output (see :func:`rocketid.data.read_csv`);
+    ``columns`` and ``sigma`` are keyed by output name, checked against the model."""
+    outputs = spec.output_names
+    for option, mapping in (("--column", columns), ("--sigma", sigma)):
+        for name in mapping or {}:
+            if name not in outputs:
+                raise SettingsError(f"{option} {name}: model {spec.name!r} has no output {name!r}; "
+                                    f"its outputs are {', '.join(outputs)}")
+    return read_csv(path, outputs, time_column=time_column, column_map=columns, sigma=sigma)
+
+
+def make_mesh(spec: ModelSpec, n_elements: int | None = None, K: int = 4):
+    """The estimation mesh: :func:`rocketid.solve.default_mesh` (elements of about
+    1 s), or about ``n_elements`` equal elements, split so that every breakpoint
+    of a parameter family falls on an element boundary."""
+    from .solve import default_mesh
+
+    if n_elements is None:
+        return default_mesh(spec, K=K)
+    if n_elements < 1:
+        raise SettingsError(f"--elements must be a positive integer, got {n_elements}")
+    return default_mesh(spec, K=K, element_length=(spec.tf - spec.t0) / n_elements)
+
+
+def write_json(path: str | os.PathLike, payload: Mapping) -> Path:
+    """Write ``payload`` as indented JSON, creating parent folders."""
+    path = Path(path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(payload, indent=2) + "\n")
+    except OSError as exc:
+        raise SettingsError(f"cannot write {str(path)!r}: {exc.strerror or exc}") from None
+    return path
+
+
+# ---------------------------------------------------------------------------
+# Progress and verbosity
+# ---------------------------------------------------------------------------
+
+
+def _verbose(ctx: click.Context | None = None) -> bool:
+    ctx = ctx or click.get_current_context(silent=True)
+    return bool(ctx is not None and ctx.meta.get(_VERBOSE))
+
+
+def _interactive() -> bool:
+    try:
+        return sys.stderr.isatty()
+    except (AttributeError, ValueError):
+        return False
+
+
+def status(message: str) -> None:
+    """A progress line on stderr, shown on a terminal or with ``--verbose``
+    (so that stderr carries only the error line when a script runs rocketid)."""
+    if _interactive() or _verbose():
+        click.echo(message, err=True)
+
+
+def progress(iterable: Iterable, *, desc: str, total: int | None = None):
+    """A tqdm progress bar on stderr for long loops (hidden unless on a terminal
+    or ``--verbose``)."""
+    from tqdm import tqdm
+
+    return tqdm(iterable, desc=desc, total=total, file=sys.stderr, disable=not (_interactive() or _verbose()),
+                leave=False)
+
+
+def _set_verbose(ctx: click.Context, param, value):
+    if value:
+        ctx.meta[_VERBOSE] = True
+    return value
+
+
+def verbose_option(f):
+    """``-v/--verbose``: tracebacks instead of one-line errors, and progress lines."""
+    return click.option("-v", "--verbose", is_flag=True, expose_value=False, is_eager=True, callback=_set_verbose,
+                        help="Show progress and full tracebacks.")(f)
+
+
+def model_option(f):
+    """``--model ra66|PATH.py`` (passed to the command as the string ``model``)."""
+    return click.option("--model", "model", default="ra66", show_default=True, metavar="ra66|PATH.py",
+                        help="A built-in model or a Python file defining build_model().")(f)
+
+
+# ---------------------------------------------------------------------------
+# The group: lazy commands, one-line errors
+# ---------------------------------------------------------------------------
+
+#: Extra commands by name -> ``"module:attribute"`` (imported when used).
+#: Modules ``rocketid/cli_<name>.py`` defining ``command`` are found without an entry here.
+LAZY_COMMANDS: dict[str, str] = {}
+
+
+def _one_line(text: str) -> str:
+    return " ".join(str(text).split())
+
+
+class RocketidGroup(click.Group):
+    """A click group that loads commands lazily and turns errors into one line."""
+
+    def _discovered(self) -> dict[str, str]:
+        found = {}
+        for info in pkgutil.iter_modules(sys.modules[__package__].__path__):
+            if info.name.startswith("cli_"):
+                found[info.name[4:].replace("_", "-")] = f"{__package__}.{info.name}:command"
+        return found
+
+    def list_commands(self, ctx):
+        return sorted(set(super().list_commands(ctx)) | set(LAZY_COMMANDS) | set(self._discovered()))
+
+    def get_command(self, ctx, cmd_name):
+        cmd = super().get_command(ctx, cmd_name)
+        if cmd is not None:
+            return cmd
+        target = LAZY_COMMANDS.get(cmd_name) or self._discovered().get(cmd_name)
+        if target is None:
+            return None
+        module_name, _, attr = target.partition(":")
+        module = importlib.import_module(module_name)
+        cmd = getattr(module, attr or "command", None)
+        if not isinstance(cmd, click.Command):
+            raise click.ClickException(f"{module_name} does not define a click command {attr or 'command'!r}")
+        return cmd
+
+    def invoke(self, ctx):
+        try:
+            return super().invoke(ctx)
+        except RocketidError as exc:
+            if _verbose(ctx):
+                raise
+            click.echo(f"Error: {_one_line(exc)}", err=True)
+            ctx.exit(EXIT_BAD_INPUT)
+        except click.UsageError as exc:
+            if _verbose(ctx):
+                raise
+            where = exc.ctx.command_path if exc.ctx is not None else ctx.command_path
+            click.echo(f"Error: {_one_line(exc.format_message())} (see '{where} --help')", err=True)
+            ctx.exit(exc.exit_code)
+
+
+@click.group(cls=RocketidGroup, context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(package_name="rocketid")
+@verbose_option
+def main():
+    """rocketid: aerodynamic coefficients of launch vehicles from trajectory data.
+
+    Run `rocketid COMMAND --help` for a command's options. Exit codes: 0 success,
+    1 the solver did not converge (results still written), 2 bad input.
+    """
+
+
+# ---------------------------------------------------------------------------
+# rocketid simulate
+# ---------------------------------------------------------------------------
+
+
+@main.command("simulate")
+@click.option("--out", "out", required=True, type=click.Path(dir_okay=False), metavar="DATA.csv",
+              help="CSV file to write (columns t and one per output).")
+@model_option
+@click.option("--seed", default=0, show_default=True, type=int, help="Seed of the measurement noise.")
+@click.option("--no-noise", is_flag=True, help="Write the noise-free outputs.")
+@click.option("--param", "params", multiple=True, type=NameValue(float), metavar="NAME=VALUE",
+              help="Override a true parameter value (repeatable), e.g. --param CL=0.12.")
+@verbose_option
+def simulate_command(out, model, seed, no_noise, params):
+    """Synthetic measurements of a model at its true parameters.
+
+    RA-66 (the default) is integrated at CD = 0.5, CL = 0.1 and sampled at
+    t = 0.01 k s, k = 1..6600, with N(0, 1) noise on x, h and v.
+    """
+    from .simulate import simulate_measurements
+
+    src = load_model(model)
+    spec = src.spec
+    overrides = assignments(params, "--param")
+    p = parameter_values(spec, overrides, "--param", base=src.truth)
+    t0 = time.perf_counter()
+    data = simulate_measurements(spec, p, src.times, seed=seed, noise=not no_noise)
+    status(f"simulated {spec.name} in {time.perf_counter() - t0:.2f} s")
+    try:
+        path = data.to_csv(out)
+    except OSError as exc:
+        raise SettingsError(f"cannot write {out!r}: {exc.strerror or exc}") from None
+    noise = "noise-free" if no_noise else f"noise seed {seed}"
+    click.echo(f"wrote {data.channels[0].times.size} samples of {', '.join(data.names)} ({noise}) to {path}")
+
+
+# ---------------------------------------------------------------------------
+# rocketid estimate
+# ---------------------------------------------------------------------------
+
+
+@main.command("estimate")
+@click.argument("data_file", metavar="DATA.csv", type=click.Path(dir_okay=False))
+@model_option
+@click.option("--column", "columns", multiple=True, type=NameValue(str, "CSV column name"), metavar="NAME=CSVCOL",
+              help="Read output NAME from column CSVCOL (repeatable).")
+@click.option("--time-column", default="t", show_default=True, help="Name of the time column.")
+@click.option("--sigma", "sigmas", multiple=True, type=NameValue(float), metavar="NAME=VALUE",
+              help="Noise standard deviation of an output (repeatable; default: the model's).")
+@click.option("--elements", "n_elements", type=click.IntRange(min=1), default=None, metavar="N",
+              help="About N finite elements (default: elements of about 1 s).")
+@click.option("--K", "K", type=click.IntRange(min=1), default=4, show_default=True,
+              help="Radau collocation points per element.")
+@click.option("--guess", "guesses", multiple=True, type=NameValue(float), metavar="NAME=VALUE",
+              help="Initial guess of a parameter (repeatable; default: the model's p0).")
+@click.option("--ipopt", "ipopt", multiple=True, type=NameValue(str, "value"), metavar="NAME=VALUE",
+              help="IPOPT option (repeatable), e.g. --ipopt max_iter=200.")
+@click.option("--out", "out", type=click.Path(dir_okay=False), default=None, metavar="FIT.json",
+              help="Write the result as JSON.")
+@verbose_option
+def estimate_command(data_file, model, columns, time_column, sigmas, n_elements, K, guesses, ipopt, out):
+    """Estimate the model's parameters from measurements in DATA.csv.
+
+    Prints the summary; with --out writes FIT.json (success, parameters,
+    objective, iterations, timings, ...). Exit code 1 when IPOPT did not
+    converge (the JSON is still written).
+    """
+    from .solve import estimate
+
+    options = ipopt_options(ipopt)
+    src = load_model(model)
+    spec = src.spec
+    guess = parameter_values(spec, assignments(guesses, "--guess"), "--guess")
+    for s, v, lo, hi in zip(spec.parameter_names, guess, spec.lower, spec.upper):
+        if not lo <= v <= hi:
+            raise SettingsError(f"--guess {s}={v:g} lies outside the bounds [{lo:g}, {hi:g}] of {s}")
+    mesh = make_mesh(spec, n_elements, K)
+    data = read_data(data_file, spec, time_column=time_column, columns=assignments(columns, "--column"),
+                     sigma=assignments(sigmas, "--sigma"))
+    status(f"read {data.n_samples} values of {', '.join(data.names)} from {data_file}; "
+           f"building and solving the NLP on {mesh.describe()}")
+    result = estimate(spec, data, guess=guess, mesh=mesh, options=options)
+    click.echo(result.summary())
+    if out is not None:
+        path = write_json(out, result.to_dict())
+        status(f"wrote {path}")
+    if not result.success:
+        click.get_current_context().exit(EXIT_NOT_CONVERGED)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()
