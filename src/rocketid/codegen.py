@@ -40,7 +40,7 @@ from .symbolic import SymbolicModel, derive
 
 __all__ = ["GeneratedModel", "generate", "generate_source", "cache_dir"]
 
-CODEGEN_VERSION = "1"
+CODEGEN_VERSION = "2"
 
 
 def cache_dir() -> Path:
@@ -64,8 +64,22 @@ def _safe_name(sym: sp.Symbol, taken: set[str]) -> str:
 
 
 class _Printer(NumPyPrinter):
+    """NumPy printer with Piecewise as nested ``numpy.where``: unlike
+    ``numpy.select`` it keeps boolean results boolean, so conditions that are
+    themselves piecewise (Mach number through a layered speed of sound) work."""
+
     def __init__(self):
         super().__init__({"fully_qualified_modules": True, "inline": True, "allow_unknown_functions": False})
+
+    def _print_Piecewise(self, expr):
+        args = list(expr.args)
+        if args[-1].cond == True:  # noqa: E712 (SymPy's true)
+            out = self._print(args.pop().expr)
+        else:
+            out = "numpy.nan"
+        for e, c in reversed(args):
+            out = f"numpy.where({self._print(c)}, {self._print(e)}, {out})"
+        return out
 
 
 def _emit_block(lines: list[str], exprs, targets, printer: _Printer, indent: str) -> None:

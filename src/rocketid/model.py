@@ -643,6 +643,66 @@ class Model:
         self._definitions.append((sym, sp.sympify(expr)))
         return sym
 
+    def redefine(self, symbol: sp.Symbol | str, expr: sp.Expr) -> None:
+        """Replace the expression of a definition (e.g. ``thrust`` by ``thrust -
+        A_e p_a(h)``); the old expression may appear in the new one via
+        :meth:`definition`."""
+        sym = self._names.get(symbol) if isinstance(symbol, str) else symbol
+        for i, (d, _) in enumerate(self._definitions):
+            if d == sym:
+                self._definitions[i] = (d, sp.sympify(expr))
+                return
+        raise ModelError(f"{symbol} is not a definition of model {self.name!r}; its definitions are "
+                         f"{', '.join(str(d) for d, _ in self._definitions) or 'none'}")
+
+    def definition(self, symbol: sp.Symbol | str) -> sp.Expr:
+        """The current expression of a definition."""
+        sym = self._names.get(symbol) if isinstance(symbol, str) else symbol
+        for d, e in self._definitions:
+            if d == sym:
+                return e
+        raise ModelError(f"{symbol} is not a definition of model {self.name!r}")
+
+    def has(self, name: str) -> bool:
+        """Whether the model has a component with this name."""
+        return name in self._names
+
+    def table(self, name: str, variable: sp.Expr, knots: Sequence[float], guess: float | Sequence[float], *,
+              bounds: tuple[float, float] = (-math.inf, math.inf), nominal: float | None = None) -> sp.Expr:
+        """A coefficient that is piecewise linear in a flight-condition variable
+        (Mach number, dynamic pressure, ...): one scalar parameter per knot
+        ``<name>_<j>``, held constant beyond the first and last knot.
+
+        Parameters
+        ----------
+        name : str
+        variable : sympy.Expr
+            The independent variable (e.g. the ``mach`` definition).
+        knots : sequence of float
+            Strictly increasing knot positions.
+        guess : float or sequence of float
+            Value at each knot.
+
+        Returns
+        -------
+        sympy.Expr
+            The interpolated coefficient (a Piecewise in ``variable``).
+        """
+        kn = np.asarray(knots, dtype=float).ravel()
+        if kn.size < 2 or np.any(np.diff(kn) <= 0):
+            raise ModelError(f"table {name}: knots must be strictly increasing, at least two")
+        g = np.broadcast_to(np.asarray(guess, dtype=float), kn.shape) if np.ndim(guess) == 0 else np.asarray(guess, float)
+        if g.shape != kn.shape:
+            raise ModelError(f"table {name}: {g.size} guesses for {kn.size} knots")
+        ps = [self._add_parameter(f"{name}_{j}", g[j], bounds, nominal) for j in range(kn.size)]
+        X = sp.sympify(variable)
+        pieces = [(ps[0], X < float(kn[0]))]
+        for j in range(kn.size - 1):
+            a, b = float(kn[j]), float(kn[j + 1])
+            pieces.append((ps[j] + (ps[j + 1] - ps[j]) * (X - a) / (b - a), X < b))
+        pieces.append((ps[-1], True))
+        return sp.Piecewise(*pieces)
+
     # -- equations ---------------------------------------------------------------
     def ode(self, rhs: Mapping[sp.Symbol, sp.Expr]) -> None:
         """Explicit dynamics ``d state/dt = rhs`` for each state given."""

@@ -57,7 +57,8 @@ def ra66(*, n_cd_segments: int = 6, atmosphere: str = "yang1983", sigma: float =
     st = ascent_states(m)
     fc = flight_conditions(m, st, atmosphere=atmosphere)
     alpha = m.input("alpha", ra66_alpha(m.t), breakpoints=(4.0, 24.0))
-    mass = m.define("mass", 20000.0 - 100.0 * m.t)
+    m0 = m.constant("m0", 20000.0)
+    mdot = m.constant("mdot", 100.0)
     Pe = m.constant("Pe", 400000.0)
     Sm = m.constant("Sm", math.pi * 1.0 ** 2)
     bp = np.linspace(0.0, 66.0, n_cd_segments + 1)
@@ -66,7 +67,7 @@ def ra66(*, n_cd_segments: int = 6, atmosphere: str = "yang1983", sigma: float =
         cd_guess = list(RA66_P0[:7])
     CD = m.piecewise_linear("CD", bp, cd_guess, bounds=RA66_BOUNDS, nominal=0.5)
     CL = m.piecewise_linear("CL", [0.0, 66.0], RA66_P0[7], bounds=RA66_BOUNDS, ties=[(0, 1)], nominal=0.1)
-    ascent_dynamics(m, st, fc, thrust=Pe, mass=mass, area=Sm, cd=CD, cl=CL, alpha=alpha)
+    ascent_dynamics(m, st, fc, thrust=Pe, mass=m0 - mdot * m.t, area=Sm, cd=CD, cl=CL, alpha=alpha)
     for s in (st.x, st.h, st.v):
         m.output(str(s), s, sigma=sigma)
     return m.freeze()

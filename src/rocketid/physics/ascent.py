@@ -25,7 +25,8 @@ from ..model import Model
 from .atmosphere import us76_speed_of_sound, us76_temperature, yang1983_density, us76_density
 from .gravity import EARTH_RADIUS, G0, inverse_square_gravity
 
-__all__ = ["AscentStates", "ascent_states", "flight_conditions", "ascent_dynamics", "DENSITY_MODELS"]
+__all__ = ["AscentStates", "AscentForces", "FlightConditions", "ascent_states", "flight_conditions",
+           "ascent_dynamics", "DENSITY_MODELS"]
 
 DENSITY_MODELS = {"yang1983": yang1983_density, "us76": us76_density}
 
@@ -71,21 +72,57 @@ def flight_conditions(m: Model, st: AscentStates, *, atmosphere: str = "yang1983
     rho = m.define("rho", DENSITY_MODELS[atmosphere](st.h))
     g = m.define("g", inverse_square_gravity(st.h, g0, radius))
     qbar = m.define("qbar", rho * st.v ** 2 / 2)
-    mach = m.define("mach", st.v / us76_speed_of_sound(st.h))
+    sound = m.define("a_sound", us76_speed_of_sound(st.h))
+    mach = m.define("mach", st.v / sound)
     return FlightConditions(rho, g, qbar, mach)
 
 
+def _named(m: Model, name: str, expr) -> sp.Symbol:
+    """``expr`` as the definition ``name`` (reused when it already is that definition)."""
+    if isinstance(expr, sp.Symbol) and str(expr) == name and m.has(name):
+        return expr
+    return m.define(name, expr)
+
+
+@dataclass(frozen=True)
+class AscentForces:
+    """The named force terms of the ascent model (definitions effects can redefine)."""
+
+    thrust: sp.Symbol
+    mass: sp.Symbol
+    alpha_thrust: sp.Symbol
+    cd: sp.Symbol
+    cl: sp.Symbol
+    drag: sp.Symbol
+    lift: sp.Symbol
+
+
 def ascent_dynamics(m: Model, st: AscentStates, fc: FlightConditions, *, thrust, mass, area, cd, cl, alpha,
-                    radius: float = EARTH_RADIUS) -> None:
-    """Declare the equations (7.1) on ``m`` (theta in v-multiplied implicit form)."""
+                    radius: float = EARTH_RADIUS) -> AscentForces:
+    """Declare the equations (7.1) on ``m`` (theta in v-multiplied implicit form).
+
+    The force terms become named definitions -- ``thrust``, ``mass``,
+    ``alpha_thrust`` (thrust direction relative to the velocity, = alpha),
+    ``cd``, ``cl``, ``drag = qbar Sm cd``, ``lift = qbar Sm cl`` -- so that a
+    physical effect is added by redefining one of them
+    (:meth:`rocketid.model.Model.redefine`) or by adding a term
+    (:meth:`rocketid.model.Model.add_term`).
+    """
     x, h, v, th = st.x, st.h, st.v, st.theta
     Re = radius
+    T = _named(m, "thrust", thrust)
+    M = _named(m, "mass", mass)
+    aT = m.define("alpha_thrust", alpha)
+    CD = _named(m, "cd", cd)
+    CL = _named(m, "cl", cl)
+    D = m.define("drag", fc.qbar * area * CD)
+    L = m.define("lift", fc.qbar * area * CL)
     m.ode({
         x: Re / (Re + h) * v * sp.cos(th),
         h: v * sp.sin(th),
-        v: thrust * sp.cos(alpha) / mass - fc.qbar * area * cd / mass - fc.g * sp.sin(th),
+        v: T * sp.cos(aT) / M - D / M - fc.g * sp.sin(th),
     })
     m.implicit({
-        th: v * m.der(th) - (thrust * sp.sin(alpha) / mass + fc.qbar * area * cl / mass
-                             - fc.g * sp.cos(th) + v ** 2 * sp.cos(th) / (Re + h)),
+        th: v * m.der(th) - (T * sp.sin(aT) / M + L / M - fc.g * sp.cos(th) + v ** 2 * sp.cos(th) / (Re + h)),
     })
+    return AscentForces(T, M, aT, CD, CL, D, L)
