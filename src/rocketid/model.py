@@ -686,7 +686,8 @@ class Model:
         Returns
         -------
         sympy.Expr
-            The interpolated coefficient (a Piecewise in ``variable``).
+            The interpolated coefficient: ``p_0 + sum_j (s_j - s_{j-1}) max(X - M_j, 0)``
+            with ``s_j`` the slope of segment j (0 beyond the ends).
         """
         kn = np.asarray(knots, dtype=float).ravel()
         if kn.size < 2 or np.any(np.diff(kn) <= 0):
@@ -696,12 +697,17 @@ class Model:
             raise ModelError(f"table {name}: {g.size} guesses for {kn.size} knots")
         ps = [self._add_parameter(f"{name}_{j}", g[j], bounds, nominal) for j in range(kn.size)]
         X = sp.sympify(variable)
-        pieces = [(ps[0], X < float(kn[0]))]
+        # exact piecewise-linear interpolation with flat ends, written with ramps
+        # max(X - M_j, 0) instead of Piecewise conditions (cheap to substitute and
+        # differentiate when X is itself piecewise, as Mach is)
+        slopes = [(ps[j + 1] - ps[j]) / float(kn[j + 1] - kn[j]) for j in range(kn.size - 1)]
+        expr = ps[0]
+        prev = sp.S.Zero
         for j in range(kn.size - 1):
-            a, b = float(kn[j]), float(kn[j + 1])
-            pieces.append((ps[j] + (ps[j + 1] - ps[j]) * (X - a) / (b - a), X < b))
-        pieces.append((ps[-1], True))
-        return sp.Piecewise(*pieces)
+            expr += (slopes[j] - prev) * sp.Max(X - float(kn[j]), 0)
+            prev = slopes[j]
+        expr -= prev * sp.Max(X - float(kn[-1]), 0)
+        return expr
 
     # -- equations ---------------------------------------------------------------
     def ode(self, rhs: Mapping[sp.Symbol, sp.Expr]) -> None:
