@@ -477,7 +477,7 @@ def simulate_command(out, model, seed, no_noise, params):
               help="Noise standard deviation of an output (repeatable; default: the model's).")
 @click.option("--elements", "n_elements", type=click.IntRange(min=1), default=None, metavar="N",
               help="About N finite elements (default: elements of about 1 s).")
-@click.option("--K", "K", type=click.IntRange(min=1), default=4, show_default=True,
+@click.option("--K", "K", type=click.IntRange(min=1), default=4, show_default=True, metavar="K",
               help="Radau collocation points per element.")
 @click.option("--guess", "guesses", multiple=True, type=NameValue(float), metavar="NAME=VALUE",
               help="Initial guess of a parameter (repeatable; default: the model's p0).")
