@@ -259,6 +259,24 @@ def test_bad_data_values(tmp_path):
     assert "bad.csv" in line and "oops" in line
 
 
+def test_unwritable_output(ra66_csv, tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    result = invoke("estimate", ra66_csv, "--out", blocker / "fit.json")
+    assert result.exit_code == 2
+    assert "fit.json" in error_line(result)
+
+
+def test_os_errors_are_one_line(ra66_csv, monkeypatch):
+    def deny(*args, **kwargs):
+        raise PermissionError(13, "Permission denied", "secret.csv")
+
+    monkeypatch.setattr(cli, "read_data", deny)
+    result = invoke("estimate", ra66_csv)
+    assert result.exit_code == 2
+    assert error_line(result) == "Error: Permission denied: secret.csv"
+
+
 def test_verbose_shows_the_traceback(tmp_path):
     from rocketid.errors import DataError
 

@@ -59,7 +59,7 @@ import numpy as np
 
 from .cases import ra66, ra66_times, ra66_truth
 from .data import Measurements, read_csv
-from .errors import DataError, ModelError, RocketidError, SettingsError
+from .errors import ModelError, RocketidError, SettingsError
 from .model import Model, ModelSpec
 
 __all__ = [
@@ -405,6 +405,12 @@ class RocketidGroup(click.Group):
             if _verbose(ctx):
                 raise
             click.echo(f"Error: {_one_line(exc)}", err=True)
+            ctx.exit(EXIT_BAD_INPUT)
+        except OSError as exc:  # unreadable or unwritable files named by the user
+            if _verbose(ctx):
+                raise
+            where = f": {exc.filename}" if exc.filename else ""
+            click.echo(f"Error: {_one_line(exc.strerror or exc)}{where}", err=True)
             ctx.exit(EXIT_BAD_INPUT)
         except click.UsageError as exc:
             if _verbose(ctx):
