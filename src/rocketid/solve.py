@@ -438,7 +438,8 @@ class EstimationResult:
                   "  RMS residual  : " + ", ".join(f"{k} {v:.4g}" for k, v in self.rms.items())]
         notes = list(self.notes)
         if not self.success:
-            notes.insert(0, f"IPOPT did not converge: {self.message}. The estimates are the last iterate, not an optimum.")
+            notes.insert(0, f"IPOPT did not converge: {self.message.rstrip('.')}. The estimates are the last iterate, "
+                            "not an optimum.")
         for s, side in self.active_bounds():
             notes.append(f"{s} is at its {side} bound: the estimate is limited by the bound, not by the data.")
         if self.success and self.chi2_per_dof > 1.5:
