@@ -189,9 +189,17 @@ def sensitivity_at(prepared: Prepared, p: np.ndarray | None = None, *, gamma: np
     if gamma is None:
         S0, _ = prepared.initial_states(p)
         gamma = S0.ravel()
+    gamma = np.asarray(gamma, float)
     if solve:
         gamma = solve_collocation(nlp, p, gamma)
-    return _form(nlp, p, np.asarray(gamma, float))
+    else:
+        c = nlp.constraints(np.concatenate([gamma, p]))[:nlp.m_ic + nlp.m_col]
+        worst = float(np.max(np.abs(c))) if c.size else 0.0
+        if not worst <= 1e-6 * (1.0 + np.max(np.abs(gamma))):
+            raise SensitivityError(f"the given gamma does not satisfy the collocation equations at p (max |c| = "
+                                   f"{worst:.3g}): the sensitivities would be meaningless; pass solve=True to "
+                                   "refine it by Newton's method")
+    return _form(nlp, p, gamma)
 
 
 def sensitivity_of(fit: EstimationResult) -> Sensitivity:
