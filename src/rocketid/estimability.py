@@ -160,7 +160,8 @@ class Estimability:
     def to_dict(self) -> dict:
         return {
             "eigenvalues": [float(v) for v in self.eigenvalues],
-            "ratios": [float(v) for v in self.ratios],
+            # lambda_1 / lambda_k is infinite where lambda_k <= 0: null, not NaN (invalid JSON)
+            "ratios": [float(v) if np.isfinite(v) else None for v in self.ratios],
             "np": int(self.n_estimated),
             "scaling": self.scaling.value,
             "threshold": float(self.threshold),
