@@ -759,6 +759,24 @@ class Model:
             raise ModelError(f"sigma of output {name} must be positive and finite, got {sigma}")
         self._outputs.append(OutputSpec(str(name), sp.sympify(expr), sigma))
 
+    def output_expression(self, name: str) -> sp.Expr:
+        """The current expression of the output ``name``."""
+        for o in self._outputs:
+            if o.name == name:
+                return o.expr
+        raise ModelError(f"model {self.name!r} has no output named {name!r}; its outputs are "
+                         f"{', '.join(o.name for o in self._outputs) or 'none'}")
+
+    def redefine_output(self, name: str, expr: sp.Expr) -> None:
+        """Replace the expression of an output, keeping its sigma (a sensor effect:
+        ``h`` becomes ``h + b_h``); the old expression is :meth:`output_expression`."""
+        for i, o in enumerate(self._outputs):
+            if o.name == name:
+                self._outputs[i] = replace(o, expr=sp.sympify(expr))
+                return
+        raise ModelError(f"model {self.name!r} has no output named {name!r}; its outputs are "
+                         f"{', '.join(o.name for o in self._outputs) or 'none'}")
+
     def set_sigma(self, name: str, sigma: float) -> None:
         """Change the noise standard deviation of an output."""
         for i, o in enumerate(self._outputs):
