@@ -759,6 +759,11 @@ class Model:
             raise ModelError(f"sigma of output {name} must be positive and finite, got {sigma}")
         self._outputs.append(OutputSpec(str(name), sp.sympify(expr), sigma))
 
+    @property
+    def output_names(self) -> tuple[str, ...]:
+        """Names of the outputs declared so far."""
+        return tuple(o.name for o in self._outputs)
+
     def output_expression(self, name: str) -> sp.Expr:
         """The current expression of the output ``name``."""
         for o in self._outputs:
