@@ -1,0 +1,144 @@
+"""``rocketid estimability``: the estimability report of a model and a data set.
+
+::
+
+    rocketid estimability ra66.csv --scaling nominal --out est.json --plot est.png
+
+Forms the reduced Hessian (7.6) at the model's guess p0 (the chapter's step 2;
+``--at fit`` forms it at the full fit's estimate instead), decomposes it (7.7),
+selects ``np`` with the modified E-optimal criterion against ``--threshold``,
+prints :meth:`rocketid.estimability.Estimability.summary` and writes the JSON
+(``eigenvalues``, ``ratios``, ``np``, ``scaling``, ``threshold``,
+``evaluated_at``, ``directions``, ``notes``, plus the model, data file, point
+and mesh). Exit codes as every rocketid command: 0 success, 1 the full fit of
+``--at fit`` did not converge (nothing is written), 2 bad input.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+
+import click
+
+from ..cli import (EXIT_NOT_CONVERGED, BUILTIN_MODELS, ModelSource, NameValue, assignments, ipopt_options,
+                   load_model, make_mesh, parameter_values, read_data, status, verbose_option, write_json)
+from ..errors import SettingsError
+
+__all__ = ["command", "model_source"]
+
+
+def model_source(name: str) -> ModelSource:
+    """``--model``: the CLI's models (:func:`rocketid.cli.load_model`) and RA-66M."""
+    if name == "ra66m" and name not in BUILTIN_MODELS:
+        from ..cases import ra66_times, ra66m, ra66m_truth
+
+        spec = ra66m()
+        return ModelSource(spec, "ra66m", ra66m_truth(spec), ra66_times())
+    return load_model(name)
+
+
+@click.command("estimability")
+@click.argument("data_file", metavar="DATA.csv", type=click.Path(dir_okay=False))
+@click.option("--model", "model", default="ra66", show_default=True, metavar="ra66|ra66m|PATH.py",
+              help="A built-in model or a Python file defining build_model().")
+@click.option("--scaling", type=click.Choice(["none", "nominal"]), default="none", show_default=True,
+              help="Decompose H_r in physical units, or with each parameter divided by its nominal value.")
+@click.option("--threshold", type=float, default=3000.0, show_default=True,
+              help="Modified E-optimal criterion: np = largest k with lambda_1/lambda_k <= threshold (> 1).")
+@click.option("--np", "n_estimated", type=int, default=None, metavar="N",
+              help="Force the number of estimated directions (1 .. number of parameters).")
+@click.option("--at", "at", type=click.Choice(["guess", "fit"]), default="guess", show_default=True,
+              help="Form H_r at the guess p0 (the chapter's step 2) or at the full fit's estimate.")
+@click.option("--guess", "guesses", multiple=True, type=NameValue(float), metavar="NAME=VALUE",
+              help="Change a parameter of the guess (repeatable; default: the model's p0).")
+@click.option("--column", "columns", multiple=True, type=NameValue(str, "CSV column name"), metavar="NAME=CSVCOL",
+              help="Read output NAME from column CSVCOL (repeatable).")
+@click.option("--time-column", default="t", show_default=True, help="Name of the time column.")
+@click.option("--sigma", "sigmas", multiple=True, type=NameValue(float), metavar="NAME=VALUE",
+              help="Noise standard deviation of an output (repeatable; default: the model's).")
+@click.option("--elements", "n_elements", type=click.IntRange(min=1), default=None, metavar="N",
+              help="About N finite elements (default: elements of about 1 s).")
+@click.option("--K", "K", type=click.IntRange(min=1), default=4, show_default=True, metavar="K",
+              help="Radau collocation points per element.")
+@click.option("--ipopt", "ipopt", multiple=True, type=NameValue(str, "value"), metavar="NAME=VALUE",
+              help="IPOPT option for the full fit of --at fit (repeatable).")
+@click.option("--out", "out", required=True, type=click.Path(dir_okay=False), metavar="EST.json",
+              help="Write the report as JSON.")
+@click.option("--plot", "plot", type=click.Path(dir_okay=False), default=None, metavar="EST.png",
+              help="Plot the eigenvalue spectrum and the directions' composition.")
+@verbose_option
+def command(data_file, model, scaling, threshold, n_estimated, at, guesses, columns, time_column, sigmas,
+            n_elements, K, ipopt, out, plot):
+    """Estimability report: eigenvalues of the reduced Hessian, ratios, np, directions.
+
+    Prints the report; writes EST.json (and EST.png with --plot).
+    """
+    from ..estimability import analyze, select_np
+    from ..sensitivity import sensitivity_at, sensitivity_of
+    from ..solve import estimate, prepare
+
+    # every setting is checked before any work is done
+    try:
+        select_np([1.0], threshold)
+    except SettingsError as exc:
+        raise SettingsError(f"--threshold: {exc}") from None
+    options = ipopt_options(ipopt)
+    src = model_source(model)
+    spec = src.spec
+    n_p = len(spec.parameters)
+    if n_estimated is not None and not 1 <= n_estimated <= n_p:
+        raise SettingsError(f"--np must be from 1 to {n_p} (the number of parameters of {spec.name}), "
+                            f"got {n_estimated}")
+    guess = parameter_values(spec, assignments(guesses, "--guess"), "--guess")
+    for s, v, lo, hi in zip(spec.parameter_names, guess, spec.lower, spec.upper):
+        if not lo <= v <= hi:
+            raise SettingsError(f"--guess {s}={v:g} lies outside the bounds [{lo:g}, {hi:g}] of {s}")
+    mesh = make_mesh(spec, n_elements, K)
+    data = read_data(data_file, spec, time_column=time_column, columns=assignments(columns, "--column"),
+                     sigma=assignments(sigmas, "--sigma"))
+    status(f"read {data.n_samples} values of {', '.join(data.names)} from {data_file}; collocating on "
+           f"{mesh.describe()}")
+    t0 = time.perf_counter()
+    prepared = prepare(spec, data, mesh=mesh)
+    extra_notes = []
+    fit_info = None
+    if at == "fit":
+        fit = estimate(spec, data, guess=guess, prepared=prepared, options=options)
+        fit_info = {"success": bool(fit.success), "iterations": int(fit.iterations),
+                    "objective": float(fit.objective), "chi2_per_dof": float(fit.chi2_per_dof)}
+        if not fit.success:
+            click.echo(f"Error: the full fit did not converge ({fit.message}); the reduced Hessian is not formed "
+                       "at a point that is not an estimate (use --at guess, or --ipopt to help the fit)", err=True)
+            click.get_current_context().exit(EXIT_NOT_CONVERGED)
+        for s, side in fit.active_bounds():
+            extra_notes.append(f"{s} is at its {side} bound in the full fit where H_r was formed")
+        sens = sensitivity_of(fit)
+        point = fit.p
+    else:
+        point = guess
+        sens = sensitivity_at(prepared, point)
+    est = analyze(prepared, point, threshold=threshold, scaling=scaling, n_estimated=n_estimated,
+                  sensitivity=sens)
+    if extra_notes:
+        est = replace(est, notes=est.notes + tuple(extra_notes))
+    status(f"formed H_r in {sens.formed_s:.3f} s ({time.perf_counter() - t0:.2f} s in all)")
+    click.echo(est.summary())
+    payload = est.to_dict()
+    payload.update({
+        "model": spec.name,
+        "data": str(data_file),
+        "at": at,
+        "mesh": {"n_elements": int(mesh.n_elements), "K": int(mesh.K)},
+        "formed_s": float(sens.formed_s),
+    })
+    if fit_info is not None:
+        payload["fit"] = fit_info
+    path = write_json(out, payload)
+    status(f"wrote {path}")
+    if plot is not None:
+        import matplotlib.pyplot as plt
+
+        fig = est.plot(plot)
+        plt.close(fig)
+        status(f"wrote {plot}")
