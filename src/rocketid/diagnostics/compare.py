@@ -1,0 +1,570 @@
+"""Compare: each measured channel against the model, with fit statistics.
+
+The first step of the diagnosis loop (compare, locate, rank, add, refit).
+For every channel of an :class:`~rocketid.solve.EstimationResult` the
+measured values are set against the model's prediction, and the residuals,
+divided by the channel's noise sigma, are tested for what a correct model
+leaves behind: white Gaussian noise of unit variance.
+
+Notation
+--------
+==============  ================================================================
+``r_i``         residual, model minus measurement (rocketid's sign everywhere)
+``e_i``         normalized residual ``r_i / sigma``; N(0, 1) for a correct model
+``n``           samples of the channel; ``N`` over all channels
+``p``           estimated quantities of the fit (``fit.n_estimated``)
+``chi2/dof``    ``sum(e^2) / (n - p n / N)``: the estimated quantities' degrees of
+                freedom are shared among channels in proportion to their samples
+``U``           Theil's inequality coefficient
+                ``sqrt(mean(r^2)) / (sqrt(mean(yhat^2)) + sqrt(mean(y^2)))``, 0 for
+                a perfect fit, 1 for no agreement; its proportions ``U_M`` (bias),
+                ``U_S`` (variance) and ``U_C`` (covariance) sum to 1
+``rho_k``       autocorrelation of ``e`` at lag ``k`` (about its mean)
+``Q``           Ljung-Box ``n (n + 2) sum_{k=1..h} rho_k^2 / (n - k)``, chi2(h)
+                for white residuals
+``JB``          Jarque-Bera ``n/6 (S^2 + (K - 3)^2 / 4)``, chi2(2) for Gaussian
+                residuals (``scipy.stats.jarque_bera``)
+``eta``         the statistic criterion (7.10) over all channels, with its four
+                terms (``rocketid.sampling.criterion``)
+==============  ================================================================
+
+eta (7.10) measures skewness and kurtosis, not whiteness: a slow drift that
+is symmetric about zero leaves eta small. The Ljung-Box test beside it is the
+whiteness test; the windowed statistics of :mod:`rocketid.diagnostics.locate`
+say where the residuals fail.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Mapping
+
+import numpy as np
+
+from ..errors import DataError, SettingsError
+from ..solve import EstimationResult
+
+__all__ = ["LjungBox", "Normality", "Theil", "ChannelComparison", "Comparison", "compare", "ljung_box",
+           "normality", "theil", "criterion_terms", "DEFAULT_LAGS"]
+
+#: Lags of the Ljung-Box test (0.2 s at 100 Hz), fewer for short channels (n // 5).
+DEFAULT_LAGS = 20
+#: Two-sided share of N(0, 1) outside +-2: what a correct model leaves outside the band.
+EXPECTED_OUTSIDE_2SIGMA = 0.04550026
+
+
+# ---------------------------------------------------------------------------
+# Tests on one residual series
+# ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class LjungBox:
+    """The Ljung-Box whiteness test of a residual series.
+
+    Attributes
+    ----------
+    statistic : float
+        ``Q = n (n + 2) sum_{k=1..h} rho_k^2 / (n - k)``.
+    dof : int
+        ``h``, the number of lags (no fitted ARMA terms).
+    p_value : float
+        ``P(chi2(h) > Q)``; small means the residuals are not white.
+    autocorrelation : ndarray, shape (h + 1,)
+        ``rho_0 = 1, rho_1 .. rho_h``.
+    """
+
+    statistic: float
+    dof: int
+    p_value: float
+    autocorrelation: np.ndarray
+
+    @property
+    def lags(self) -> int:
+        return self.dof
+
+    @property
+    def lag1(self) -> float:
+        """Lag-1 autocorrelation (``+-2/sqrt(n)`` for white noise)."""
+        return float(self.autocorrelation[1]) if self.autocorrelation.size > 1 else math.nan
+
+
+def autocorrelation(e: np.ndarray, lags: int) -> np.ndarray:
+    """Sample autocorrelation ``rho_0..rho_lags`` of ``e`` about its mean (biased, ``1/n``)."""
+    e = np.asarray(e, float).ravel()
+    d = e - e.mean()
+    c0 = float(d @ d)
+    n = d.size
+    if c0 == 0:
+        return np.concatenate([[1.0], np.zeros(lags)])
+    # FFT autocovariance (n up to 10^5 or more)
+    m = 1 << int(math.ceil(math.log2(2 * n)))
+    f = np.fft.rfft(d, m)
+    acov = np.fft.irfft(f * np.conj(f), m)[: lags + 1]
+    return acov / c0
+
+
+def ljung_box(e: np.ndarray, lags: int | None = None) -> LjungBox:
+    """The Ljung-Box test (chi-square p-value from ``scipy.stats.chi2``).
+
+    Parameters
+    ----------
+    e : array, shape (n,)
+        Residuals (normalized or not: the test is scale free).
+    lags : int, optional
+        ``h`` (default :data:`DEFAULT_LAGS`, at most ``n // 5``).
+
+    Raises
+    ------
+    DataError
+        Fewer than 10 samples, or ``lags`` not in 1 .. n - 1.
+    """
+    from scipy.stats import chi2
+
+    e = np.asarray(e, float).ravel()
+    n = e.size
+    if n < 10:
+        raise DataError(f"the Ljung-Box test needs at least 10 residuals, got {n}")
+    h = min(DEFAULT_LAGS, max(1, n // 5)) if lags is None else int(lags)
+    if not 1 <= h < n:
+        raise DataError(f"Ljung-Box lags must be in 1 .. {n - 1} for {n} residuals, got {lags}")
+    rho = autocorrelation(e, h)
+    k = np.arange(1, h + 1)
+    q = float(n * (n + 2) * np.sum(rho[1:] ** 2 / (n - k)))
+    return LjungBox(q, h, float(chi2.sf(q, h)), rho)
+
+
+@dataclass(frozen=True)
+class Normality:
+    """Normality of a residual series: Jarque-Bera with its moments.
+
+    Attributes
+    ----------
+    statistic : float
+        ``JB = n/6 (S^2 + (K - 3)^2 / 4)`` (``scipy.stats.jarque_bera``).
+    p_value : float
+        ``P(chi2(2) > JB)``.
+    skewness, kurtosis : float
+        Sample moments ``S`` and ``K`` (central, ``1/n``; ``K = 3`` for a Gaussian).
+    """
+
+    statistic: float
+    p_value: float
+    skewness: float
+    kurtosis: float
+
+
+def normality(e: np.ndarray) -> Normality:
+    """The Jarque-Bera test of ``e`` (``scipy.stats.jarque_bera``) with skewness and kurtosis."""
+    from scipy.stats import jarque_bera
+
+    e = np.asarray(e, float).ravel()
+    if e.size < 8:
+        raise DataError(f"the normality test needs at least 8 residuals, got {e.size}")
+    res = jarque_bera(e)
+    d = e - e.mean()
+    z2 = float(np.mean(d ** 2))
+    s = float(np.mean(d ** 3) / z2 ** 1.5) if z2 > 0 else math.nan
+    k = float(np.mean(d ** 4) / z2 ** 2) if z2 > 0 else math.nan
+    return Normality(float(res.statistic), float(res.pvalue), s, k)
+
+
+@dataclass(frozen=True)
+class Theil:
+    """Theil's inequality coefficient and its proportions.
+
+    Attributes
+    ----------
+    U : float
+        ``sqrt(mean(r^2)) / (sqrt(mean(yhat^2)) + sqrt(mean(y^2)))``.
+    bias, variance, covariance : float
+        ``U_M = (mean yhat - mean y)^2 / MSE``, ``U_S = (s_yhat - s_y)^2 / MSE``,
+        ``U_C = 2 (1 - corr) s_yhat s_y / MSE``; they sum to 1. A good model
+        puts the error in ``U_C`` (unsystematic); a large ``U_M`` or ``U_S``
+        is a systematic error.
+    """
+
+    U: float
+    bias: float
+    variance: float
+    covariance: float
+
+
+def theil(predicted: np.ndarray, measured: np.ndarray) -> Theil:
+    """Theil's inequality coefficient of a prediction against measurements."""
+    yp = np.asarray(predicted, float).ravel()
+    ym = np.asarray(measured, float).ravel()
+    r = yp - ym
+    mse = float(np.mean(r ** 2))
+    den = math.sqrt(float(np.mean(yp ** 2))) + math.sqrt(float(np.mean(ym ** 2)))
+    U = math.sqrt(mse) / den if den > 0 else math.nan
+    if mse == 0:
+        return Theil(U, 0.0, 0.0, 1.0)
+    sp_, sm = float(np.std(yp)), float(np.std(ym))
+    corr = float(np.corrcoef(yp, ym)[0, 1]) if sp_ > 0 and sm > 0 else 0.0
+    um = (float(yp.mean()) - float(ym.mean())) ** 2 / mse
+    us = (sp_ - sm) ** 2 / mse
+    uc = 2 * (1 - corr) * sp_ * sm / mse
+    return Theil(U, um, us, uc)
+
+
+# ---------------------------------------------------------------------------
+# eta (7.10)
+# ---------------------------------------------------------------------------
+
+
+def criterion_terms(residuals: Mapping[str, np.ndarray], sigma: Mapping[str, float]) -> tuple[dict, str]:
+    """eta (7.10) and its terms over all channels, each divided by its sigma.
+
+    Uses :func:`rocketid.sampling.criterion.statistic_criterion` when that
+    module is installed; otherwise the same formula (METHOD.md section 5) is
+    computed here. Returns ``({"eta", "|s1|", "|k1-3|", "|s1-s2|", "|k1-k2|",
+    "s1", "k1", "s2", "k2"}, source)``.
+    """
+    try:
+        from ..sampling.criterion import statistic_criterion
+    except ImportError:  # pragma: no cover - the sampling stage is part of the package
+        statistic_criterion = None
+    if statistic_criterion is not None:
+        return statistic_criterion(dict(residuals), dict(sigma)).as_dict(), "rocketid.sampling.criterion"
+    e = np.concatenate([np.asarray(r, float) / sigma[k] for k, r in residuals.items()])
+    s1, k1 = float(np.mean(e ** 3)), float(np.mean(e ** 4))
+    d = e - e.mean()
+    z2, z3, z4 = (float(np.mean(d ** j)) for j in (2, 3, 4))
+    s2, k2 = z3 / z2 ** 1.5, z4 / z2 ** 2
+    terms = {"|s1|": abs(s1), "|k1-3|": abs(k1 - 3), "|s1-s2|": abs(s1 - s2), "|k1-k2|": abs(k1 - k2)}
+    return {"eta": sum(terms.values()), **terms, "s1": s1, "k1": k1, "s2": s2, "k2": k2}, \
+        "rocketid.diagnostics.compare (METHOD.md section 5; rocketid.sampling.criterion not found)"
+
+
+# ---------------------------------------------------------------------------
+# Per channel and overall
+# ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ChannelComparison:
+    """One channel: measured, model, residuals and their statistics.
+
+    Attributes
+    ----------
+    name : str
+    times, measured, predicted : ndarray, shape (n,)
+    sigma : float
+        The noise standard deviation the fit used.
+    residual : ndarray, shape (n,)
+        ``predicted - measured``.
+    normalized : ndarray, shape (n,)
+        ``residual / sigma``.
+    rms, bias, std : float
+        Of ``residual`` (channel units).
+    chi2_per_dof : float
+        ``sum(e^2) / (n - p n / N)`` (see the module notation).
+    theil : Theil
+    outside_2sigma : float
+        Share of ``|e| > 2`` (0.0455 expected).
+    whiteness : LjungBox
+    normality : Normality
+    """
+
+    name: str
+    times: np.ndarray
+    measured: np.ndarray
+    predicted: np.ndarray
+    sigma: float
+    residual: np.ndarray
+    normalized: np.ndarray
+    rms: float
+    bias: float
+    std: float
+    chi2_per_dof: float
+    theil: Theil
+    outside_2sigma: float
+    whiteness: LjungBox
+    normality: Normality
+
+    @property
+    def n(self) -> int:
+        return int(self.times.size)
+
+    @property
+    def bias_z(self) -> float:
+        """``mean(e) sqrt(n)``: the bias in standard errors of a white-noise mean."""
+        return float(np.mean(self.normalized) * math.sqrt(self.n))
+
+    def to_dict(self) -> dict:
+        return {"name": self.name, "n": self.n, "sigma": self.sigma, "rms": self.rms, "bias": self.bias,
+                "std": self.std, "bias_z": self.bias_z, "chi2_per_dof": self.chi2_per_dof,
+                "theil": {"U": self.theil.U, "bias": self.theil.bias, "variance": self.theil.variance,
+                          "covariance": self.theil.covariance},
+                "outside_2sigma": self.outside_2sigma,
+                "ljung_box": {"statistic": self.whiteness.statistic, "dof": self.whiteness.dof,
+                              "p_value": self.whiteness.p_value, "lag1": self.whiteness.lag1},
+                "jarque_bera": {"statistic": self.normality.statistic, "p_value": self.normality.p_value,
+                                "skewness": self.normality.skewness, "kurtosis": self.normality.kurtosis}}
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """Every channel against the model, and the statistics over all channels.
+
+    Attributes
+    ----------
+    model : str
+    channels : tuple of ChannelComparison
+    chi2_per_dof : float
+        The fit's ``2 J / (N - p)``.
+    n_data, n_estimated : int
+    criterion : dict
+        eta (7.10), its four terms and the moments (see :func:`criterion_terms`).
+    criterion_source : str
+        Which implementation computed eta.
+    whiteness : LjungBox
+        Of all channels' normalized residuals, each channel tested separately
+        and the statistics added (``Q`` and ``h`` sum over channels).
+    level : float
+        Significance level of the verdicts.
+    notes : tuple of str
+    """
+
+    model: str
+    channels: tuple
+    chi2_per_dof: float
+    n_data: int
+    n_estimated: int
+    criterion: dict
+    criterion_source: str
+    whiteness: LjungBox
+    level: float = 0.05
+    notes: tuple = ()
+
+    def __getitem__(self, name: str) -> ChannelComparison:
+        for c in self.channels:
+            if c.name == name:
+                return c
+        raise DataError(f"no channel named {name!r}; the comparison has {', '.join(self.names)}")
+
+    @property
+    def names(self) -> tuple:
+        return tuple(c.name for c in self.channels)
+
+    @property
+    def eta(self) -> float:
+        return float(self.criterion["eta"])
+
+    @property
+    def fits_to_noise(self) -> bool:
+        """chi2/dof within its 99.9 % band for white noise and every channel white at ``level``
+        (Bonferroni over channels)."""
+        from scipy.stats import chi2
+
+        dof = max(1, self.n_data - self.n_estimated)
+        hi = chi2.isf(0.001, dof) / dof
+        white = all(c.whiteness.p_value >= self.level / len(self.channels) for c in self.channels)
+        return bool(self.chi2_per_dof <= hi and white)
+
+    def table(self) -> str:
+        """One line per channel."""
+        head = (f"  {'channel':<8}{'n':>7}{'sigma':>8}{'RMS':>10}{'bias':>10}{'bias z':>9}{'chi2/dof':>10}"
+                f"{'Theil U':>10}{'U_M':>6}{'|e|>2':>7}{'LB p':>9}{'rho1':>7}{'JB p':>9}")
+        lines = [head]
+        for c in self.channels:
+            lines.append(f"  {c.name:<8}{c.n:>7}{c.sigma:>8.3g}{c.rms:>10.4g}{c.bias:>10.3g}{c.bias_z:>9.3g}"
+                         f"{c.chi2_per_dof:>10.4g}{c.theil.U:>10.2e}{c.theil.bias:>6.2f}{100 * c.outside_2sigma:>6.1f}%"
+                         f"{c.whiteness.p_value:>9.2g}{c.whiteness.lag1:>7.3f}{c.normality.p_value:>9.2g}")
+        return "\n".join(lines)
+
+    def summary(self) -> str:
+        """Fixed sections (overall, channels, eta) and numbered notes."""
+        crit = self.criterion
+        lines = [f"rocketid comparison: {self.model}", "=" * 60, "Overall",
+                 f"  chi2 / dof    : {self.chi2_per_dof:.4f}  ({self.n_data} values, {self.n_estimated} estimated)",
+                 f"  white noise   : {'yes' if self.fits_to_noise else 'NO'} (chi2/dof band and Ljung-Box at "
+                 f"level {self.level:g})",
+                 "Channels (residual = model - measured; e = residual / sigma)", self.table(),
+                 "Statistic criterion (7.10)",
+                 f"  eta           : {crit['eta']:.4g} = |s1| {crit['|s1|']:.3g} + |k1-3| {crit['|k1-3|']:.3g} "
+                 f"+ |s1-s2| {crit['|s1-s2|']:.3g} + |k1-k2| {crit['|k1-k2|']:.3g}",
+                 f"  moments       : s1 {crit['s1']:.3g}, k1 {crit['k1']:.4g}, s2 {crit['s2']:.3g}, k2 {crit['k2']:.4g}",
+                 f"  computed by   : {self.criterion_source}"]
+        if self.notes:
+            lines.append("Notes")
+            lines += [f"  [{i}] {n}" for i, n in enumerate(self.notes, 1)]
+        return "\n".join(lines)
+
+    def to_dict(self) -> dict:
+        return {"model": self.model, "chi2_per_dof": self.chi2_per_dof, "n_data": self.n_data,
+                "n_estimated": self.n_estimated, "fits_to_noise": self.fits_to_noise,
+                "criterion": {k: float(v) for k, v in self.criterion.items()},
+                "criterion_source": self.criterion_source,
+                "channels": [c.to_dict() for c in self.channels], "notes": list(self.notes)}
+
+    # ---- plots
+    def plot(self, path=None, *, title: str | None = None):
+        """Per channel: measured and model against time (left), normalized residual
+        against time with the +-2 sigma band and a 1 s running mean (right).
+
+        Returns the matplotlib figure (saved to ``path`` when given).
+        """
+        plt = _pyplot()
+        n = len(self.channels)
+        fig, axes = plt.subplots(n, 2, figsize=(11, 2.5 * n + 0.6), squeeze=False,
+                                 gridspec_kw={"width_ratios": [1, 1.4]})
+        for (a1, a2), c in zip(axes, self.channels):
+            a1.plot(c.times, c.measured, ".", ms=1.5, color="0.55", label="measured", rasterized=True)
+            a1.plot(c.times, c.predicted, "-", lw=1.2, color="tab:blue", label="model")
+            a1.set_ylabel(c.name)
+            a1.legend(loc="upper left", fontsize=8, frameon=False)
+            residual_panel(a2, c.times, c.normalized)
+            a2.set_ylabel(f"{c.name}: e = r / {c.sigma:g}")
+            a2.set_title(f"RMS {c.rms:.3g}, bias {c.bias:+.3g}, chi2/dof {c.chi2_per_dof:.3g}, "
+                         f"LB p {c.whiteness.p_value:.2g}", fontsize=9)
+        axes[-1, 0].set_xlabel("t (s)")
+        axes[-1, 1].set_xlabel("t (s)")
+        fig.suptitle(title or f"{self.model}: measured vs model, normalized residuals (chi2/dof "
+                              f"{self.chi2_per_dof:.3g}, eta {self.eta:.3g})", fontsize=11)
+        fig.tight_layout()
+        if path is not None:
+            fig.savefig(path, dpi=110)
+        return fig
+
+    def plot_autocorrelation(self, path=None):
+        """Autocorrelation of each channel's normalized residuals with the +-2/sqrt(n) band."""
+        plt = _pyplot()
+        fig, ax = plt.subplots(figsize=(6, 3.2))
+        for c in self.channels:
+            rho = c.whiteness.autocorrelation
+            ax.plot(np.arange(rho.size), rho, "o-", ms=3, label=f"{c.name} (LB p {c.whiteness.p_value:.2g})")
+        band = 2 / math.sqrt(min(c.n for c in self.channels))
+        ax.axhspan(-band, band, color="0.85", zorder=0, label="+-2/sqrt(n)")
+        ax.set_xlabel("lag (samples)")
+        ax.set_ylabel("autocorrelation of e")
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        if path is not None:
+            fig.savefig(path, dpi=110)
+        return fig
+
+
+def _pyplot():
+    import matplotlib
+    if matplotlib.get_backend().lower() not in ("agg", "module://matplotlib_inline.backend_inline"):
+        matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    return plt
+
+
+def running_mean(times: np.ndarray, e: np.ndarray, width: float) -> np.ndarray:
+    """Centred running mean of ``e`` over ``width`` seconds (by sample count at the median step)."""
+    if times.size < 3:
+        return np.asarray(e, float)
+    dt = float(np.median(np.diff(times)))
+    k = max(1, int(round(width / dt)))
+    k = min(k, e.size)
+    c = np.convolve(e, np.ones(k) / k, mode="same")
+    # the edges average fewer samples
+    norm = np.convolve(np.ones(e.size), np.ones(k) / k, mode="same")
+    return c / norm
+
+
+def residual_panel(ax, times: np.ndarray, e: np.ndarray, *, width: float = 1.0, label: str | None = None,
+                   color: str = "tab:blue") -> None:
+    """Normalized residuals against time, the +-2 band, and a running mean."""
+    ax.axhspan(-2, 2, color="tab:green", alpha=0.12, lw=0, label="+-2 sigma")
+    ax.axhline(0, color="0.4", lw=0.6)
+    ax.plot(times, e, ".", ms=1.2, color="0.5", alpha=0.6, rasterized=True)
+    ax.plot(times, running_mean(times, e, width), "-", lw=1.3, color=color,
+            label=label or f"{width:g} s running mean")
+    lim = max(4.0, float(np.percentile(np.abs(e), 99.5)) * 1.1)
+    ax.set_ylim(-lim, lim)
+    ax.legend(loc="upper right", fontsize=7, frameon=False)
+
+
+# ---------------------------------------------------------------------------
+# The entry point
+# ---------------------------------------------------------------------------
+
+
+def compare(fit: EstimationResult, *, lags: int | None = None, level: float = 0.05) -> Comparison:
+    """Compare each measured channel of ``fit`` with the model (item 2 of the diagnosis).
+
+    Parameters
+    ----------
+    fit : EstimationResult
+    lags : int, optional
+        Lags of the Ljung-Box test (default :data:`DEFAULT_LAGS`, at most n // 5).
+    level : float
+        Significance level of the verdicts and notes.
+
+    Returns
+    -------
+    Comparison
+
+    Raises
+    ------
+    SettingsError
+        ``level`` not in (0, 1).
+    DataError
+        A channel with fewer than 10 samples.
+    """
+    if not isinstance(fit, EstimationResult):
+        raise SettingsError(f"compare() needs an EstimationResult (rocketid.estimate), got {type(fit).__name__}")
+    if not 0 < level < 1:
+        raise SettingsError(f"level must be in (0, 1), got {level}")
+    from scipy.stats import chi2
+
+    nlp = fit.nlp
+    sig = dict(zip(nlp.channel_names, (float(s) for s in nlp.channel_sigmas)))
+    N, p = fit.n_data, fit.n_estimated
+    chans = []
+    for name in nlp.channel_names:
+        ch = fit.prepared.measurements[name]
+        r = np.asarray(fit.residuals[name], float)
+        yhat = np.asarray(fit.predictions[name], float)
+        s = sig[name]
+        e = r / s
+        n = e.size
+        dof = max(1.0, n - p * n / N)
+        chans.append(ChannelComparison(
+            name=name, times=np.asarray(ch.times), measured=np.asarray(ch.values), predicted=yhat, sigma=s,
+            residual=r, normalized=e, rms=float(np.sqrt(np.mean(r ** 2))), bias=float(np.mean(r)),
+            std=float(np.std(r)), chi2_per_dof=float(e @ e / dof), theil=theil(yhat, ch.values),
+            outside_2sigma=float(np.mean(np.abs(e) > 2)), whiteness=ljung_box(e, lags), normality=normality(e)))
+    crit, source = criterion_terms(fit.residuals, sig)
+    q = sum(c.whiteness.statistic for c in chans)
+    h = sum(c.whiteness.dof for c in chans)
+    pooled = LjungBox(q, h, float(chi2.sf(q, h)), np.mean([c.whiteness.autocorrelation for c in chans], axis=0)
+                      if len({c.whiteness.dof for c in chans}) == 1 else chans[0].whiteness.autocorrelation)
+    notes = []
+    dof = max(1, N - p)
+    hi = chi2.isf(0.001, dof) / dof
+    if not fit.success:
+        notes.append(f"the fit did not converge ({fit.message}): these statistics describe the last iterate")
+    if fit.chi2_per_dof > hi:
+        notes.append(f"chi2/dof = {fit.chi2_per_dof:.3g} is above {hi:.3f}, the 99.9 % bound for white noise with the "
+                     "stated sigma: the model does not fit to the noise level")
+    elif fit.chi2_per_dof < chi2.ppf(0.001, dof) / dof:
+        notes.append(f"chi2/dof = {fit.chi2_per_dof:.3g} is below 1: the stated sigma is larger than the residuals' "
+                     "scatter (check the sigma of each channel)")
+    m = len(chans)
+    for c in chans:
+        bits = []
+        if c.whiteness.p_value < level / m:
+            bits.append(f"not white (Ljung-Box p = {c.whiteness.p_value:.2g}, lag-1 autocorrelation "
+                        f"{c.whiteness.lag1:.2f})")
+        if abs(c.bias_z) > 3.5:
+            bits.append(f"biased (mean residual {c.bias:+.3g} = {c.bias_z:+.1f} standard errors)")
+        if c.theil.bias + c.theil.variance > 0.5:
+            bits.append(f"systematic (Theil proportions U_M {c.theil.bias:.2f}, U_S {c.theil.variance:.2f})")
+        if c.normality.p_value < level / m:
+            bits.append(f"not Gaussian (Jarque-Bera p = {c.normality.p_value:.2g}, skewness "
+                        f"{c.normality.skewness:.2f}, kurtosis {c.normality.kurtosis:.2f})")
+        if bits:
+            notes.append(f"channel {c.name} residuals are " + "; ".join(bits))
+    if crit["eta"] < 0.1 and any(c.whiteness.p_value < level / m for c in chans):
+        notes.append(f"eta = {crit['eta']:.3g} is small although the residuals are not white: eta (7.10) tests "
+                     "skewness and kurtosis, not whiteness")
+    return Comparison(model=fit.spec.name, channels=tuple(chans), chi2_per_dof=float(fit.chi2_per_dof),
+                      n_data=int(N), n_estimated=int(p), criterion=crit, criterion_source=source, whiteness=pooled,
+                      level=float(level), notes=tuple(notes))
