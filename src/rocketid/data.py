@@ -67,8 +67,14 @@ class Channel:
             i = int(np.flatnonzero(dt < 0)[0])
             raise DataError(f"channel {self.name!r}: times are not sorted (t = {t[i]:g} is followed by "
                             f"{t[i + 1]:g} at sample {i + 1}); sort the data by time")
-        if self.sigma is not None and not (self.sigma > 0 and math.isfinite(self.sigma)):
-            raise DataError(f"channel {self.name!r}: sigma must be positive and finite, got {self.sigma}")
+        if self.sigma is not None:
+            try:
+                sigma = float(self.sigma)
+            except (TypeError, ValueError):
+                raise DataError(f"channel {self.name!r}: sigma must be a number, got {self.sigma!r}") from None
+            if not (sigma > 0 and math.isfinite(sigma)):
+                raise DataError(f"channel {self.name!r}: sigma must be positive and finite, got {self.sigma}")
+            object.__setattr__(self, "sigma", sigma)
         t.flags.writeable = False
         y.flags.writeable = False
         object.__setattr__(self, "times", t)
@@ -100,7 +106,11 @@ class Measurements:
     def from_arrays(cls, t: Sequence[float], values: Mapping[str, Sequence[float]],
                     sigma: Mapping[str, float] | None = None) -> "Measurements":
         """Channels sharing the sample times ``t``."""
-        sigma = sigma or {}
+        sigma = dict(sigma or {})
+        unknown = [k for k in sigma if k not in values]
+        if unknown:
+            raise DataError(f"sigma is given for {', '.join(map(repr, unknown))}, which is not a channel; "
+                            f"the channels are {', '.join(map(str, values))}")
         return cls(tuple(Channel(str(k), np.asarray(t, float), np.asarray(v, float), sigma.get(k))
                          for k, v in values.items()))
 
