@@ -42,6 +42,7 @@ import copy
 import hashlib
 import math
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 from typing import Iterable, Mapping, Sequence
 
 import numpy as np
@@ -341,9 +342,35 @@ class ModelSpec:
         """Substitute definitions and constants: the expression in terms of
         t, states, derivatives, inputs and local parameters only."""
         expr = sp.sympify(expr)
-        for sym, val in reversed(self.definitions):
-            expr = expr.xreplace({sym: val})
+        defs = self._expanded_definitions
+        hit = {s: defs[s] for s in expr.free_symbols if s in defs}
+        if hit:
+            expr = expr.xreplace(hit)
         return expr.xreplace({c: sp.Float(v) for c, v in self.constants})
+
+    @cached_property
+    def _expanded_definitions(self) -> dict[sp.Symbol, sp.Expr]:
+        """Each definition with the definitions it uses substituted, computed once
+        (an expression such as ``Max(mach - 0.6, 0)`` is then built once per spec,
+        not once per use); a definition may use one declared after it."""
+        raw = dict(self.definitions)
+        done: dict[sp.Symbol, sp.Expr] = {}
+
+        def visit(sym: sp.Symbol, path: tuple) -> sp.Expr:
+            if sym in done:
+                return done[sym]
+            if sym in path:
+                cycle = " -> ".join(str(s) for s in (*path[path.index(sym):], sym))
+                raise ModelError(f"model {self.name!r}: definitions refer to each other in a cycle ({cycle})")
+            expr = raw[sym]
+            deps = sorted((d for d in expr.free_symbols if d in raw), key=str)
+            sub = {d: visit(d, (*path, sym)) for d in deps}
+            done[sym] = expr.xreplace(sub) if sub else expr
+            return done[sym]
+
+        for sym in raw:
+            visit(sym, ())
+        return done
 
     @property
     def breakpoints(self) -> tuple[float, ...]:
