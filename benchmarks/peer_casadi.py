@@ -120,6 +120,7 @@ def simulate_ra66(p_true=P_TRUE, t_eval=None, rtol=1e-12, atol=1e-12):
     t_eval = np.atleast_1d(np.asarray(t_eval if t_eval is not None else np.linspace(0, T_F, 661), float))
     if t_eval.min() < 0.0 or t_eval.max() > T_F + 1e-12:
         raise ValueError("t_eval must lie in [0, 66] s")
+    t_eval = np.clip(t_eval, 0.0, T_F)
 
     breaks = np.unique(np.concatenate([CD_KNOTS, ALPHA_KINKS]))
     out = np.full((4, t_eval.size), np.nan)
@@ -211,6 +212,16 @@ class CasadiRA66:
     x, h, v, theta), p (8)] and, with ``condensed=False``, y (n*3) after them.
     The element-start state of element i > 0 is the last Radau point (tau = 1) of
     element i-1, so there are no continuity rows; the initial state is fixed.
+    Collocation rows per point: D z - h f(z) for x, h, v and v * (D theta) - h * v f_theta.
+
+    Objective 1/2 sum(((A gamma + b) - y_meas) / sigma)^2 with the fixed sparse Lagrange
+    map A (b carries the fixed initial state). ``condensed=True`` writes it on gamma
+    directly: ``objective_form="quadratic"`` (default) as 1/2 d'Q d + c'd with Q = A'A/sigma^2
+    and d = gamma - gamma_ref (gamma_ref the unconstrained least-squares fit of the data; the
+    constant is added back to the reported objective), ``"residual"`` as the sum of squares
+    of A gamma + b - y_meas. ``condensed=False`` adds y as variables with rows y - A gamma - b.
+    ``symbolic=None`` picks SX for the condensed NLP and MX (with the collocation rows as one
+    SX function call) for the uncondensed one: the faster builds, measured.
     """
 
     NS = 4
@@ -279,6 +290,8 @@ class CasadiRA66:
         R = ca.vertcat(DER[0, :] - hs * fx, DER[1, :] - hs * fh, DER[2, :] - hs * fv,
                        vv * DER[3, :] - hs * vfth)
         g_col_sx = ca.vec(R)  # per point: x, h, v, theta rows (aligned with gamma)
+        self._colloc_sx = (wc, g_col_sx)
+        self._rootfinder = None
         if symbolic == "SX":
             w = wc if self.condensed else ca.vertcat(wc, ca.SX.sym("y", 3 * n))
             g_col = g_col_sx
@@ -447,15 +460,49 @@ class CasadiRA66:
             x0[self.ng + k] = p[k]
         return self._run(solver, x0, lbx, ubx, lam_x0=warm["lam_x"], lam_g0=warm["lam_g"])
 
-    def solve_at(self, p, init=None):
-        """Collocation solution at fixed p (all 8 fixed: a square feasibility problem)."""
+    def solve_at(self, p, init=None, method="newton"):
+        """Collocation solution at fixed p: the square system c(gamma, p) = 0.
+
+        method="newton": CasADi's Newton rootfinder with a sparse direct solver (robust: IPOPT
+        with all p fixed works at N=66 but, from N=264 on, MUMPS's default ordering ran out
+        of memory and IPOPT aborted in restoration); method="ipopt": the estimation NLP with
+        all 8 parameters fixed through lbx = ubx.
+        """
         p = np.asarray(p, float)
-        lbx, ubx = self.lbx.copy(), self.ubx.copy()
-        lbx[self.ng: self.ng + self.NP] = p
-        ubx[self.ng: self.ng + self.NP] = p
         x0 = self.initial_guess(p) if init is None else np.asarray(init, float).copy()
         x0[self.ng: self.ng + self.NP] = p
-        return self._run(self.solver, x0, lbx, ubx)
+        if method == "ipopt":
+            lbx, ubx = self.lbx.copy(), self.ubx.copy()
+            lbx[self.ng: self.ng + self.NP] = p
+            ubx[self.ng: self.ng + self.NP] = p
+            return self._run(self.solver, x0, lbx, ubx)
+        if method != "newton":
+            raise ValueError("method must be 'newton' or 'ipopt'")
+        if self._rootfinder is None:
+            wc, g = self._colloc_sx
+            self._colloc_fun = ca.Function("colloc", [wc], [g])
+            gam_s, par_s = ca.SX.sym("gam", self.ng), ca.SX.sym("par", self.NP)
+            F = ca.Function("F", [gam_s, par_s], [self._colloc_fun(ca.vertcat(gam_s, par_s))])
+            self._rootfinder = ca.rootfinder("colloc_rf", "newton", F,
+                                             {"linear_solver": "csparse", "abstol": 1e-9,
+                                              "max_iter": 50, "error_on_fail": False})
+        t0 = time.perf_counter()
+        gam = np.asarray(self._rootfinder(x0[: self.ng], p)).ravel()
+        solve_s = time.perf_counter() - t0
+        st = self._rootfinder.stats()
+        w = x0.copy()
+        w[: self.ng] = gam
+        resid = np.asarray(self._colloc_fun(w[: self.ng + self.NP])).ravel()
+        return {
+            "p": p.copy(),
+            "objective": self.objective_of(w),
+            "iterations": int(st.get("iter_count", -1)),
+            "solve_s": solve_s,
+            "success": bool(st.get("success", np.max(np.abs(resid)) < 1e-6)),
+            "return_status": st.get("return_status"),
+            "max_residual": float(np.max(np.abs(resid))),
+            "x_opt": w,
+        }
 
 
 def collocation_error_at_truth(model: CasadiRA66, t=None):
@@ -515,6 +562,10 @@ def _main(Ns=(66,), Ks=(3,)):
                 err, rt = collocation_error_at_truth(mdl)
                 print(f"  collocation solution at the truth ({rt['iterations']} it, {rt['return_status']}):"
                       f" max |x|, |h|, |v| error over the 6600 samples = {err}")
+                ri = mdl.solve_at(P_TRUE, method="ipopt")
+                ei = np.abs(mdl.outputs(ri["x_opt"]) - mdl.outputs(rt["x_opt"])).max(axis=0)
+                print(f"  same via IPOPT with all p fixed: {ri['iterations']} it, {ri['return_status']}, "
+                      f"max |y| difference to the Newton solution {ei}")
                 y0 = mdl.outputs(rt["x_opt"])
                 for tq in (40.0, 66.0):
                     q = int(round(tq / 0.01)) - 1
