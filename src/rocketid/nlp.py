@@ -315,6 +315,7 @@ class CollocationNLP:
                                   omap.Mu, sel, c0))
         self._channels = tuple(chans)
         self.n_residuals = sum(c.n for c in chans)
+        self._stack_linear()
 
         # ---- Hessian structure: constraint part, objective (constant linear part + nonlinear parts)
         hr, hc = g.HESS_ROWS, g.HESS_COLS
@@ -366,10 +367,13 @@ class CollocationNLP:
         r = np.linalg.lstsq(self.transform.P, p - self.transform.c, rcond=None)[0]
         return np.concatenate([S.ravel(), r])
 
-    def outputs(self, x: np.ndarray) -> list[np.ndarray]:
-        """Model outputs at each channel's sample times."""
+    def outputs(self, x: np.ndarray, linear: bool = True) -> list[np.ndarray]:
+        """Model outputs at each channel's sample times (``linear=False``: only
+        the channels with nonlinear outputs)."""
         out = []
         for ch in self._channels:
+            if ch.linear and not linear:
+                continue
             if ch.linear:
                 out.append(ch.G @ x + ch.g0)
             else:
@@ -377,9 +381,10 @@ class CollocationNLP:
                 out.append(getattr(self.generated, f"output_{ch.index}")(U, ch.data))
         return out
 
-    def residuals(self, x: np.ndarray) -> list[np.ndarray]:
+    def residuals(self, x: np.ndarray, linear: bool = True) -> list[np.ndarray]:
         """Model minus measurement, per channel (not divided by sigma)."""
-        return [y - ch.values for y, ch in zip(self.outputs(x), self._channels)]
+        chans = [ch for ch in self._channels if linear or not ch.linear]
+        return [y - ch.values for y, ch in zip(self.outputs(x, linear), chans)]
 
     @property
     def channel_names(self) -> tuple[str, ...]:
@@ -390,19 +395,47 @@ class CollocationNLP:
         return np.array([ch.sigma for ch in self._channels])
 
     # ------------------------------------------------------------ NLP callbacks
+    def _stack_linear(self) -> None:
+        """Stack the linear channels into one ``G`` (and its transpose, as CSR)
+        so that the objective and gradient are two sparse mat-vecs."""
+        lin = [ch for ch in self._channels if ch.linear]
+        self._lin_cache = (None, None)
+        if not lin:
+            self._G_lin = None
+            return
+        self._G_lin = sps.vstack([ch.G for ch in lin], format="csr")
+        self._GT_lin = self._G_lin.T.tocsr()
+        self._g0_lin = np.concatenate([ch.g0 for ch in lin])
+        self._z_lin = np.concatenate([ch.values for ch in lin])
+        self._w_lin = np.concatenate([np.full(ch.n, 1.0 / ch.sigma ** 2) for ch in lin])
+
+    def _linear_residual(self, x: np.ndarray) -> np.ndarray:
+        """Weighted residual ``w (G x + g0 - z)`` of the linear channels, cached for the last x."""
+        last_x, last_r = self._lin_cache
+        if last_x is not None and np.array_equal(last_x, x):
+            return last_r
+        r = self._G_lin @ x + (self._g0_lin - self._z_lin)
+        self._lin_cache = (np.array(x, copy=True), r)
+        return r
+
     def objective(self, x: np.ndarray) -> float:
         """``J = 1/2 sum ((y - y_meas)/sigma)^2`` (7.5)."""
         J = 0.0
-        for r, ch in zip(self.residuals(x), self._channels):
+        if self._G_lin is not None:
+            r = self._linear_residual(x)
+            J += 0.5 * float(r @ (self._w_lin * r))
+        for r, ch in zip(self.residuals(x, linear=False), (c for c in self._channels if not c.linear)):
             J += 0.5 * float(r @ r) / ch.sigma ** 2
         return J
 
     def gradient(self, x: np.ndarray) -> np.ndarray:
-        grad = np.zeros(self.n)
+        if self._G_lin is not None:
+            grad = self._GT_lin @ (self._w_lin * self._linear_residual(x))
+        else:
+            grad = np.zeros(self.n)
         for ch in self._channels:
             if ch.linear:
-                r = (ch.G @ x + ch.g0 - ch.values) / ch.sigma ** 2
-                grad += ch.G.T @ r
+                continue
             else:
                 U = (ch.Mu @ x + ch.u0).reshape(ch.n, -1)
                 gfun = self.generated
@@ -492,6 +525,7 @@ class CollocationNLP:
             g0 = (ch.sel @ u0 + ch.c0) if ch.linear else None
             chans.append(replace(ch, u0=u0, g0=g0))
         new._channels = tuple(chans)
+        new._stack_linear()
         new._obj_templates = [(chans[[c_.index for c_ in chans].index(t[0].index)],) + tuple(t[1:])
                               for t in self._obj_templates]
         if self._lin_bounded is not None:
