@@ -1,0 +1,211 @@
+"""The state of one run of the sampling algorithm, and its checkpoint file.
+
+After every processed batch the coordinator writes the run's state to
+``DIR/checkpoints/run_<seed>.json`` atomically (a temporary file in the same
+folder, flushed and fsynced, then ``os.replace``), so a run killed at any
+moment leaves either the previous or the new checkpoint, never a torn one.
+Because a draw's outcome is a pure function of ``(seed, draw)`` and the
+problem, a resumed run continues at the first unprocessed draw and ends
+exactly where an uninterrupted run would.
+
+File format (JSON, version 1)::
+
+    {"version": 1, "token": <problem hash>, "settings": {...}, "n_iter": ...,
+     "seed": s, "draws": <processed>, "since": <draws since the last improvement>,
+     "stopped_by": null | "n_iter" | "max_draws",
+     "best": <DrawOutcome> | null, "failures": [[draw, status, message], ...],
+     "history": [eta of draw 1, 2, ... (null: failed)], "improvements": [draw, ...],
+     "solve_s": <summed draw wall time>, "n_retried": ...}
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..errors import SettingsError
+from .worker import DrawOutcome
+
+__all__ = ["RunState", "checkpoint_path", "write_checkpoint", "read_checkpoint", "CHECKPOINT_VERSION"]
+
+CHECKPOINT_VERSION = 1
+
+
+@dataclass
+class RunState:
+    """Mutable state of one run inside the coordinator (the result types are frozen).
+
+    Attributes
+    ----------
+    seed : int
+    draws : int
+        Draws processed, in order (draws 1 .. ``draws``).
+    since : int
+        Draws in a row, up to now, that did not improve eta (failed ones included).
+    best : DrawOutcome or None
+    failures : list of (draw, status, message)
+    history : list of float
+        eta of every processed draw (NaN: failed).
+    improvements : list of int
+        Draws that improved eta.
+    stopped_by : str or None
+        ``"n_iter"`` (the rule) or ``"max_draws"`` (the cap).
+    solve_s : float
+    n_retried : int
+    resumed_from : int
+        Draws loaded from a checkpoint (0 for a fresh run).
+    """
+
+    seed: int
+    draws: int = 0
+    since: int = 0
+    best: DrawOutcome | None = None
+    failures: list = field(default_factory=list)
+    history: list = field(default_factory=list)
+    improvements: list = field(default_factory=list)
+    stopped_by: str | None = None
+    solve_s: float = 0.0
+    n_retried: int = 0
+    resumed_from: int = 0
+
+    @property
+    def next_draw(self) -> int:
+        return self.draws + 1
+
+    def process(self, outcome: DrawOutcome, n_iter: int, max_draws: int | None) -> None:
+        """Steps 7-10 for the next draw, in order."""
+        if outcome.draw != self.next_draw or outcome.seed != self.seed:
+            raise RuntimeError(f"internal error: run {self.seed} expected draw {self.next_draw}, got "
+                               f"{outcome.seed}/{outcome.draw}")
+        self.draws += 1
+        self.solve_s += outcome.solve_s
+        self.n_retried += int(outcome.retried)
+        if not outcome.success:
+            self.failures.append((outcome.draw, outcome.status, outcome.message))
+            self.history.append(math.nan)
+            self.since += 1
+        else:
+            self.history.append(outcome.eta)
+            if self.best is None or outcome.eta < self.best.eta:
+                self.best = outcome
+                self.improvements.append(outcome.draw)
+                self.since = 0
+            else:
+                self.since += 1
+        if self.since >= n_iter:
+            self.stopped_by = "n_iter"
+        elif max_draws is not None and self.draws >= max_draws:
+            self.stopped_by = "max_draws"
+
+    def certain_end(self, n_iter: int, max_draws: int | None) -> int:
+        """One past the last draw that is certainly needed: with no improvement
+        from now on the run stops at draw ``draws + n_iter - since``."""
+        end = self.draws + (n_iter - self.since) + 1
+        if max_draws is not None:
+            end = min(end, max_draws + 1)
+        return end
+
+    def to_dict(self) -> dict:
+        return {"seed": self.seed, "draws": self.draws, "since": self.since, "stopped_by": self.stopped_by,
+                "best": None if self.best is None else self.best.to_dict(),
+                "failures": [list(f) for f in self.failures],
+                "history": [v if math.isfinite(v) else None for v in self.history],
+                "improvements": list(self.improvements), "solve_s": self.solve_s, "n_retried": self.n_retried}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "RunState":
+        return cls(seed=int(d["seed"]), draws=int(d["draws"]), since=int(d["since"]),
+                   best=None if d["best"] is None else DrawOutcome.from_dict(d["best"]),
+                   failures=[tuple(f) for f in d["failures"]],
+                   history=[math.nan if v is None else float(v) for v in d["history"]],
+                   improvements=[int(k) for k in d["improvements"]], stopped_by=d.get("stopped_by"),
+                   solve_s=float(d.get("solve_s", 0.0)), n_retried=int(d.get("n_retried", 0)),
+                   resumed_from=int(d["draws"]))
+
+    def replay_max_since(self) -> int:
+        """The longest stretch of non-improving draws in the history (to check
+        that a smaller n_iter would not have stopped the run earlier)."""
+        best, since, longest = math.inf, 0, 0
+        for v in self.history:
+            if math.isfinite(v) and v < best:
+                best, since = v, 0
+            else:
+                since += 1
+                longest = max(longest, since)
+        return longest
+
+
+def checkpoint_path(directory: str | os.PathLike, seed: int) -> Path:
+    """``DIR/checkpoints/run_<seed>.json``."""
+    return Path(directory) / "checkpoints" / f"run_{int(seed)}.json"
+
+
+def write_checkpoint(directory: str | os.PathLike, state: RunState, *, token: str, settings_key: dict,
+                     n_iter: int) -> Path:
+    """Write ``state`` atomically (tmp file + ``os.replace``)."""
+    path = checkpoint_path(directory, state.seed)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    payload = {"version": CHECKPOINT_VERSION, "token": token, "settings": settings_key, "n_iter": n_iter}
+    payload.update(state.to_dict())
+    fd, tmp = tempfile.mkstemp(prefix=f".run_{state.seed}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w") as f:
+            json.dump(payload, f, allow_nan=False)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+    return path
+
+
+def read_checkpoint(directory: str | os.PathLike, seed: int, *, token: str, settings_key: dict,
+                    n_iter: int) -> RunState | None:
+    """The saved state of run ``seed`` (None when there is no checkpoint).
+
+    Raises
+    ------
+    SettingsError
+        The checkpoint belongs to another problem or settings, or a smaller
+        ``n_iter`` would already have stopped the saved run earlier.
+    """
+    path = checkpoint_path(directory, seed)
+    if not path.is_file():
+        return None
+    try:
+        d = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise SettingsError(f"cannot read checkpoint {str(path)!r}: {exc}; remove it to start run {seed} afresh") from None
+    if d.get("version") != CHECKPOINT_VERSION:
+        raise SettingsError(f"checkpoint {str(path)!r} has format version {d.get('version')!r}, this rocketid "
+                            f"writes {CHECKPOINT_VERSION}; remove it or use another output directory")
+    if d.get("token") != token:
+        raise SettingsError(
+            f"checkpoint {str(path)!r} was written for another problem (the data, model, mesh, p0, sampling "
+            "settings or the reference solution differ); resume with the same settings on the same machine, or "
+            "use another output directory")
+    if d.get("settings") != settings_key:
+        raise SettingsError(f"checkpoint {str(path)!r} was written with settings {d.get('settings')}, not "
+                            f"{settings_key}; use the same settings or another output directory")
+    state = RunState.from_dict(d)
+    old_n_iter = int(d["n_iter"])
+    if n_iter != old_n_iter:
+        if n_iter < old_n_iter and state.replay_max_since() >= n_iter:
+            raise SettingsError(f"checkpoint {str(path)!r} was written with n_iter = {old_n_iter}; with n_iter = "
+                                f"{n_iter} its run would have stopped earlier. Resume with n_iter >= "
+                                f"{state.replay_max_since() + 1} or use another output directory")
+        # the saved run is exactly the start of a run with the new n_iter: re-apply the rule
+        state.stopped_by = None
+        if state.since >= n_iter:
+            state.stopped_by = "n_iter"
+    elif state.stopped_by == "max_draws":
+        state.stopped_by = None  # the cap is re-checked by the caller with its own max_draws
+    return state

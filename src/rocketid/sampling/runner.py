@@ -1,0 +1,566 @@
+"""The statistic-criterion sampling algorithm (steps 1-10), serial or parallel, resumable.
+
+Steps 1-4 (:func:`prepare_sampling`): the reduced Hessian H_r and its
+eigenvectors V at p0, np by the modified E-optimal criterion, and the
+reference solve of (7.9) with ``q2 = V2^T p0`` (draw 0; its solution
+warm-starts every draw). Steps 5-10 (:func:`sample`): for each run (one seed
+each), draws ``k = 1, 2, ...`` (see :mod:`rocketid.sampling.worker`) are
+processed in draw order; a draw with a smaller eta than the best so far
+becomes the best; a run stops after ``n_iter`` draws in a row without
+improvement (failed draws count as no improvement).
+
+Parallel and exact
+------------------
+The coordinator hands out batches of draws to an executor and processes the
+returned outcomes strictly in draw order per run, so the stopping rule is
+applied exactly as in a serial loop. It first hands out *certain* work: with
+``since`` draws already without improvement, a run needs at least its next
+``n_iter - since`` draws whatever they give. Only when no run has certain
+work left does a parallel executor evaluate draws past that point
+(speculatively); the outcomes of draws past a run's stopping point are
+discarded and counted as waste (:attr:`SamplingResult.n_wasted`). Runs are
+independent and interleaved over the workers, so with several runs there is
+almost always certain work and the waste is a few batches at the very end.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Mapping, Sequence
+
+import numpy as np
+
+from ..errors import SettingsError
+from ..estimability import Estimability, analyze, estimate_q1
+from ..solve import EstimationResult, Prepared
+from .checkpoint import RunState, checkpoint_path, read_checkpoint, write_checkpoint
+from .criterion import TERM_NAMES, criterion_of
+from .executors import make_executor
+from .settings import SamplingSettings
+from .worker import DrawOutcome, Recipe, WorkerContext, install
+
+__all__ = ["SamplingProblem", "prepare_sampling", "sample", "RunResult", "SamplingResult"]
+
+log = logging.getLogger("rocketid.sampling")
+
+
+# ---------------------------------------------------------------------------
+# Steps 1-4
+# ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class SamplingProblem:
+    """Steps 1-4 done: what every run shares.
+
+    Attributes
+    ----------
+    prepared : Prepared
+    p0 : ndarray, shape (n_p,)
+    settings : SamplingSettings
+    estimability : Estimability
+        H_r, V and np at p0.
+    reference : EstimationResult
+        (7.9) with ``q2 = V2^T p0`` solved from a simulation at p0 (draw 0).
+    reference_outcome : DrawOutcome
+        The reference as a draw outcome (eta and its terms).
+    recipe : Recipe
+        What worker processes need.
+    setup_s : float
+    """
+
+    prepared: Prepared
+    p0: np.ndarray
+    settings: SamplingSettings
+    estimability: Estimability
+    reference: EstimationResult
+    reference_outcome: DrawOutcome
+    recipe: Recipe
+    setup_s: float
+
+
+def prepare_sampling(prepared: Prepared, p0: Sequence[float] | Mapping | None = None,
+                     settings: SamplingSettings | None = None) -> SamplingProblem:
+    """Steps 1-4: estimability at p0 and the reference (7.9) solve.
+
+    Raises
+    ------
+    SolverError, SensitivityError
+        When H_r cannot be formed at p0; a reference solve that does not
+        converge is reported in its outcome (and every draw starts from it).
+    """
+    settings = settings or SamplingSettings()
+    t0 = time.perf_counter()
+    spec = prepared.spec
+    p0 = spec.parameter_vector(p0)
+    est = analyze(prepared, p0, threshold=settings.threshold, scaling=settings.scaling,
+                  n_estimated=settings.n_estimated)
+    if est.n_estimated == 0:
+        raise SettingsError("no direction passes the modified E-optimal criterion at p0: nothing to estimate")
+    if est.n_estimated == est.eigenvalues.size:
+        raise SettingsError(f"all {est.n_estimated} directions pass the criterion (threshold "
+                            f"{settings.threshold:g}): there is no q2 to sample; estimate all parameters directly")
+    q2_ref = est.q2_of(p0)
+    ref = estimate_q1(prepared, est, q2_ref, options=settings.ipopt_options)
+    crit = criterion_of(ref) if ref.success else None
+    eta = crit.eta if crit is not None else math.nan
+    moments = (crit.s1, crit.k1, crit.s2, crit.k2) if crit is not None else (math.nan,) * 4
+    outcome = DrawOutcome(0, 0, bool(ref.success and math.isfinite(eta)), int(ref.status), ref.message, float(eta),
+                          tuple(map(float, moments)), float(ref.objective), int(ref.iterations),
+                          tuple(map(float, ref.p)), tuple(map(float, q2_ref)), tuple(map(float, p0)),
+                          float(ref.timings.get("solve_s", math.nan)))
+    recipe = Recipe.make(prepared, settings, est, ref, q2_ref)
+    return SamplingProblem(prepared, p0, settings, est, ref, outcome, recipe, time.perf_counter() - t0)
+
+
+# ---------------------------------------------------------------------------
+# Results
+# ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class RunResult:
+    """One run of the algorithm (one seed).
+
+    Attributes
+    ----------
+    seed : int
+    best : DrawOutcome or None
+        The least-eta draw (None if every draw failed).
+    n_draws : int
+        Draws processed (the last improving draw plus ``n_iter``, when
+        stopped by the rule).
+    stopped_by : str
+        ``"n_iter"`` (the rule) or ``"max_draws"`` (the cap).
+    failures : tuple of (draw, status, message)
+    history : ndarray, shape (n_draws,)
+        eta of draws 1..n_draws (NaN: failed).
+    improvements : tuple of int
+        Draws that improved eta.
+    solve_s : float
+        Summed wall time of the draws (all processes).
+    n_retried : int
+        Draws whose warm-started solve failed and was repeated cold.
+    resumed_from : int
+        Draws loaded from a checkpoint.
+    """
+
+    seed: int
+    best: DrawOutcome | None
+    n_draws: int
+    stopped_by: str
+    failures: tuple
+    history: np.ndarray
+    improvements: tuple
+    solve_s: float
+    n_retried: int
+    resumed_from: int
+
+    @property
+    def n_failures(self) -> int:
+        return len(self.failures)
+
+    @property
+    def eta(self) -> float:
+        return self.best.eta if self.best is not None else math.nan
+
+    @property
+    def running_best(self) -> np.ndarray:
+        """Best eta after each draw, shape (n_draws,)."""
+        h = np.where(np.isfinite(self.history), self.history, np.inf)
+        out = np.minimum.accumulate(h) if h.size else h
+        return np.where(np.isfinite(out), out, np.nan)
+
+    @classmethod
+    def from_state(cls, st: RunState) -> "RunResult":
+        h = np.array(st.history, dtype=float)
+        h.flags.writeable = False
+        return cls(st.seed, st.best, st.draws, st.stopped_by or "interrupted", tuple(st.failures), h,
+                   tuple(st.improvements), st.solve_s, st.n_retried, st.resumed_from)
+
+    def to_dict(self) -> dict:
+        return {"seed": self.seed, "best": None if self.best is None else self.best.to_dict(),
+                "n_draws": self.n_draws, "stopped_by": self.stopped_by, "n_failures": self.n_failures,
+                "failures": [list(f) for f in self.failures], "improvements": list(self.improvements),
+                "solve_s": self.solve_s, "n_retried": self.n_retried, "resumed_from": self.resumed_from}
+
+
+@dataclass(frozen=True)
+class SamplingResult:
+    """The outcome of :func:`sample`: the reference, every run, and how it ran.
+
+    Attributes
+    ----------
+    settings : SamplingSettings
+    estimability : Estimability
+    reference : DrawOutcome
+        Draw 0: (7.9) with ``q2 = V2^T p0``.
+    runs : tuple of RunResult
+    executor : str
+    workers : int
+    wall_s : float
+        Wall time of steps 5-10 (this call; a resumed call counts its own time).
+    setup_s : float
+        Steps 1-4.
+    n_evaluated : int
+        Draws evaluated in this call (processed or wasted).
+    n_wasted : int
+        Draws evaluated past a run's stopping point and discarded.
+    n_cancelled : int
+        Draws submitted past a stopping point and cancelled (dask; perhaps partly evaluated).
+    worker_setup_s : tuple of float
+        Per worker process: wall time to rebuild the NLP from the recipe.
+    token : str
+    parameter_names : tuple of str
+    """
+
+    settings: SamplingSettings
+    estimability: Estimability
+    reference: DrawOutcome
+    runs: tuple
+    executor: str
+    workers: int
+    wall_s: float
+    setup_s: float
+    n_evaluated: int
+    n_wasted: int
+    n_cancelled: int
+    worker_setup_s: tuple
+    token: str
+    parameter_names: tuple
+
+    @property
+    def best_run(self) -> RunResult | None:
+        """The run with the least eta (ties: the first)."""
+        ok = [r for r in self.runs if r.best is not None]
+        return min(ok, key=lambda r: r.best.eta) if ok else None
+
+    @property
+    def n_draws(self) -> int:
+        return sum(r.n_draws for r in self.runs)
+
+    @property
+    def n_failures(self) -> int:
+        return sum(r.n_failures for r in self.runs)
+
+    @property
+    def solves_per_s(self) -> float:
+        """Draws evaluated per second of wall time in this call."""
+        return self.n_evaluated / self.wall_s if self.wall_s > 0 else math.nan
+
+    def summary(self) -> str:
+        """Settings, reference, runs; numbered notes."""
+        est = self.estimability
+        s = self.settings
+        lines = ["rocketid statistic-criterion sampling (steps 1-10)",
+                 "=" * 60,
+                 "Settings",
+                 f"  n_iter        : {s.n_iter} draws in a row without improvement"
+                 + (f" (cap {s.max_draws} draws)" if s.max_draws else ""),
+                 f"  distribution  : {s.distribution_name} within the bounds",
+                 f"  scaling       : {s.scaling}; threshold {s.threshold:g}; np = {est.n_estimated} of "
+                 f"{est.eigenvalues.size}",
+                 f"  executor      : {self.executor} ({self.workers} worker{'s' if self.workers != 1 else ''}), "
+                 f"batches of {s.batch_size}",
+                 "Reference (draw 0: q2 fixed at V2^T p0)",
+                 f"  eta           : {self.reference.eta:.6g}  ({self._terms(self.reference)})",
+                 "Runs",
+                 f"  {'seed':>8}{'draws':>8}{'best at':>9}{'eta':>12}{'failed':>8}  stopped by"]
+        for r in self.runs:
+            at = r.best.draw if r.best is not None else "-"
+            lines.append(f"  {r.seed:>8}{r.n_draws:>8}{at:>9}{r.eta:>12.6g}{r.n_failures:>8}  {r.stopped_by}")
+        b = self.best_run
+        if b is not None:
+            lines.append("Least-eta run: seed " + str(b.seed) + ", " + ", ".join(
+                f"{n}={v:.4g}" for n, v in zip(self.parameter_names, b.best.p)))
+        lines += ["Performance",
+                  f"  wall time     : {self.wall_s:.2f} s for {self.n_evaluated} solves ({self.solves_per_s:.1f} per s); "
+                  f"steps 1-4 {self.setup_s:.2f} s",
+                  f"  wasted        : {self.n_wasted} draws evaluated past a stopping point"
+                  + (f", {self.n_cancelled} cancelled" if self.n_cancelled else "")]
+        if self.worker_setup_s:
+            lines.append("  worker set-up : " + ", ".join(f"{t:.2f}" for t in self.worker_setup_s)
+                         + " s (NLP rebuilt from the recipe, generated code from the disk cache)")
+        notes = []
+        if not self.reference.success:
+            notes.append(f"the reference solve (draw 0) failed: {self.reference.message}; every draw is "
+                         "warm-started from it, so expect slow or failed draws")
+        for r in self.runs:
+            if r.best is None:
+                notes.append(f"run {r.seed}: every draw failed; it has no result")
+            if r.n_failures:
+                first = r.failures[0]
+                notes.append(f"run {r.seed}: {r.n_failures} of {r.n_draws} draws failed (first: draw {first[0]}, "
+                             f"status {first[1]}: {first[2]}); failed draws never win and count as no improvement")
+            if r.stopped_by == "max_draws":
+                notes.append(f"run {r.seed} was stopped by the cap of {s.max_draws} draws, not by the n_iter rule")
+            if r.stopped_by == "interrupted":
+                notes.append(f"run {r.seed} was interrupted after {r.n_draws} draws; resume it from its checkpoint")
+            if r.resumed_from:
+                notes.append(f"run {r.seed} resumed from a checkpoint at draw {r.resumed_from}")
+        if notes:
+            lines.append("Notes")
+            lines += [f"  [{i}] {n}" for i, n in enumerate(notes, 1)]
+        return "\n".join(lines)
+
+    @staticmethod
+    def _terms(o: DrawOutcome) -> str:
+        return ", ".join(f"{n} {v:.3g}" for n, v in zip(TERM_NAMES, o.terms))
+
+    def to_dict(self) -> dict:
+        b = self.best_run
+        return {"settings": self.settings.to_dict(), "np": int(self.estimability.n_estimated),
+                "estimability": self.estimability.to_dict() if self.estimability.sensitivity is not None else None,
+                "parameter_names": list(self.parameter_names), "reference": self.reference.to_dict(),
+                "runs": [r.to_dict() for r in self.runs], "best_seed": None if b is None else b.seed,
+                "executor": self.executor, "workers": self.workers, "wall_s": self.wall_s, "setup_s": self.setup_s,
+                "n_evaluated": self.n_evaluated, "n_wasted": self.n_wasted, "n_cancelled": self.n_cancelled,
+                "solves_per_s": self.solves_per_s, "worker_setup_s": list(self.worker_setup_s), "token": self.token}
+
+
+# ---------------------------------------------------------------------------
+# Progress bars
+# ---------------------------------------------------------------------------
+
+
+class _Progress:
+    """tqdm bars on stderr: one for the study (solves/s), one per run."""
+
+    def __init__(self, enabled: bool, states: Sequence[RunState], n_iter: int, max_draws: int | None):
+        self.enabled = enabled
+        self.n_iter, self.max_draws = n_iter, max_draws
+        self.bars = {}
+        self.total = None
+        if not enabled:
+            return
+        from tqdm import tqdm
+        self.total = tqdm(desc="solves", unit="solve", file=sys.stderr, position=0, leave=True, dynamic_ncols=True)
+        for i, st in enumerate(states, 1):
+            self.bars[st.seed] = tqdm(desc=f"run seed {st.seed}", unit="draw", file=sys.stderr, position=i,
+                                      leave=True, initial=st.draws, total=self._min_total(st), dynamic_ncols=True)
+            self.update(st, 0)
+
+    def _min_total(self, st: RunState) -> int:
+        return st.certain_end(self.n_iter, self.max_draws) - 1 if st.stopped_by is None else st.draws
+
+    def evaluated(self, n: int, runs_done: int, n_runs: int) -> None:
+        if self.enabled:
+            self.total.update(n)
+            self.total.set_postfix_str(f"runs done {runs_done}/{n_runs}", refresh=False)
+
+    def update(self, st: RunState, n: int) -> None:
+        if not self.enabled:
+            return
+        bar = self.bars[st.seed]
+        bar.total = self._min_total(st)
+        bar.update(n)
+        best = f"{st.best.eta:.5g} @ {st.best.draw}" if st.best is not None else "-"
+        bar.set_postfix_str(f"best eta {best}, since {st.since}, failed {len(st.failures)}"
+                            + (f", {st.stopped_by}" if st.stopped_by else ""), refresh=True)
+
+    def close(self) -> None:
+        for bar in self.bars.values():
+            bar.close()
+        if self.total is not None:
+            self.total.close()
+
+
+# ---------------------------------------------------------------------------
+# Steps 5-10, for several runs
+# ---------------------------------------------------------------------------
+
+
+def _auto_progress() -> bool:
+    try:
+        return sys.stderr.isatty()
+    except (AttributeError, ValueError):
+        return False
+
+
+def sample(prepared: Prepared | SamplingProblem, *, p0: Sequence[float] | Mapping | None = None,
+           seeds: Sequence[int] = (1,), settings: SamplingSettings | None = None, executor: str = "serial",
+           workers: int | None = None, client: Any = None, address: str | None = None,
+           checkpoint_dir: str | Path | None = None, resume: bool = False, progress: bool | None = None,
+           callback: Callable[[int, int], None] | None = None) -> SamplingResult:
+    """Run the sampling algorithm (steps 1-10) once per seed.
+
+    Parameters
+    ----------
+    prepared : Prepared or SamplingProblem
+        The model collocated against the data (``rocketid.prepare``), or the
+        output of :func:`prepare_sampling` (steps 1-4 already done).
+    p0 : optional
+        The initial guess (default: the model's); ignored with a SamplingProblem.
+    seeds : sequence of int
+        One run per seed (non-negative integers); draw ``k`` of run ``s`` uses
+        ``numpy.random.default_rng([s, k])``.
+    settings : SamplingSettings, optional
+    executor : {"serial", "processes", "dask"}
+    workers : int, optional
+        Processes for ``"processes"`` (default: the CPUs available).
+    client : distributed.Client, optional
+        For ``"dask"`` (or give ``address``).
+    checkpoint_dir : path, optional
+        Write ``checkpoint_dir/checkpoints/run_<seed>.json`` after every batch.
+    resume : bool
+        Continue runs from their checkpoints (runs without one start afresh).
+    progress : bool, optional
+        tqdm bars on stderr (default: when stderr is a terminal).
+    callback : callable, optional
+        ``callback(seed, draws_processed)`` after every processed batch (after
+        its checkpoint); an exception raised there stops everything and
+        propagates (the checkpoints stay).
+
+    Returns
+    -------
+    SamplingResult
+        Identical (runs, best draws, eta) for every executor, worker count
+        and batch size, and for a run resumed from a checkpoint.
+
+    Raises
+    ------
+    SettingsError
+        Bad seeds or settings; unfinished checkpoints without ``resume``; a
+        checkpoint of another problem.
+    """
+    problem = prepared if isinstance(prepared, SamplingProblem) else prepare_sampling(prepared, p0, settings)
+    if settings is not None and isinstance(prepared, SamplingProblem) and settings.key() != problem.settings.key():
+        raise SettingsError("settings differ from the SamplingProblem's in what draws depend on (scaling, threshold, "
+                            "distribution, np, IPOPT options); prepare the problem with these settings")
+    settings = settings or problem.settings
+    seeds = list(seeds)
+    for s in seeds:
+        if isinstance(s, bool) or not isinstance(s, (int, np.integer)) or s < 0:
+            raise SettingsError(f"seeds must be non-negative integers, got {s!r}")
+    if len(set(seeds)) != len(seeds):
+        raise SettingsError(f"seeds must be distinct, got {seeds}")
+    if not seeds:
+        raise SettingsError("give at least one seed")
+    seeds = [int(s) for s in seeds]
+    recipe = problem.recipe
+    key, n_iter, max_draws, B = settings.key(), settings.n_iter, settings.max_draws, settings.batch_size
+
+    # ---- run states: fresh or from checkpoints
+    states: dict[int, RunState] = {}
+    for s in seeds:
+        st = None
+        if checkpoint_dir is not None:
+            if resume:
+                st = read_checkpoint(checkpoint_dir, s, token=recipe.token, settings_key=key, n_iter=n_iter)
+            elif checkpoint_path(checkpoint_dir, s).is_file():
+                try:
+                    old = read_checkpoint(checkpoint_dir, s, token=recipe.token, settings_key=key, n_iter=n_iter)
+                except SettingsError:
+                    old = None
+                if old is not None and old.stopped_by is None:
+                    raise SettingsError(f"{str(checkpoint_path(checkpoint_dir, s))!r} holds an unfinished run "
+                                        f"({old.draws} draws); resume it (resume=True, --resume) or remove the "
+                                        "checkpoints folder")
+                log.info("replacing the checkpoint of finished run %s", s)
+        st = st or RunState(s)
+        if st.stopped_by is None and max_draws is not None and st.draws >= max_draws:
+            st.stopped_by = "max_draws"
+        states[s] = st
+
+    ctx = install(recipe, problem.prepared) if executor == "serial" else None
+    t0 = time.perf_counter()
+    ex = make_executor(executor, recipe, ctx, workers=workers, client=client, address=address)
+    bars = _Progress(_auto_progress() if progress is None else bool(progress), list(states.values()), n_iter,
+                     max_draws)
+    order = {s: i for i, s in enumerate(seeds)}
+    pending: dict[int, dict[int, DrawOutcome]] = {s: {} for s in seeds}
+    next_submit = {s: states[s].next_draw for s in seeds}
+    inflight: dict[Any, tuple[int, int, int]] = {}
+    inflight_draws = {s: 0 for s in seeds}
+    active = [s for s in seeds if states[s].stopped_by is None]
+    n_evaluated = n_wasted = n_cancelled = 0
+    setup_by_pid: dict[int, float] = {}
+    max_inflight = 1 if not ex.speculative else 2 * ex.workers
+    spec_batch = max(1, min(B, n_iter // 2))
+
+    def save(st: RunState) -> None:
+        if checkpoint_dir is not None:
+            write_checkpoint(checkpoint_dir, st, token=recipe.token, settings_key=key, n_iter=n_iter)
+
+    def stop_run(s: int) -> None:
+        nonlocal n_wasted, n_cancelled
+        active.remove(s)
+        n_wasted += len(pending[s])
+        pending[s].clear()
+        for h, (hs, k0, k1) in list(inflight.items()):
+            if hs == s and ex.cancel(h):
+                inflight.pop(h)
+                inflight_draws[s] -= k1 - k0
+                n_cancelled += k1 - k0
+
+    try:
+        while active or inflight:
+            # hand out work: certain work first, then (parallel only) speculative draws
+            while len(inflight) < max_inflight:
+                pick = None
+                certain = [s for s in active if next_submit[s] < states[s].certain_end(n_iter, max_draws)]
+                if certain:
+                    pick = min(certain, key=lambda s: (inflight_draws[s], order[s]))
+                    end = states[pick].certain_end(n_iter, max_draws)
+                elif ex.speculative:
+                    # small batches, at most about one batch ahead per run: bounded waste
+                    spec_ok = [s for s in active if (max_draws is None or next_submit[s] <= max_draws)
+                               and inflight_draws[s] < B]
+                    if spec_ok:
+                        pick = min(spec_ok, key=lambda s: (inflight_draws[s], order[s]))
+                        end = next_submit[pick] + spec_batch
+                        if max_draws is not None:
+                            end = min(end, max_draws + 1)
+                if pick is None:
+                    break
+                k0 = next_submit[pick]
+                k1 = min(k0 + B, end)
+                h = ex.submit(pick, k0, k1)
+                inflight[h] = (pick, k0, k1)
+                inflight_draws[pick] += k1 - k0
+                next_submit[pick] = k1
+            if not inflight:
+                break
+            done = ex.wait(list(inflight))
+            done.sort(key=lambda h: (order[inflight[h][0]], inflight[h][1]))
+            for h in done:
+                s, k0, k1 = inflight.pop(h)
+                inflight_draws[s] -= k1 - k0
+                res = ex.result(h)
+                n_evaluated += len(res.outcomes)
+                setup_by_pid.setdefault(res.pid, res.setup_s)
+                bars.evaluated(len(res.outcomes), len(seeds) - len(active), len(seeds))
+                if s not in active:
+                    n_wasted += len(res.outcomes)
+                    continue
+                st = states[s]
+                for o in res.outcomes:
+                    pending[s][o.draw] = o
+                before = st.draws
+                while st.stopped_by is None and st.next_draw in pending[s]:
+                    st.process(pending[s].pop(st.next_draw), n_iter, max_draws)
+                if st.draws > before:
+                    save(st)
+                    bars.update(st, st.draws - before)
+                    if st.stopped_by is not None:
+                        stop_run(s)
+                    if callback is not None:
+                        callback(s, st.draws)
+    except BaseException:
+        ex.close(cancel=True)
+        bars.close()
+        raise
+    ex.close()
+    bars.close()
+    wall = time.perf_counter() - t0
+    est = problem.estimability
+    return SamplingResult(settings, est, problem.reference_outcome,
+                          tuple(RunResult.from_state(states[s]) for s in seeds), ex.name, ex.workers, wall,
+                          problem.setup_s, n_evaluated, n_wasted, n_cancelled,
+                          tuple(setup_by_pid[p] for p in sorted(setup_by_pid)) if executor != "serial" else (),
+                          recipe.token, problem.prepared.spec.parameter_names)
