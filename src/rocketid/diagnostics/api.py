@@ -1,0 +1,419 @@
+"""``diagnose()``: the whole diagnosis loop on one data set, and its report.
+
+::
+
+    fit the model -> compare -> locate -> check plausibility
+        -> rank candidate effects (score test) -> confirm the leaders by refitting
+        -> history (base and refits) -> report.html, candidates.json
+
+The model is the chapter's RA-66 parameterization by default (time-knot
+CD(t), constant CL); ``"ra66m"`` selects the Mach-indexed one (CD(M),
+CL = CL_alpha alpha), or pass a :class:`~rocketid.model.ModelSpec` or the
+path of a model file defining ``build_model()``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import json
+import math
+import sys
+import time
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from ..data import Measurements, read_csv
+from ..errors import DataError, ModelError, RocketidError, SettingsError
+from ..model import Model, ModelSpec
+from ..solve import EstimationResult, estimate
+from .compare import Comparison, compare
+from .locate import Location, locate
+from .plausibility import Plausibility, check_plausibility
+
+__all__ = ["diagnose", "DiagnosisReport", "resolve_model", "BUILTIN_MODELS"]
+
+
+def _ra66() -> ModelSpec:
+    from ..cases import ra66
+    return ra66()
+
+
+def _ra66m() -> ModelSpec:
+    from ..cases import ra66m
+    return ra66m()
+
+
+#: Built-in models by name: the chapter's parameterization and the Mach-indexed one.
+BUILTIN_MODELS = {"ra66": _ra66, "ra66m": _ra66m}
+
+
+def resolve_model(model: str | Path | ModelSpec | Model) -> tuple[ModelSpec, str]:
+    """The model of a diagnosis and its label.
+
+    Parameters
+    ----------
+    model : {"ra66", "ra66m"}, ModelSpec, Model or path
+        A built-in name, a model, or a Python file whose ``build_model()``
+        returns a ModelSpec (or a Model, frozen here).
+
+    Raises
+    ------
+    ModelError
+        Unknown name, missing file, no ``build_model``, or a file that fails.
+    """
+    if isinstance(model, ModelSpec):
+        return model, model.name
+    if isinstance(model, Model):
+        spec = model.freeze()
+        return spec, spec.name
+    if not isinstance(model, (str, Path)):
+        raise ModelError(f"model must be one of {', '.join(BUILTIN_MODELS)}, a ModelSpec or the path of a model file, "
+                         f"got {type(model).__name__}")
+    key = str(model)
+    if key in BUILTIN_MODELS:
+        return BUILTIN_MODELS[key](), key
+    path = Path(key)
+    if path.suffix != ".py":
+        raise ModelError(f"unknown model {key!r}: use {', '.join(BUILTIN_MODELS)} or the path of a Python file (.py) "
+                         "that defines build_model()")
+    if not path.is_file():
+        raise ModelError(f"model file {key!r} does not exist")
+    name = "rocketid_user_model_" + hashlib.sha256(str(path.resolve()).encode()).hexdigest()[:12]
+    spec_ = importlib.util.spec_from_file_location(name, path)
+    if spec_ is None or spec_.loader is None:
+        raise ModelError(f"model file {key!r} cannot be imported")
+    module = importlib.util.module_from_spec(spec_)
+    sys.modules[name] = module
+    try:
+        spec_.loader.exec_module(module)
+    except RocketidError:
+        raise
+    except Exception as exc:
+        sys.modules.pop(name, None)
+        raise ModelError(f"model file {key!r} failed to import: {type(exc).__name__}: {exc}") from exc
+    build = getattr(module, "build_model", None)
+    if not callable(build):
+        raise ModelError(f"model file {key!r} does not define build_model(); add a function build_model() that "
+                         "returns a ModelSpec (Model(...).freeze())")
+    try:
+        spec = build()
+        if isinstance(spec, Model):
+            spec = spec.freeze()
+    except RocketidError as exc:
+        raise type(exc)(f"model file {key!r}: {exc}") from exc
+    except Exception as exc:
+        raise ModelError(f"model file {key!r}: build_model() failed: {type(exc).__name__}: {exc}") from exc
+    if not isinstance(spec, ModelSpec):
+        raise ModelError(f"model file {key!r}: build_model() returned {type(spec).__name__}, not a ModelSpec")
+    return spec, key
+
+
+def _read_data(data, spec: ModelSpec) -> tuple[Measurements, str]:
+    if isinstance(data, Measurements):
+        return data, "measurements"
+    if isinstance(data, (str, Path)):
+        return read_csv(data, spec.output_names), str(data)
+    raise DataError(f"data must be Measurements or the path of a CSV file, got {type(data).__name__}")
+
+
+@dataclass(frozen=True)
+class DiagnosisReport:
+    """Everything the diagnosis found, with :meth:`summary` and :meth:`write`.
+
+    Attributes
+    ----------
+    model : str
+        What was asked for (``ra66``, ``ra66m``, a file, or the spec's name).
+    data_label : str
+    fit : EstimationResult
+        The base fit.
+    comparison : Comparison
+    location : Location or None
+        None when the data are too short for the windows (see :attr:`notes`).
+    plausibility : Plausibility
+    ranking : object or None
+        :class:`rocketid.diagnostics.score.CandidateRanking` (None when the
+        ranking could not be made; see :attr:`notes`).
+    confirmations : tuple
+        :class:`rocketid.diagnostics.refit.Confirmation` of the leading candidates.
+    after : Comparison or None
+        The comparison of the best confirmed refit (the lowest BIC).
+    history : object or None
+        :class:`rocketid.diagnostics.history.ModelHistory`: the base fit and the refits.
+    level : float
+    timings : dict
+        Wall time of each step, s.
+    notes : tuple of str
+    """
+
+    model: str
+    data_label: str
+    fit: EstimationResult
+    comparison: Comparison
+    location: Location | None
+    plausibility: Plausibility
+    ranking: Any
+    confirmations: tuple
+    after: Comparison | None
+    history: Any
+    level: float
+    timings: dict
+    notes: tuple = ()
+
+    # ---- verdicts
+    @property
+    def fails(self) -> bool:
+        """The residuals are not white noise, or the coefficients are implausible."""
+        return (not self.comparison.fits_to_noise) or (not self.plausibility.passed)
+
+    @property
+    def best(self):
+        """The confirmation with the lowest BIC (None without confirmations)."""
+        ok = [c for c in self.confirmations if getattr(c.fit, "success", False)]
+        return min(ok, key=lambda c: c.bic) if ok else None
+
+    def verdict(self) -> list[str]:
+        """The diagnosis in a few sentences."""
+        out = []
+        c = self.comparison
+        if c.fits_to_noise:
+            out.append(f"The residuals of {self.fit.spec.name} are white noise at the stated sigma "
+                       f"(chi2/dof {c.chi2_per_dof:.3f}).")
+        else:
+            out.append(f"{self.fit.spec.name} does not fit to the noise: chi2/dof = {c.chi2_per_dof:.3g}, "
+                       f"residuals not white.")
+        if self.location is not None and self.location.findings:
+            f = self.location.findings[0]
+            out.append(f"It fails most in: {f.text}.")
+            e = self.location.earliest
+            if e is not None and e is not f:
+                out.append(f"It fails first in: {e.text}.")
+        if not self.plausibility.passed:
+            names = self.plausibility.flagged_parameters()
+            out.append(f"The coefficients are implausible ({len(self.plausibility.flagged(severity='fail'))} failing "
+                       f"check(s) on {', '.join(names[:6])}{'...' if len(names) > 6 else ''}): a flexible "
+                       "parameterization may be absorbing a missing effect.")
+        if self.ranking is not None and getattr(self.ranking, "candidates", None):
+            top = self.ranking.candidates[0]
+            sig = [k for k in self.ranking.candidates if getattr(k, "significant", False)]
+            if sig:
+                out.append(f"The score test ranks {top.name} ({top.title}) first (statistic {top.statistic:.4g}, "
+                           f"corrected p = {top.p_value_corrected:.2g}); {len(sig)} candidate(s) significant at "
+                           f"{self.level:g}.")
+            else:
+                out.append(f"No candidate effect is significant at {self.level:g} (best: {top.name}).")
+        b = self.best
+        if b is not None:
+            name = _effect_name(b)
+            out.append(f"Refit with {name}: chi2/dof {b.fit.chi2_per_dof:.4g} (was {self.fit.chi2_per_dof:.4g}), "
+                       f"LR p = {b.lr_p_value:.2g}, BIC {b.bic:.6g}.")
+        return out
+
+    def summary(self) -> str:
+        """Fixed sections (verdict, compare, locate, plausibility, candidates,
+        confirmations) and numbered notes."""
+        lines = [f"rocketid diagnosis: {self.fit.spec.name} on {self.data_label}", "=" * 60, "Verdict"]
+        lines += [f"  {s}" for s in self.verdict()]
+        lines += ["", self.comparison.summary()]
+        lines += ["", self.location.summary() if self.location is not None else "Location: not available (see notes)"]
+        lines += ["", self.plausibility.summary()]
+        if self.ranking is not None:
+            lines += ["", self.ranking.summary()]
+        for c in self.confirmations:
+            lines += ["", c.summary()]
+        if self.history is not None:
+            try:
+                lines += ["", "History", str(self.history.table())]
+            except Exception as exc:  # noqa: BLE001 - a report must not fail on a table
+                lines += ["", f"History: not available ({exc})"]
+        if self.notes:
+            lines += ["", "Notes"] + [f"  [{i}] {n}" for i, n in enumerate(self.notes, 1)]
+        return "\n".join(lines)
+
+    def candidates_payload(self) -> dict:
+        """``{"candidates": [...]}``, best first, each with ``name``, ``statistic``,
+        ``p_value`` (corrected) and ``group`` (the content of candidates.json)."""
+        if self.ranking is None:
+            return {"candidates": [], "note": "no ranking: " + "; ".join(n for n in self.notes if "rank" in n)}
+        payload = dict(self.ranking.to_dict())
+        cands = list(payload.get("candidates", []))
+        objs = list(getattr(self.ranking, "candidates", []))
+        fixed = []
+        for i, d in enumerate(cands):
+            d = dict(d)
+            o = objs[i] if i < len(objs) else None
+            if o is not None:
+                d.setdefault("name", o.name)
+                d.setdefault("statistic", float(o.statistic))
+                d.setdefault("p_value", float(o.p_value_corrected))
+                d.setdefault("group", getattr(o, "group", None))
+            fixed.append(d)
+        payload["candidates"] = fixed
+        return payload
+
+    def to_dict(self) -> dict:
+        out = {"model": self.model, "data": self.data_label, "fails": self.fails, "verdict": self.verdict(),
+               "fit": self.fit.to_dict(), "comparison": self.comparison.to_dict(),
+               "location": self.location.to_dict() if self.location is not None else None,
+               "plausibility": self.plausibility.to_dict(), "candidates": self.candidates_payload()["candidates"],
+               "confirmations": [_confirmation_dict(c) for c in self.confirmations],
+               "timings": dict(self.timings), "notes": list(self.notes)}
+        return out
+
+    def write(self, out: str | Path) -> Path:
+        """Write ``out/report.html`` (self-contained), ``out/candidates.json``,
+        ``out/diagnosis.json``, ``out/summary.txt`` and ``out/figures/*.png``;
+        returns the path of report.html."""
+        from .report import write_report
+        return write_report(self, out)
+
+
+def _effect_name(conf) -> str:
+    est = getattr(conf, "effect_estimates", None) or {}
+    eff = getattr(conf, "effect", None)
+    if eff is not None:
+        return getattr(eff, "name", str(eff))
+    return ", ".join(est) if est else "the effect"
+
+
+def _confirmation_dict(c) -> dict:
+    def num(x):
+        try:
+            return float(x)
+        except (TypeError, ValueError):
+            return None
+    d = {"effect": _effect_name(c), "lr_statistic": num(getattr(c, "lr_statistic", None)),
+         "lr_p_value": num(getattr(c, "lr_p_value", None)), "aic": num(getattr(c, "aic", None)),
+         "bic": num(getattr(c, "bic", None)), "chi2_per_dof": num(c.fit.chi2_per_dof),
+         "holdout_rms": getattr(c, "holdout_rms", None), "rms": getattr(c, "rms", None),
+         "effect_estimates": {str(k): (num(v) if num(v) is not None else str(v))
+                              for k, v in (getattr(c, "effect_estimates", None) or {}).items()}}
+    for k in ("holdout_rms", "rms"):
+        if isinstance(d[k], Mapping):
+            d[k] = {str(a): num(b) for a, b in d[k].items()}
+        else:
+            d[k] = num(d[k])
+    return d
+
+
+def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Model = "ra66", *,
+             out: str | Path | None = None, candidates: Sequence | None = None, level: float = 0.05,
+             confirm_top: int = 2, window: float | None = None, guess: Mapping | Sequence[float] | None = None,
+             mesh=None, options: Mapping[str, Any] | None = None) -> DiagnosisReport:
+    """Fit ``model`` to ``data`` and diagnose what it misses.
+
+    Parameters
+    ----------
+    data : Measurements or path
+        The measurements (a CSV path is read with the model's output names).
+    model : {"ra66", "ra66m"}, ModelSpec, Model or path
+        ``"ra66"``: the chapter's time-knot CD(t) and constant CL (default);
+        ``"ra66m"``: Mach-indexed CD(M), CL = CL_alpha alpha; or a model /
+        model file (``build_model()``).
+    out : path, optional
+        Write the report there (:meth:`DiagnosisReport.write`).
+    candidates : sequence of Effect or str, optional
+        Candidate effects to rank (default: part A's catalogue).
+    level : float
+        Significance level of every test and of the ranking.
+    confirm_top : int
+        Refit the model with each of this many leading significant candidates.
+    window : float, optional
+        Window length of :func:`~rocketid.diagnostics.locate.locate`, s.
+    guess, mesh, options
+        Passed to :func:`rocketid.estimate`.
+
+    Returns
+    -------
+    DiagnosisReport
+    """
+    if not 0 < level < 1:
+        raise SettingsError(f"level must be in (0, 1), got {level}")
+    if isinstance(confirm_top, bool) or not isinstance(confirm_top, (int, np.integer)) or confirm_top < 0:
+        raise SettingsError(f"confirm_top must be a non-negative integer, got {confirm_top!r}")
+    spec, label = resolve_model(model)
+    meas, data_label = _read_data(data, spec)
+    notes: list[str] = []
+    timings = {}
+    t0 = time.perf_counter()
+    fit = estimate(spec, meas, guess=guess, mesh=mesh, options=options)
+    timings["fit_s"] = time.perf_counter() - t0
+    if not fit.success:
+        notes.append(f"the base fit did not converge ({fit.message}); the diagnosis describes its last iterate")
+    t0 = time.perf_counter()
+    comp = compare(fit, level=level)
+    timings["compare_s"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    try:
+        loc = locate(fit, comp, window=window, level=level)
+    except DataError as exc:
+        loc = None
+        notes.append(f"no location: {exc}")
+    timings["locate_s"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    plaus = check_plausibility(fit, level=level)
+    timings["plausibility_s"] = time.perf_counter() - t0
+    ranking, confirmations, history, after = None, [], None, None
+    t0 = time.perf_counter()
+    try:
+        from .score import rank_candidates
+    except ImportError as exc:
+        rank_candidates = None
+        notes.append(f"candidate ranking is not available ({exc})")
+    if rank_candidates is not None:
+        try:
+            ranking = rank_candidates(fit, candidates, level=level)
+        except RocketidError as exc:
+            notes.append(f"the candidate ranking failed: {exc}")
+    timings["rank_s"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    if ranking is not None and confirm_top > 0:
+        sig = [c for c in ranking.candidates if getattr(c, "significant", False)]
+        chosen = sig[:confirm_top]
+        if not chosen and ranking.candidates and (not comp.fits_to_noise or not plaus.passed):
+            chosen = list(ranking.candidates[:1])
+            notes.append(f"no candidate is significant at {level:g}; the best-ranked one ({chosen[0].name}) was "
+                         "refitted anyway because the base model fails")
+        try:
+            from .refit import confirm
+        except ImportError as exc:
+            confirm = None
+            notes.append(f"refit confirmation is not available ({exc})")
+        if confirm is not None:
+            for c in chosen:
+                try:
+                    with warnings.catch_warnings():
+                        warnings.simplefilter("ignore", RuntimeWarning)
+                        confirmations.append(confirm(fit, c.name))
+                except RocketidError as exc:
+                    notes.append(f"refitting with {c.name} failed: {exc}")
+    timings["confirm_s"] = time.perf_counter() - t0
+    try:
+        from .history import ModelHistory
+        history = ModelHistory()
+        history.add(f"{spec.name} (base)", fit)
+        for c in confirmations:
+            history.add(f"+ {_effect_name(c)}", c.fit)
+    except ImportError as exc:
+        history = None
+        notes.append(f"model history is not available ({exc})")
+    except RocketidError as exc:
+        notes.append(f"model history failed: {exc}")
+    ok = [c for c in confirmations if c.fit.success]
+    if ok:
+        best = min(ok, key=lambda c: c.bic)
+        try:
+            after = compare(best.fit, level=level)
+        except RocketidError as exc:
+            notes.append(f"the best refit could not be compared: {exc}")
+    report = DiagnosisReport(model=label, data_label=data_label, fit=fit, comparison=comp, location=loc,
+                             plausibility=plaus, ranking=ranking, confirmations=tuple(confirmations), after=after,
+                             history=history, level=float(level), timings=timings, notes=tuple(notes))
+    if out is not None:
+        report.write(out)
+    return report

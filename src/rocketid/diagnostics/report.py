@@ -1,0 +1,469 @@
+"""The diagnosis report: one self-contained HTML file, candidates.json and figures.
+
+``report.html`` needs no network and no other file: the stylesheet is inline
+and every plot is a PNG embedded as a ``data:`` URI (matplotlib, Agg). The
+page is filled from a :class:`string.Template`; every value put into it is
+escaped with :func:`html.escape`. Beside it the writer puts
+``candidates.json`` (``{"candidates": [...]}``, best first, each with
+``name``, ``statistic``, ``p_value`` (corrected) and ``group``),
+``diagnosis.json`` (everything as numbers), ``summary.txt`` and the figures
+as PNG files in ``figures/``.
+"""
+
+from __future__ import annotations
+
+import base64
+import datetime as _dt
+import html
+import io
+import json
+import math
+from pathlib import Path
+from string import Template
+from typing import Any, Iterable, Sequence
+
+import numpy as np
+
+from ..errors import SettingsError
+
+__all__ = ["write_report", "render_html", "figure_png", "data_uri", "html_table", "PAGE"]
+
+_CSS = """
+:root { --fg: #1d2430; --muted: #5b6472; --line: #d9dee6; --bg: #ffffff; --band: #f5f7fa;
+        --fail: #b42318; --warn: #b54708; --ok: #067647; --accent: #1f5fa8; }
+* { box-sizing: border-box; }
+body { font: 14px/1.45 -apple-system, "Segoe UI", Roboto, "Helvetica Neue", Arial, sans-serif;
+       color: var(--fg); background: var(--bg); margin: 0; }
+main { max-width: 1120px; margin: 0 auto; padding: 24px 28px 60px; }
+h1 { font-size: 24px; margin: 0 0 4px; }
+h2 { font-size: 19px; margin: 34px 0 8px; padding-top: 10px; border-top: 2px solid var(--line); }
+h3 { font-size: 15px; margin: 18px 0 6px; }
+p.meta { color: var(--muted); margin: 0 0 14px; }
+nav { margin: 10px 0 18px; font-size: 13px; }
+nav a { color: var(--accent); margin-right: 14px; text-decoration: none; }
+.verdict { border-left: 5px solid var(--accent); background: var(--band); padding: 10px 16px; margin: 12px 0; }
+.verdict.bad { border-color: var(--fail); }
+.verdict.good { border-color: var(--ok); }
+.verdict li { margin: 3px 0; }
+table { border-collapse: collapse; margin: 8px 0 14px; font-size: 13px; }
+th, td { border-bottom: 1px solid var(--line); padding: 4px 9px; text-align: right; vertical-align: top; }
+th { background: var(--band); font-weight: 600; }
+td.l, th.l { text-align: left; }
+tr.sig td { background: #fff6ed; }
+.fail { color: var(--fail); font-weight: 600; }
+.warn { color: var(--warn); font-weight: 600; }
+.info { color: var(--muted); }
+.ok { color: var(--ok); font-weight: 600; }
+figure { margin: 10px 0 18px; }
+figure img { max-width: 100%; height: auto; border: 1px solid var(--line); }
+figcaption { color: var(--muted); font-size: 12.5px; margin-top: 4px; }
+pre { background: var(--band); border: 1px solid var(--line); padding: 10px; overflow-x: auto; font-size: 12px;
+      line-height: 1.35; }
+ol.findings li, ul.notes li { margin: 4px 0; }
+details summary { cursor: pointer; color: var(--accent); margin: 6px 0; }
+footer { color: var(--muted); font-size: 12px; margin-top: 40px; }
+"""
+
+PAGE = Template("""<!DOCTYPE html>
+<html lang="en">
+<head>
+<meta charset="utf-8">
+<meta name="viewport" content="width=device-width, initial-scale=1">
+<title>$title</title>
+<style>$css</style>
+</head>
+<body>
+<main>
+<h1>$title</h1>
+<p class="meta">$meta</p>
+<nav><a href="#compare">1 Compare</a><a href="#locate">2 Locate</a><a href="#plausibility">3 Plausibility</a><a href="#candidates">4 Candidates</a><a href="#confirm">5 Confirmation</a><a href="#history">6 History</a><a href="#fit">Fit</a></nav>
+<div class="verdict $verdict_class"><strong>Verdict</strong><ul>$verdict</ul></div>
+$notes
+<h2 id="compare">1 Compare: measured against model</h2>
+$compare
+<h2 id="locate">2 Locate: where the model fails</h2>
+$locate
+<h2 id="plausibility">3 Plausibility of the coefficients</h2>
+$plausibility
+<h2 id="candidates">4 Candidate effects, ranked by the score test</h2>
+$candidates
+<h2 id="confirm">5 Confirmation by refitting</h2>
+$confirm
+<h2 id="history">6 History: the error as effects are added</h2>
+$history
+<h2 id="fit">The base fit</h2>
+<pre>$fit_summary</pre>
+<footer>$footer</footer>
+</main>
+</body>
+</html>
+""")
+
+
+# ---------------------------------------------------------------------------
+# helpers
+# ---------------------------------------------------------------------------
+
+
+def figure_png(fig, dpi: int = 100) -> bytes:
+    """The figure as PNG bytes (the figure is closed afterwards)."""
+    import matplotlib.pyplot as plt
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=dpi)
+    plt.close(fig)
+    return buf.getvalue()
+
+
+def data_uri(png: bytes) -> str:
+    """``data:image/png;base64,...``."""
+    return "data:image/png;base64," + base64.b64encode(png).decode("ascii")
+
+
+def _e(x: Any) -> str:
+    return html.escape(str(x), quote=True)
+
+
+def _num(x, fmt: str = ".4g") -> str:
+    try:
+        v = float(x)
+    except (TypeError, ValueError):
+        return _e(x) if x is not None else "-"
+    if math.isnan(v):
+        return "-"
+    return format(v, fmt)
+
+
+def html_table(header: Sequence[str], rows: Iterable[Sequence[Any]], *, left: int = 1,
+               row_classes: Sequence[str] | None = None) -> str:
+    """An HTML table; the first ``left`` columns are left-aligned; cells are escaped
+    unless given as ``("html", markup)``."""
+    def cell(v, i, tag):
+        cls = ' class="l"' if i < left else ""
+        if isinstance(v, tuple) and len(v) == 2 and v[0] == "html":
+            return f"<{tag}{cls}>{v[1]}</{tag}>"
+        return f"<{tag}{cls}>{_e(v)}</{tag}>"
+    out = ["<table>", "<tr>" + "".join(cell(h, i, "th") for i, h in enumerate(header)) + "</tr>"]
+    for k, r in enumerate(rows):
+        cls = f' class="{row_classes[k]}"' if row_classes and row_classes[k] else ""
+        out.append(f"<tr{cls}>" + "".join(cell(v, i, "td") for i, v in enumerate(r)) + "</tr>")
+    out.append("</table>")
+    return "\n".join(out)
+
+
+class _Figures:
+    """Collects figures: embeds each as a data URI and writes it to ``figures/``."""
+
+    def __init__(self, folder: Path | None):
+        self.folder = folder
+        self.files: list[Path] = []
+
+    def add(self, name: str, fig, caption: str) -> str:
+        if fig is None:
+            return ""
+        png = figure_png(fig)
+        if self.folder is not None:
+            self.folder.mkdir(parents=True, exist_ok=True)
+            path = self.folder / f"{name}.png"
+            path.write_bytes(png)
+            self.files.append(path)
+        return (f'<figure><img alt="{_e(caption)}" src="{data_uri(png)}">'
+                f"<figcaption>{_e(caption)}</figcaption></figure>")
+
+    def add_png(self, name: str, png: bytes, caption: str) -> str:
+        if self.folder is not None:
+            self.folder.mkdir(parents=True, exist_ok=True)
+            path = self.folder / f"{name}.png"
+            path.write_bytes(png)
+            self.files.append(path)
+        return (f'<figure><img alt="{_e(caption)}" src="{data_uri(png)}">'
+                f"<figcaption>{_e(caption)}</figcaption></figure>")
+
+
+# ---------------------------------------------------------------------------
+# sections
+# ---------------------------------------------------------------------------
+
+
+def _compare_section(comp, figs: _Figures, name: str = "compare", heading: str = "") -> str:
+    rows = []
+    for c in comp.channels:
+        rows.append([c.name, c.n, _num(c.sigma, ".3g"), _num(c.rms), _num(c.bias, "+.3g"), _num(c.bias_z, "+.3g"),
+                     _num(c.chi2_per_dof), f"{c.theil.U:.2e}", _num(c.theil.bias, ".2f"), _num(c.theil.variance, ".2f"),
+                     _num(c.theil.covariance, ".2f"), f"{100 * c.outside_2sigma:.1f} %",
+                     _num(c.whiteness.statistic, ".4g"), _num(c.whiteness.p_value, ".2g"),
+                     _num(c.whiteness.lag1, ".3f"), _num(c.normality.statistic, ".4g"),
+                     _num(c.normality.p_value, ".2g")])
+    crit = comp.criterion
+    parts = [heading,
+             f"<p>chi2/dof = <strong>{_num(comp.chi2_per_dof)}</strong> over {comp.n_data} values and "
+             f"{comp.n_estimated} estimated quantities; white noise: "
+             + ('<span class="ok">yes</span>' if comp.fits_to_noise else '<span class="fail">no</span>')
+             + ". Residual = model &minus; measured; e = residual / sigma.</p>",
+             html_table(["channel", "n", "sigma", "RMS", "bias", "bias z", "chi2/dof", "Theil U", "U_M", "U_S", "U_C",
+                         "|e| > 2", "Ljung-Box Q", "LB p", "lag-1 rho", "Jarque-Bera", "JB p"], rows),
+             "<h3>Statistic criterion eta (7.10)</h3>",
+             html_table(["eta", "|s1|", "|k1-3|", "|s1-s2|", "|k1-k2|", "s1", "k1", "s2", "k2"],
+                        [[_num(crit[k]) for k in ("eta", "|s1|", "|k1-3|", "|s1-s2|", "|k1-k2|", "s1", "k1", "s2", "k2")]],
+                        left=0),
+             f"<p class=\"info\">eta computed by {_e(comp.criterion_source)}. eta tests skewness and kurtosis, "
+             "not whiteness: the Ljung-Box test (20 lags) is the whiteness test.</p>",
+             figs.add(name, comp.plot(), "Per channel: measured and model against time (left); normalized residual "
+                                          "with the +-2 sigma band and a 1 s running mean (right)."),
+             figs.add(f"{name}_acf", comp.plot_autocorrelation(),
+                      "Autocorrelation of the normalized residuals with the +-2/sqrt(n) band of white noise.")]
+    if comp.notes:
+        parts.append('<ul class="notes">' + "".join(f"<li>{_e(n)}</li>" for n in comp.notes) + "</ul>")
+    return "\n".join(parts)
+
+
+def _locate_section(loc, figs: _Figures) -> str:
+    if loc is None:
+        return '<p class="warn">No location: the data are too short for the windows (see the notes above).</p>'
+    parts = [f"<p>Windows of {loc.window:.3g} s every {loc.step:.3g} s; a window fails when |z| &gt; "
+             f"{loc.z_critical:.2f} or its scatter exceeds sigma (level {loc.level:g}, Bonferroni over "
+             f"{loc.n_tests} tests).</p>"]
+    if loc.findings:
+        parts.append("<h3>Failing windows, in words</h3><ol class=\"findings\">"
+                     + "".join(f"<li>{_e(f.text)}</li>" for f in loc.findings[:10]) + "</ol>")
+        if len(loc.findings) > 10:
+            parts.append(f"<p class=\"info\">{len(loc.findings) - 10} more findings in diagnosis.json.</p>")
+    else:
+        parts.append('<p class="ok">No window fails: the residuals look like white noise everywhere.</p>')
+    if loc.phases:
+        chans = list(loc.windows)
+        rows = []
+        for p in loc.phases:
+            row = [p.name, f"{p.t_start:.1f}-{min(p.t_end, loc.condition_times[-1]):.1f}"]
+            for c in chans:
+                r = next((x for x in loc.phase_table if x["phase"] == p.name and x["channel"] == c), None)
+                if r is None:
+                    row += ["-", "-"]
+                else:
+                    z = r["z"]
+                    cls = "fail" if abs(z) > loc.z_critical else ""
+                    row += [("html", f'<span class="{cls}">{z:+.1f}</span>'), f"{r['rms_ratio']:.2f}"]
+            rows.append(row)
+        head = ["phase", "t (s)"] + [h for c in chans for h in (f"{c} bias z", f"{c} std(e)")]
+        parts += ["<h3>Per flight phase</h3>", html_table(head, rows, left=2)]
+    cus = [[c.channel, f"{c.change_time:.1f}", _num(c.statistic, ".3g"), _num(c.p_value, ".2g"),
+            "-" if c.departure_time is None else f"{c.departure_time:.1f}"] for c in loc.cusums.values()]
+    parts += ["<h3>Cumulative sums</h3>",
+              html_table(["channel", "change point t (s)", "max |bridge|", "p (white noise)",
+                          "leaves the +-3 band at t (s)"], cus),
+              figs.add("locate", loc.plot(), "Window bias z (flagged windows marked), scatter ratio, cumulative sums "
+                                             "with the +-2 sqrt(k/n) band of white noise, and the flight conditions; "
+                                             "flight phases shaded.")]
+    if loc.notes:
+        parts.append('<ul class="notes">' + "".join(f"<li>{_e(n)}</li>" for n in loc.notes) + "</ul>")
+    return "\n".join(parts)
+
+
+def _plausibility_section(pl, figs: _Figures) -> str:
+    verdict = ('<span class="ok">plausible</span>' if pl.passed else '<span class="fail">implausible</span>')
+    parts = [f"<p>Verdict: {verdict}.</p>"]
+    if pl.flags:
+        parts.append(html_table(["#", "severity", "check", "parameters", "finding"],
+                                [[i, ("html", f'<span class="{f.severity}">{_e(f.severity)}</span>'), f.code,
+                                  ", ".join(f.parameters), f.message] for i, f in enumerate(pl.flags, 1)], left=5))
+    flagged = set(pl.flagged_parameters())
+    rows, cls = [], []
+    for i, n in enumerate(pl.names):
+        rows.append([n, pl.kinds[i], _num(pl.estimates[i], ".5g"), _num(pl.standard_errors[i], ".3g"),
+                     _num(pl.lower[i], ".3g"), _num(pl.upper[i], ".3g"),
+                     ", ".join(sorted({f.code for f in pl.flags if n in f.parameters})) or "-"])
+        cls.append("sig" if n in flagged else "")
+    parts += ["<h3>Coefficients</h3>",
+              html_table(["parameter", "kind", "estimate", "std err", "lower", "upper", "flags"], rows, left=2,
+                         row_classes=cls)]
+    for mc in pl.mach_checks:
+        parts.append(f"<h3>Is {_e(mc.family)}(t) a smooth function of Mach?</h3>"
+                     f"<p>Best {_e(mc.family_name)} through the knots, with covariance C + tau^2 I (tau = "
+                     f"{mc.tolerance:g}): chi2 = {mc.statistic:.3g} on {mc.dof} dof, "
+                     f"p = <strong>{mc.p_value:.2g}</strong>.</p>")
+        parts.append(html_table(["knot", "t (s)", "Mach", "value", "std err", "smooth curve", "std. residual"],
+                                [[k, f"{t:.1f}", f"{m:.2f}", f"{v:.4f}", _num(s, ".2g"), f"{c:.4f}", f"{z:+.2f}"]
+                                 for k, t, m, v, s, c, z in zip(mc.knots, mc.times, mc.mach, mc.values,
+                                                                mc.standard_errors, mc.smooth, mc.standardized)]))
+    parts.append(figs.add("plausibility", pl.plot(),
+                          "Time-knot drag against the Mach number at the knot times, with the best smooth drag curve "
+                          "and +-2 sqrt(se^2 + tau^2) bars (left), and against time (right); flagged knots in red."
+                          if pl.mach_checks else "Estimates between their bounds with 2-sigma bars; flagged in red."))
+    if pl.notes:
+        parts.append('<ul class="notes">' + "".join(f"<li>{_e(n)}</li>" for n in pl.notes) + "</ul>")
+    return "\n".join(parts)
+
+
+def _ranking_plot(ranking):
+    from .compare import _pyplot
+    plt = _pyplot()
+    cands = list(ranking.candidates)[:15]
+    if not cands:
+        return None
+    fig, ax = plt.subplots(figsize=(8, 0.32 * len(cands) + 1.2))
+    y = np.arange(len(cands))[::-1]
+    stat = np.array([max(float(c.statistic), 1e-3) for c in cands])
+    col = ["tab:red" if getattr(c, "significant", False) else "tab:gray" for c in cands]
+    ax.barh(y, stat, color=col)
+    ax.set_yticks(y, [f"{c.name}" + (f"  [{c.group}]" if getattr(c, "group", None) not in (None, "") else "")
+                      for c in cands], fontsize=8)
+    ax.set_xscale("log")
+    ax.set_xlabel("score statistic (red: significant after correction)")
+    fig.tight_layout()
+    return fig
+
+
+def _candidates_section(report, figs: _Figures) -> str:
+    r = report.ranking
+    if r is None:
+        return '<p class="warn">No ranking (see the notes above).</p>'
+    rows, cls = [], []
+    for i, c in enumerate(r.candidates, 1):
+        absorbed = getattr(c, "absorbed_by", None)
+        if isinstance(absorbed, (list, tuple)):
+            absorbed = ", ".join(map(str, absorbed))
+        rows.append([i, c.name, getattr(c, "title", ""), _num(c.statistic, ".4g"), getattr(c, "dof", "-"),
+                     _num(getattr(c, "p_value", None), ".2g"), _num(getattr(c, "p_value_corrected", None), ".2g"),
+                     _num(getattr(c, "predicted_drop", None), ".4g"), getattr(c, "group", "") or "-",
+                     absorbed or "-", "yes" if getattr(c, "significant", False) else "no",
+                     getattr(c, "note", "") or ""])
+        cls.append("sig" if getattr(c, "significant", False) else "")
+    parts = [f"<p>Score (Lagrange-multiplier) test of each candidate at the base fit, best first; p-values "
+             f"corrected for the number of candidates; significant at {report.level:g} highlighted. "
+             "Candidates in one group are confounded: decide between them by refitting.</p>",
+             html_table(["#", "effect", "title", "statistic", "dof", "p", "p corrected", "predicted drop", "group",
+                         "absorbed by", "significant", "note"], rows, left=3, row_classes=cls)]
+    groups = getattr(r, "groups", None)
+    if groups:
+        try:
+            items = groups.items() if hasattr(groups, "items") else enumerate(groups)
+            parts.append("<h3>Confounded groups</h3><ul>" + "".join(
+                f"<li>{_e(k)}: {_e(', '.join(map(str, v)) if isinstance(v, (list, tuple)) else v)}</li>"
+                for k, v in items) + "</ul>")
+        except Exception:  # noqa: BLE001 - an unexpected shape is shown as text
+            parts.append(f"<pre>{_e(groups)}</pre>")
+    parts.append(figs.add("candidates", _ranking_plot(r), "Score statistic of each candidate (log scale)."))
+    try:
+        parts.append(f"<details><summary>ranking summary</summary><pre>{_e(r.summary())}</pre></details>")
+    except Exception:  # noqa: BLE001
+        pass
+    return "\n".join(parts)
+
+
+def _confirm_section(report, figs: _Figures) -> str:
+    from .api import _confirmation_dict
+    if not report.confirmations:
+        return "<p>No candidate was refitted" + (" (none is significant)." if report.ranking is not None else ".") + "</p>"
+    rows = []
+    for c in report.confirmations:
+        d = _confirmation_dict(c)
+        est = ", ".join(f"{k} = {_num(v, '.4g')}" for k, v in d["effect_estimates"].items())
+        hold = d["holdout_rms"]
+        hold = ", ".join(f"{k} {_num(v, '.3g')}" for k, v in hold.items()) if isinstance(hold, dict) else _num(hold)
+        rows.append([d["effect"], est, _num(d["chi2_per_dof"]), _num(d["lr_statistic"], ".4g"),
+                     _num(d["lr_p_value"], ".2g"), _num(d["aic"], ".6g"), _num(d["bic"], ".6g"), hold])
+    parts = [f"<p>Base fit: chi2/dof {report.fit.chi2_per_dof:.4g}. Each leading candidate refitted from nominal "
+             "values: likelihood-ratio test against the base fit, AIC, BIC (lower is better) and the hold-out "
+             "RMS.</p>",
+             html_table(["effect", "estimates", "chi2/dof", "LR statistic", "LR p", "AIC", "BIC", "hold-out RMS"],
+                        rows, left=2)]
+    for c in report.confirmations:
+        try:
+            parts.append(f"<details><summary>{_e(c.summary().splitlines()[0])}</summary><pre>{_e(c.summary())}</pre>"
+                         "</details>")
+        except Exception:  # noqa: BLE001
+            pass
+    if report.after is not None:
+        best = report.best
+        from .api import _effect_name
+        parts.append(f"<h3>After: the model with {_e(_effect_name(best))}</h3>")
+        parts.append(_compare_section(report.after, figs, name="after"))
+    return "\n".join(parts)
+
+
+def _history_section(report, figs: _Figures) -> str:
+    h = report.history
+    if h is None:
+        return "<p>No history (see the notes above).</p>"
+    parts = []
+    try:
+        parts.append(f"<pre>{_e(h.table())}</pre>")
+    except Exception as exc:  # noqa: BLE001
+        parts.append(f"<p class=\"warn\">history table unavailable: {_e(exc)}</p>")
+    if figs.folder is not None:
+        path = figs.folder / "history.png"
+        try:
+            figs.folder.mkdir(parents=True, exist_ok=True)
+            res = h.plot_residuals(path)
+            if not path.is_file() and res is not None and hasattr(res, "savefig"):
+                res.savefig(path, dpi=100)
+            if path.is_file():
+                parts.append(f'<figure><img alt="history residuals" src="{data_uri(path.read_bytes())}">'
+                             "<figcaption>Normalized residuals of each model in the history.</figcaption></figure>")
+                figs.files.append(path)
+        except Exception as exc:  # noqa: BLE001 - a report must not fail on one plot
+            parts.append(f"<p class=\"warn\">history plot unavailable: {_e(exc)}</p>")
+    return "\n".join(parts)
+
+
+# ---------------------------------------------------------------------------
+# the page
+# ---------------------------------------------------------------------------
+
+
+def render_html(report, figures_folder: Path | None = None) -> tuple[str, list[Path]]:
+    """The report's HTML (self-contained) and the figure files written."""
+    figs = _Figures(figures_folder)
+    fit = report.fit
+    notes = report.notes
+    verdict = "".join(f"<li>{_e(s)}</li>" for s in report.verdict())
+    notes_html = ("<h3>Notes</h3><ol>" + "".join(f"<li>{_e(n)}</li>" for n in notes) + "</ol>") if notes else ""
+    meta = (f"Model {_e(report.model)} ({_e(fit.spec.name)}), data {_e(report.data_label)}: "
+            f"{fit.n_data} values in {len(fit.nlp.channel_names)} channels; level {report.level:g}; "
+            f"fit {'converged' if fit.success else 'NOT converged'} in {fit.iterations} iterations.")
+    tm = ", ".join(f"{k[:-2]} {v:.2f} s" for k, v in report.timings.items())
+    page = PAGE.substitute(
+        title=_e(f"rocketid diagnosis: {fit.spec.name}"), css=_CSS, meta=meta,
+        verdict_class="bad" if report.fails else "good", verdict=verdict, notes=notes_html,
+        compare=_compare_section(report.comparison, figs), locate=_locate_section(report.location, figs),
+        plausibility=_plausibility_section(report.plausibility, figs), candidates=_candidates_section(report, figs),
+        confirm=_confirm_section(report, figs), history=_history_section(report, figs),
+        fit_summary=_e(fit.summary()),
+        footer=_e(f"Made by rocketid {_version()} on {_dt.datetime.now().strftime('%Y-%m-%d %H:%M')}; "
+                  f"timings: {tm}. Self-contained: no network needed."))
+    return page, figs.files
+
+
+def _version() -> str:
+    try:
+        from importlib.metadata import version
+        return version("rocketid")
+    except Exception:  # noqa: BLE001
+        return ""
+
+
+def write_report(report, out: str | Path) -> Path:
+    """Write the report's files into the folder ``out`` (created); returns report.html's path."""
+    out = Path(out)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise SettingsError(f"cannot create the report folder {str(out)!r}: {exc.strerror or exc}") from None
+    if not out.is_dir():
+        raise SettingsError(f"{str(out)!r} is not a folder")
+    page, _ = render_html(report, out / "figures")
+    path = out / "report.html"
+    path.write_text(page, encoding="utf-8")
+    (out / "candidates.json").write_text(json.dumps(report.candidates_payload(), indent=2, default=_json_default) + "\n")
+    (out / "diagnosis.json").write_text(json.dumps(report.to_dict(), indent=2, default=_json_default) + "\n")
+    (out / "summary.txt").write_text(report.summary() + "\n")
+    return path
+
+
+def _json_default(o):
+    if isinstance(o, (np.floating, np.integer)):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, (set, tuple)):
+        return list(o)
+    return str(o)
