@@ -1,0 +1,82 @@
+"""``rocketid diagnose``: fit a model, find where it fails and which effect it misses.
+
+::
+
+    rocketid diagnose data.csv --out report/                 # the chapter's RA-66 parameterization
+    rocketid diagnose data.csv --out report/ --model ra66m   # Mach-indexed CD(M), CL = CL_alpha alpha
+    rocketid diagnose data.csv --out report/ --model my_model.py --level 0.01 --confirm 3
+
+Runs :func:`rocketid.diagnostics.api.diagnose` (fit, compare, locate,
+plausibility, candidate ranking, refit confirmation of the leaders) and writes
+``DIR/report.html`` (self-contained: opens with no network),
+``DIR/candidates.json`` (``{"candidates": [...]}``, best first, each with
+``name``, ``statistic``, ``p_value`` (corrected) and ``group``),
+``DIR/diagnosis.json``, ``DIR/summary.txt`` and ``DIR/figures/*.png``; prints
+the verdict. Exit codes as every rocketid command: 0 the report is written
+(whatever it finds), 1 the base fit did not converge (the report is still
+written), 2 bad input.
+"""
+
+from __future__ import annotations
+
+import time
+
+import click
+
+from ..cli import EXIT_NOT_CONVERGED, NameValue, assignments, status, verbose_option
+from ..errors import SettingsError
+
+__all__ = ["command"]
+
+
+@click.command("diagnose")
+@click.argument("data_file", metavar="DATA.csv", type=click.Path(dir_okay=False))
+@click.option("--out", "out", required=True, type=click.Path(file_okay=False), metavar="DIR",
+              help="Folder for report.html, candidates.json, diagnosis.json, summary.txt and figures/.")
+@click.option("--model", "model", default="ra66", show_default=True, metavar="ra66|ra66m|PATH.py",
+              help="ra66: the chapter's time-knot CD(t) and CL; ra66m: Mach-indexed CD(M) and CL_alpha; "
+                   "or a Python file defining build_model().")
+@click.option("--level", type=float, default=0.05, show_default=True,
+              help="Significance level of the tests and of the candidate ranking (0 < level < 1).")
+@click.option("--confirm", "confirm_top", type=click.IntRange(min=0), default=2, show_default=True, metavar="N",
+              help="Refit the model with each of the N leading significant candidates.")
+@click.option("--window", type=float, default=None, metavar="SECONDS",
+              help="Window length of the located statistics (default: the flight's span / 22).")
+@click.option("--time-column", default="t", show_default=True, help="Name of the time column.")
+@click.option("--sigma", "sigmas", multiple=True, type=NameValue(float), metavar="NAME=VALUE",
+              help="Noise standard deviation of an output (repeatable; default: the model's).")
+@verbose_option
+def command(data_file, out, model, level, confirm_top, window, time_column, sigmas):
+    """Fit a model to DATA.csv and diagnose what it misses; write DIR/report.html.
+
+    The report compares each channel with the model, locates where the
+    residuals fail (time, flight phase, Mach, dynamic pressure, altitude),
+    checks the coefficients' plausibility, ranks candidate physical effects by
+    the score test and confirms the leaders by refitting.
+    """
+    from ..data import read_csv
+    from ..diagnostics.api import diagnose, resolve_model
+
+    if not 0 < level < 1:
+        raise SettingsError(f"--level must be between 0 and 1, got {level:g}")
+    if window is not None and not window > 0:
+        raise SettingsError(f"--window must be a positive number of seconds, got {window:g}")
+    spec, label = resolve_model(model)
+    sig = assignments(sigmas, "--sigma", allowed=list(spec.output_names))
+    data = read_csv(data_file, spec.output_names, time_column=time_column, sigma=sig)
+    status(f"read {data.n_samples} values of {', '.join(data.names)} from {data_file}; fitting {spec.name} and "
+           "diagnosing")
+    t0 = time.perf_counter()
+    report = diagnose(data, spec, level=level, confirm_top=confirm_top, window=window)
+    report = _relabel(report, label, str(data_file))
+    path = report.write(out)
+    for line in report.verdict():
+        click.echo(line)
+    click.echo(f"wrote {path} and {path.parent / 'candidates.json'} ({time.perf_counter() - t0:.1f} s)")
+    if not report.fit.success:
+        click.get_current_context().exit(EXIT_NOT_CONVERGED)
+
+
+def _relabel(report, model_label: str, data_label: str):
+    from dataclasses import replace
+    return replace(report, model=model_label, data_label=data_label)
