@@ -111,7 +111,7 @@ def test_radau_points_reject_unsupported_k(K):
         radau_points(K)
 
 
-def test_meshes():
+def test_meshes(ra66_spec):
     m = uniform_mesh(0.0, 66.0, 66, 4)
     assert m.n_elements == 66 and m.K == 4
     np.testing.assert_allclose(m.lengths, 1.0)
@@ -120,7 +120,9 @@ def test_meshes():
     # the first 1 s element split geometrically 1 : 4 : 16, the rest untouched
     np.testing.assert_allclose(g.boundaries[:4], [0.0, 1 / 21, 5 / 21, 1.0])
     np.testing.assert_allclose(g.boundaries[3:], np.arange(1.0, 67.0))
-    assert ri.default_mesh(ri.ra66()).n_elements == 66 and ri.default_mesh(ri.ra66()).K == 4
+    default = ri.default_mesh(ra66_spec)
+    assert (default.n_elements, default.K) == (66, 4)
+    np.testing.assert_array_equal(default.boundaries, ri.ra66_mesh().boundaries)
 
 
 # ---------------------------------------------------------------------------
