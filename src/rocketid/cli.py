@@ -365,7 +365,8 @@ def model_option(f):
 #: Extra commands by name -> ``"module:attribute"`` (imported when used).
 #: Modules ``rocketid/cli_<name>.py`` defining ``command`` are found without an entry here.
 LAZY_COMMANDS: dict[str, str] = {"estimability": "rocketid.commands.estimability:command",
-                                  "diagnose": "rocketid.commands.diagnose:command"}
+                                  "diagnose": "rocketid.commands.diagnose:command",
+                                  "reproduce": "rocketid.commands.reproduce:command"}
 
 
 def _one_line(text: str) -> str:
