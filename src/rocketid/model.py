@@ -276,7 +276,8 @@ class ModelSpec:
             if key in table:
                 return table[key]
             import difflib
-            close = difflib.get_close_matches(key, list(table), n=3)
+            lower = {k.lower(): k for k in table}
+            close = [lower[c] for c in difflib.get_close_matches(key.lower(), list(lower), n=3)]
             hint = f"; did you mean {', '.join(close)}?" if close else ""
             raise ModelError(f"model {self.name!r} has no component named {key!r}{hint}")
         raise ModelError(f"expected a SymPy symbol or a name, got {type(key).__name__}")
