@@ -305,8 +305,36 @@ class StudyResult:
                 "sampling": self.sampling.to_dict()}
 
     def to_markdown(self) -> str:
-        """All three tables, the comparison with the chapter, and the notes."""
-        return self.summary().replace("rocketid reproduce:", "#").replace("=" * 66 + "\n", "\n", 1)
+        """A Markdown page: setting, Tables 7.1-7.3, the comparison with the chapter, notes."""
+        s = self.settings
+        smp = self.sampling
+        est = smp.estimability
+        out = ["# RA-66: the chapter's study (section 7.3) reproduced", "",
+               f"- setting: {s.runs} runs (seeds {s.run_seeds[0]}..{s.run_seeds[-1]}), n_iter = {s.n_iter}, "
+               f"noise seed {s.data_seed}" + ("" if s.is_chapter_setting else " (shortened; the chapter: 10 runs, "
+                                                                           "n_iter = 2000)"),
+               f"- estimability: scaling {s.scaling}, threshold {s.threshold:g}: np = {est.n_estimated} of "
+               f"{est.eigenvalues.size} (the chapter: {CHAPTER['np']})",
+               f"- draws: {smp.n_draws} processed, {smp.n_failures} failed, {smp.n_wasted} wasted; "
+               f"{smp.executor} with {smp.workers} worker(s), {smp.wall_s:.1f} s, {smp.solves_per_s:.1f} solves/s",
+               "", "## Table 7.1: estimates", "",
+               "Index 0: (7.9) with q2 fixed at V2^T p0 (the initial guess); 1..R: the least-eta draw of each run.",
+               "", self.table_7_1.to_markdown(6), "",
+               "Mean of the runs beside the chapter's mean (truth CD = 0.5, CL = 0.1):", "",
+               "| | " + " | ".join(self.parameter_names) + " |", "|---|" + "---|" * len(self.parameter_names),
+               "| ours | " + " | ".join(f"{v:.6g}" for v in np.nanmean(self.estimates[1:], axis=0)) + " |",
+               "| chapter | " + " | ".join(f"{CHAPTER['mean_estimates'].get(n, math.nan):.6g}"
+                                         for n in self.parameter_names) + " |",
+               "", "## Table 7.2: average errors", "",
+               "Mean |prediction - truth| over the 6600 samples; the prediction is a high-accuracy simulation "
+               "(`rocketid.simulate`) with the estimated parameters, the truth the noise-free simulation.", "",
+               self.table_7_2.to_markdown(6), "", "### Beside the chapter", "",
+               self.chapter_comparison().to_markdown(6), "",
+               f"## Table 7.3: perturbed initial states (index 0 and the least-eta run, index {self.best_index})", "",
+               self.table_7_3.to_markdown(6), ""]
+        if self.notes:
+            out += ["## Notes", ""] + [f"{i}. {n}" for i, n in enumerate(self.notes, 1)] + [""]
+        return "\n".join(out)
 
     def write(self, out: str | Path, *, plots: bool = True) -> list[Path]:
         """Write the CSV tables, ``tables.md``, ``study.json``, ``summary.txt`` and the plots."""
