@@ -335,14 +335,15 @@ def _fmt_range(name: str, lo: float, hi: float) -> str:
 
 
 def _describe(f_channel, kind, ts, te, sign, peak_bias, peak_z, ratio, phases, conds, span) -> str:
-    where = f"t = {ts:.0f}-{te:.0f} s"
+    d = 0 if span >= 20 else (1 if span >= 2 else 2)  # time digits for the flight's length
+    where = f"t = {ts:.{d}f}-{te:.{d}f} s"
     if kind == "offset":
         head = (f"{f_channel} residual is offset {'+' if sign > 0 else '-'}{abs(peak_bias):.2g} sigma (model "
                 f"{'above' if sign > 0 else 'below'} the data) over {'the whole flight' if te - ts >= 0.9 * span else 'most of the flight'} "
                 f"({where})")
     elif kind == "drift":
-        head = (f"{f_channel} residual drifts {'positive' if sign > 0 else 'negative'} from t = {ts:.0f} s to "
-                f"{te:.0f} s, up to {peak_bias:+.2g} sigma")
+        head = (f"{f_channel} residual drifts {'positive' if sign > 0 else 'negative'} from t = {ts:.{d}f} s to "
+                f"{te:.{d}f} s, up to {peak_bias:+.2g} sigma")
     elif kind == "bias":
         head = f"{f_channel} residual is biased {peak_bias:+.2g} sigma over {where}"
     else:

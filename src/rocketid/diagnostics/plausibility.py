@@ -395,7 +395,7 @@ def check_plausibility(fit: EstimationResult, *, uncertainty=None, level: float 
             if v + tol < drag_range[0] or v - tol > drag_range[1]:
                 flags.append(Flag("implausible", "fail", (n,), f"{n} = {v:.4g}{sd} is outside the plausible range "
                                   f"{drag_range[0]:g}-{drag_range[1]:g} of a launch vehicle's drag coefficient"))
-        if kind in ("effect", "other") and n in real and real[n] != 0 and abs(v) > effect_factor * abs(real[n]):
+        if n in real and real[n] != 0 and abs(v) > effect_factor * abs(real[n]):
             flags.append(Flag("implausible", "warn", (n,), f"{n} = {v:.4g}{sd} is {abs(v / real[n]):.0f} times its "
                               f"realistic size {real[n]:g}"))
         if np.isfinite(s) and s > abs(v) and n not in at_bound:
