@@ -429,17 +429,24 @@ class Comparison:
             fig.savefig(path, dpi=110)
         return fig
 
-    def plot_autocorrelation(self, path=None):
-        """Autocorrelation of each channel's normalized residuals with the +-2/sqrt(n) band."""
+    def plot_autocorrelation(self, path=None, *, max_lag: float = 5.0):
+        """Autocorrelation of each channel's normalized residuals against the lag in
+        seconds (up to ``max_lag`` s, at most a quarter of the samples), with the
+        +-2/sqrt(n) band of white noise; the Ljung-Box lags are marked."""
         plt = _pyplot()
-        fig, ax = plt.subplots(figsize=(6, 3.2))
+        fig, ax = plt.subplots(figsize=(7, 3.2))
         for c in self.channels:
-            rho = c.whiteness.autocorrelation
-            ax.plot(np.arange(rho.size), rho, "o-", ms=3, label=f"{c.name} (LB p {c.whiteness.p_value:.2g})")
+            dt = float(np.median(np.diff(c.times))) if c.n > 1 else 1.0
+            k = int(max(c.whiteness.dof, min(c.n // 4, round(max_lag / dt))))
+            rho = autocorrelation(c.normalized, k)
+            ax.plot(np.arange(k + 1) * dt, rho, "-", lw=1.3, label=f"{c.name} (LB p {c.whiteness.p_value:.2g})")
         band = 2 / math.sqrt(min(c.n for c in self.channels))
-        ax.axhspan(-band, band, color="0.85", zorder=0, label="+-2/sqrt(n)")
-        ax.set_xlabel("lag (samples)")
+        ax.axhspan(-band, band, color="0.8", zorder=0, label="+-2/sqrt(n)")
+        lb = max(c.whiteness.dof * float(np.median(np.diff(c.times))) for c in self.channels if c.n > 1)
+        ax.axvline(lb, color="0.5", ls=":", lw=0.8, label="Ljung-Box lags")
+        ax.set_xlabel("lag (s)")
         ax.set_ylabel("autocorrelation of e")
+        ax.set_ylim(min(-0.2, ax.get_ylim()[0]), 1.02)
         ax.legend(fontsize=8)
         fig.tight_layout()
         if path is not None:

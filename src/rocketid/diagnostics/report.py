@@ -210,7 +210,7 @@ def _compare_section(comp, figs: _Figures, name: str = "compare", heading: str =
              figs.add(name, comp.plot(), "Per channel: measured and model against time (left); normalized residual "
                                           "with the +-2 sigma band and a 1 s running mean (right)."),
              figs.add(f"{name}_acf", comp.plot_autocorrelation(),
-                      "Autocorrelation of the normalized residuals with the +-2/sqrt(n) band of white noise.")]
+                      "Autocorrelation of the normalized residuals against the lag, with the +-2/sqrt(n) band of white noise.")]
     if comp.notes:
         parts.append('<ul class="notes">' + "".join(f"<li>{_e(n)}</li>" for n in comp.notes) + "</ul>")
     return "\n".join(parts)
