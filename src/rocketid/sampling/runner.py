@@ -215,6 +215,9 @@ class SamplingResult:
         Draws submitted past a stopping point and cancelled (dask; perhaps partly evaluated).
     worker_setup_s : tuple of float
         Per worker process: wall time to rebuild the NLP from the recipe.
+    startup_s : float
+        From the start of steps 5-10 to the first batch's start (for a
+        process pool: spawning the workers, importing rocketid, rebuilding).
     token : str
     parameter_names : tuple of str
     """
@@ -231,6 +234,7 @@ class SamplingResult:
     n_wasted: int
     n_cancelled: int
     worker_setup_s: tuple
+    startup_s: float
     token: str
     parameter_names: tuple
 
@@ -280,7 +284,7 @@ class SamplingResult:
                 f"{n}={v:.4g}" for n, v in zip(self.parameter_names, b.best.p)))
         lines += ["Performance",
                   f"  wall time     : {self.wall_s:.2f} s for {self.n_evaluated} solves ({self.solves_per_s:.1f} per s); "
-                  f"steps 1-4 {self.setup_s:.2f} s",
+                  f"steps 1-4 {self.setup_s:.2f} s, executor start-up {self.startup_s:.2f} s",
                   f"  wasted        : {self.n_wasted} draws evaluated past a stopping point"
                   + (f", {self.n_cancelled} cancelled" if self.n_cancelled else "")]
         if self.worker_setup_s:
@@ -320,7 +324,8 @@ class SamplingResult:
                 "runs": [r.to_dict() for r in self.runs], "best_seed": None if b is None else b.seed,
                 "executor": self.executor, "workers": self.workers, "wall_s": self.wall_s, "setup_s": self.setup_s,
                 "n_evaluated": self.n_evaluated, "n_wasted": self.n_wasted, "n_cancelled": self.n_cancelled,
-                "solves_per_s": self.solves_per_s, "worker_setup_s": list(self.worker_setup_s), "token": self.token}
+                "solves_per_s": self.solves_per_s, "worker_setup_s": list(self.worker_setup_s),
+                "startup_s": self.startup_s, "token": self.token}
 
 
 # ---------------------------------------------------------------------------
@@ -480,6 +485,7 @@ def sample(prepared: Prepared | SamplingProblem, *, p0: Sequence[float] | Mappin
     active = [s for s in seeds if states[s].stopped_by is None]
     n_evaluated = n_wasted = n_cancelled = 0
     setup_by_pid: dict[int, float] = {}
+    startup = math.nan
     max_inflight = 1 if not ex.speculative else 2 * ex.workers
     spec_batch = max(1, min(B, n_iter // 2))
 
@@ -532,6 +538,8 @@ def sample(prepared: Prepared | SamplingProblem, *, p0: Sequence[float] | Mappin
                 s, k0, k1 = inflight.pop(h)
                 inflight_draws[s] -= k1 - k0
                 res = ex.result(h)
+                if math.isnan(startup):
+                    startup = max(0.0, time.perf_counter() - t0 - res.wall_s)
                 n_evaluated += len(res.outcomes)
                 setup_by_pid.setdefault(res.pid, res.setup_s)
                 bars.evaluated(len(res.outcomes), len(seeds) - len(active), len(seeds))
@@ -563,4 +571,4 @@ def sample(prepared: Prepared | SamplingProblem, *, p0: Sequence[float] | Mappin
                           tuple(RunResult.from_state(states[s]) for s in seeds), ex.name, ex.workers, wall,
                           problem.setup_s, n_evaluated, n_wasted, n_cancelled,
                           tuple(setup_by_pid[p] for p in sorted(setup_by_pid)) if executor != "serial" else (),
-                          recipe.token, problem.prepared.spec.parameter_names)
+                          0.0 if math.isnan(startup) else startup, recipe.token, problem.prepared.spec.parameter_names)
