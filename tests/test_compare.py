@@ -9,6 +9,7 @@ back-pressure: fails visibly).
 
 from __future__ import annotations
 
+import importlib
 import math
 
 import numpy as np
@@ -16,8 +17,10 @@ import pytest
 import scipy.stats
 
 import rocketid as ri
-from rocketid.diagnostics import compare as cmp
 from rocketid.errors import DataError, SettingsError
+
+# the module (the package rocketid.diagnostics exports the function compare under the same name)
+cmp = importlib.import_module("rocketid.diagnostics.compare")
 
 
 # ---------------------------------------------------------------------------
