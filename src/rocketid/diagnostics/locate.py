@@ -429,7 +429,7 @@ class Location:
     def summary(self) -> str:
         """Fixed sections (settings, phases, per-phase statistics, findings) and numbered notes."""
         lines = [f"rocketid location: {self.model}", "=" * 60, "Settings",
-                 f"  windows       : {self.window:g} s, step {self.step:g} s; {self.n_tests} tests; |z| > "
+                 f"  windows       : {self.window:.3g} s, step {self.step:.3g} s; {self.n_tests} tests; |z| > "
                  f"{self.z_critical:.2f} flags (level {self.level:g}, Bonferroni)",
                  "  conditions    : " + (", ".join(CONDITIONS[k][0] for k in CONDITIONS if k in self.conditions)
                                          or "none (the model defines no flight condition: time windows only)")]
@@ -499,6 +499,11 @@ class Location:
         a.axhspan(-self.z_critical, self.z_critical, color="tab:green", alpha=0.15, lw=0,
                   label=f"|z| < {self.z_critical:.2f}")
         a.set_yscale("symlog", linthresh=self.z_critical)
+        top = max([float(np.max(np.abs(w.z))) for w in self.windows.values()] + [self.z_critical])
+        ticks = [0.0] + [s * 10.0 ** k for k in range(1, int(math.ceil(math.log10(max(top, 10.0)))) + 1)
+                         for s in (-1, 1)]
+        a.set_yticks(sorted(ticks), [f"{t:g}" for t in sorted(ticks)])
+        a.minorticks_off()
         a.set_ylabel("window bias z")
         a.legend(loc="upper right", fontsize=7, ncol=4, frameon=False)
         for i, p in enumerate(self.phases):
