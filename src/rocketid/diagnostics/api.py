@@ -141,6 +141,8 @@ class DiagnosisReport:
         ranking could not be made; see :attr:`notes`).
     confirmations : tuple
         :class:`rocketid.diagnostics.refit.Confirmation` of the leading candidates.
+    confirmed : tuple of str
+        The candidates' names, in the order of :attr:`confirmations`.
     after : Comparison or None
         The comparison of the best confirmed refit (the lowest BIC).
     history : object or None
@@ -159,6 +161,7 @@ class DiagnosisReport:
     plausibility: Plausibility
     ranking: Any
     confirmations: tuple
+    confirmed: tuple
     after: Comparison | None
     history: Any
     level: float
@@ -170,6 +173,13 @@ class DiagnosisReport:
     def fails(self) -> bool:
         """The residuals are not white noise, or the coefficients are implausible."""
         return (not self.comparison.fits_to_noise) or (not self.plausibility.passed)
+
+    def effect_name(self, confirmation) -> str:
+        """The candidate name a confirmation refitted."""
+        for c, name in zip(self.confirmations, self.confirmed):
+            if c is confirmation:
+                return name
+        return _effect_name(confirmation)
 
     @property
     def best(self):
@@ -209,7 +219,7 @@ class DiagnosisReport:
                 out.append(f"No candidate effect is significant at {self.level:g} (best: {top.name}).")
         b = self.best
         if b is not None:
-            name = _effect_name(b)
+            name = self.effect_name(b)
             out.append(f"Refit with {name}: chi2/dof {b.fit.chi2_per_dof:.4g} (was {self.fit.chi2_per_dof:.4g}), "
                        f"LR p = {b.lr_p_value:.2g}, BIC {b.bic:.6g}.")
         return out
@@ -261,7 +271,7 @@ class DiagnosisReport:
                "fit": self.fit.to_dict(), "comparison": self.comparison.to_dict(),
                "location": self.location.to_dict() if self.location is not None else None,
                "plausibility": self.plausibility.to_dict(), "candidates": self.candidates_payload()["candidates"],
-               "confirmations": [_confirmation_dict(c) for c in self.confirmations],
+               "confirmations": [_confirmation_dict(c, n) for c, n in zip(self.confirmations, self.confirmed)],
                "timings": dict(self.timings), "notes": list(self.notes)}
         return out
 
@@ -281,13 +291,13 @@ def _effect_name(conf) -> str:
     return ", ".join(est) if est else "the effect"
 
 
-def _confirmation_dict(c) -> dict:
+def _confirmation_dict(c, name: str | None = None) -> dict:
     def num(x):
         try:
             return float(x)
         except (TypeError, ValueError):
             return None
-    d = {"effect": _effect_name(c), "lr_statistic": num(getattr(c, "lr_statistic", None)),
+    d = {"effect": name or _effect_name(c), "lr_statistic": num(getattr(c, "lr_statistic", None)),
          "lr_p_value": num(getattr(c, "lr_p_value", None)), "aic": num(getattr(c, "aic", None)),
          "bic": num(getattr(c, "bic", None)), "chi2_per_dof": num(c.fit.chi2_per_dof),
          "holdout_rms": getattr(c, "holdout_rms", None), "rms": getattr(c, "rms", None),
@@ -358,7 +368,7 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
     t0 = time.perf_counter()
     plaus = check_plausibility(fit, level=level)
     timings["plausibility_s"] = time.perf_counter() - t0
-    ranking, confirmations, history, after = None, [], None, None
+    ranking, confirmations, confirmed, history, after = None, [], [], None, None
     t0 = time.perf_counter()
     try:
         from .score import rank_candidates
@@ -390,6 +400,7 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
                     with warnings.catch_warnings():
                         warnings.simplefilter("ignore", RuntimeWarning)
                         confirmations.append(confirm(fit, c.name))
+                        confirmed.append(c.name)
                 except RocketidError as exc:
                     notes.append(f"refitting with {c.name} failed: {exc}")
     timings["confirm_s"] = time.perf_counter() - t0
@@ -397,8 +408,8 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
         from .history import ModelHistory
         history = ModelHistory()
         history.add(f"{spec.name} (base)", fit)
-        for c in confirmations:
-            history.add(f"+ {_effect_name(c)}", c.fit)
+        for c, name in zip(confirmations, confirmed):
+            history.add(f"+ {name}", c.fit)
     except ImportError as exc:
         history = None
         notes.append(f"model history is not available ({exc})")
@@ -412,7 +423,8 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
         except RocketidError as exc:
             notes.append(f"the best refit could not be compared: {exc}")
     report = DiagnosisReport(model=label, data_label=data_label, fit=fit, comparison=comp, location=loc,
-                             plausibility=plaus, ranking=ranking, confirmations=tuple(confirmations), after=after,
+                             plausibility=plaus, ranking=ranking, confirmations=tuple(confirmations),
+                             confirmed=tuple(confirmed), after=after,
                              history=history, level=float(level), timings=timings, notes=tuple(notes))
     if out is not None:
         report.write(out)

@@ -354,8 +354,8 @@ def _confirm_section(report, figs: _Figures) -> str:
     if not report.confirmations:
         return "<p>No candidate was refitted" + (" (none is significant)." if report.ranking is not None else ".") + "</p>"
     rows = []
-    for c in report.confirmations:
-        d = _confirmation_dict(c)
+    for c, name in zip(report.confirmations, report.confirmed):
+        d = _confirmation_dict(c, name)
         est = ", ".join(f"{k} = {_num(v, '.4g')}" for k, v in d["effect_estimates"].items())
         hold = d["holdout_rms"]
         hold = ", ".join(f"{k} {_num(v, '.3g')}" for k, v in hold.items()) if isinstance(hold, dict) else _num(hold)
@@ -374,8 +374,7 @@ def _confirm_section(report, figs: _Figures) -> str:
             pass
     if report.after is not None:
         best = report.best
-        from .api import _effect_name
-        parts.append(f"<h3>After: the model with {_e(_effect_name(best))}</h3>")
+        parts.append(f"<h3>After: the model with {_e(report.effect_name(best))}</h3>")
         parts.append(_compare_section(report.after, figs, name="after"))
     return "\n".join(parts)
 
