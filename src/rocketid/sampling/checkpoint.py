@@ -15,7 +15,7 @@ File format (JSON, version 1)::
      "stopped_by": null | "n_iter" | "max_draws",
      "best": <DrawOutcome> | null, "failures": [[draw, status, message], ...],
      "history": [eta of draw 1, 2, ... (null: failed)], "improvements": [draw, ...],
-     "solve_s": <summed draw wall time>, "n_retried": ...}
+     "solve_s": <summed draw wall time>, "n_retried": ..., "iterations": <summed IPOPT iterations>}
 """
 
 from __future__ import annotations
@@ -56,6 +56,8 @@ class RunState:
         ``"n_iter"`` (the rule) or ``"max_draws"`` (the cap).
     solve_s : float
     n_retried : int
+    iterations : int
+        IPOPT iterations summed over the processed draws.
     resumed_from : int
         Draws loaded from a checkpoint (0 for a fresh run).
     """
@@ -70,6 +72,7 @@ class RunState:
     stopped_by: str | None = None
     solve_s: float = 0.0
     n_retried: int = 0
+    iterations: int = 0
     resumed_from: int = 0
 
     @property
@@ -84,6 +87,7 @@ class RunState:
         self.draws += 1
         self.solve_s += outcome.solve_s
         self.n_retried += int(outcome.retried)
+        self.iterations += int(outcome.iterations)
         if not outcome.success:
             self.failures.append((outcome.draw, outcome.status, outcome.message))
             self.history.append(math.nan)
@@ -114,7 +118,8 @@ class RunState:
                 "best": None if self.best is None else self.best.to_dict(),
                 "failures": [list(f) for f in self.failures],
                 "history": [v if math.isfinite(v) else None for v in self.history],
-                "improvements": list(self.improvements), "solve_s": self.solve_s, "n_retried": self.n_retried}
+                "improvements": list(self.improvements), "solve_s": self.solve_s, "n_retried": self.n_retried,
+                "iterations": self.iterations}
 
     @classmethod
     def from_dict(cls, d: dict) -> "RunState":
@@ -124,7 +129,7 @@ class RunState:
                    history=[math.nan if v is None else float(v) for v in d["history"]],
                    improvements=[int(k) for k in d["improvements"]], stopped_by=d.get("stopped_by"),
                    solve_s=float(d.get("solve_s", 0.0)), n_retried=int(d.get("n_retried", 0)),
-                   resumed_from=int(d["draws"]))
+                   iterations=int(d.get("iterations", 0)), resumed_from=int(d["draws"]))
 
     def replay_max_since(self) -> int:
         """The longest stretch of non-improving draws in the history (to check

@@ -146,6 +146,8 @@ class RunResult:
         Summed wall time of the draws (all processes).
     n_retried : int
         Draws whose warm-started solve failed and was repeated cold.
+    iterations : int
+        IPOPT iterations summed over the draws.
     resumed_from : int
         Draws loaded from a checkpoint.
     """
@@ -159,6 +161,7 @@ class RunResult:
     improvements: tuple
     solve_s: float
     n_retried: int
+    iterations: int
     resumed_from: int
 
     @property
@@ -181,13 +184,14 @@ class RunResult:
         h = np.array(st.history, dtype=float)
         h.flags.writeable = False
         return cls(st.seed, st.best, st.draws, st.stopped_by or "interrupted", tuple(st.failures), h,
-                   tuple(st.improvements), st.solve_s, st.n_retried, st.resumed_from)
+                   tuple(st.improvements), st.solve_s, st.n_retried, st.iterations, st.resumed_from)
 
     def to_dict(self) -> dict:
         return {"seed": self.seed, "best": None if self.best is None else self.best.to_dict(),
                 "n_draws": self.n_draws, "stopped_by": self.stopped_by, "n_failures": self.n_failures,
                 "failures": [list(f) for f in self.failures], "improvements": list(self.improvements),
-                "solve_s": self.solve_s, "n_retried": self.n_retried, "resumed_from": self.resumed_from}
+                "solve_s": self.solve_s, "n_retried": self.n_retried, "iterations": self.iterations,
+                "mean_iterations": self.iterations / max(1, self.n_draws), "resumed_from": self.resumed_from}
 
 
 @dataclass(frozen=True)
@@ -282,7 +286,11 @@ class SamplingResult:
         if b is not None:
             lines.append("Least-eta run: seed " + str(b.seed) + ", " + ", ".join(
                 f"{n}={v:.4g}" for n, v in zip(self.parameter_names, b.best.p)))
+        its = sum(r.iterations for r in self.runs) / max(1, self.n_draws)
+        retried = sum(r.n_retried for r in self.runs)
         lines += ["Performance",
+                  f"  IPOPT         : {its:.2f} iterations per draw (warm-started from draw 0)"
+                  + (f"; {retried} warm starts failed and were repeated cold" if retried else ""),
                   f"  wall time     : {self.wall_s:.2f} s for {self.n_evaluated} solves ({self.solves_per_s:.1f} per s); "
                   f"steps 1-4 {self.setup_s:.2f} s, executor start-up {self.startup_s:.2f} s",
                   f"  wasted        : {self.n_wasted} draws evaluated past a stopping point"
@@ -542,9 +550,9 @@ def sample(prepared: Prepared | SamplingProblem, *, p0: Sequence[float] | Mappin
                     startup = max(0.0, time.perf_counter() - t0 - res.wall_s)
                 n_evaluated += len(res.outcomes)
                 setup_by_pid.setdefault(res.pid, res.setup_s)
-                bars.evaluated(len(res.outcomes), len(seeds) - len(active), len(seeds))
                 if s not in active:
                     n_wasted += len(res.outcomes)
+                    bars.evaluated(len(res.outcomes), len(seeds) - len(active), len(seeds))
                     continue
                 st = states[s]
                 for o in res.outcomes:
@@ -557,8 +565,9 @@ def sample(prepared: Prepared | SamplingProblem, *, p0: Sequence[float] | Mappin
                     bars.update(st, st.draws - before)
                     if st.stopped_by is not None:
                         stop_run(s)
-                    if callback is not None:
-                        callback(s, st.draws)
+                bars.evaluated(len(res.outcomes), len(seeds) - len(active), len(seeds))
+                if st.draws > before and callback is not None:
+                    callback(s, st.draws)
     except BaseException:
         ex.close(cancel=True)
         bars.close()
