@@ -304,8 +304,14 @@ def _ranking_plot(ranking):
     stat = np.array([max(float(c.statistic), 1e-3) for c in cands])
     col = ["tab:red" if getattr(c, "significant", False) else "tab:gray" for c in cands]
     ax.barh(y, stat, color=col)
-    ax.set_yticks(y, [f"{c.name}" + (f"  [{c.group}]" if getattr(c, "group", None) not in (None, "") else "")
-                      for c in cands], fontsize=8)
+    groups = list(getattr(ranking, "groups", []) or [])
+
+    def label(c):
+        g = getattr(c, "group", None)
+        members = groups[g - 1] if isinstance(g, int) and 0 < g <= len(groups) else []
+        return c.name + (f"  [group {g}]" if len(members) > 1 else "")
+
+    ax.set_yticks(y, [label(c) for c in cands], fontsize=8)
     ax.set_xscale("log")
     ax.set_xlabel("score statistic (red: significant after correction)")
     fig.tight_layout()
@@ -335,10 +341,13 @@ def _candidates_section(report, figs: _Figures) -> str:
     groups = getattr(r, "groups", None)
     if groups:
         try:
-            items = groups.items() if hasattr(groups, "items") else enumerate(groups)
-            parts.append("<h3>Confounded groups</h3><ul>" + "".join(
-                f"<li>{_e(k)}: {_e(', '.join(map(str, v)) if isinstance(v, (list, tuple)) else v)}</li>"
-                for k, v in items) + "</ul>")
+            items = list(groups.items() if hasattr(groups, "items") else enumerate(groups, 1))
+            multi = [(k, v) for k, v in items if not isinstance(v, (list, tuple)) or len(v) > 1]
+            if multi:
+                parts.append("<h3>Confounded groups</h3><p>The data cannot tell the members of a group apart at "
+                             "the base fit; the refits decide.</p><ul>" + "".join(
+                                 f"<li>group {_e(k)}: {_e(', '.join(map(str, v)) if isinstance(v, (list, tuple)) else v)}"
+                                 "</li>" for k, v in multi) + "</ul>")
         except Exception:  # noqa: BLE001 - an unexpected shape is shown as text
             parts.append(f"<pre>{_e(groups)}</pre>")
     parts.append(figs.add("candidates", _ranking_plot(r), "Score statistic of each candidate (log scale)."))
