@@ -148,8 +148,6 @@ def tutorial_figures():
     pl = check_plausibility(fit)
     _save(pl.plot(), "tutorial-plausibility.png")
     try:
-        from rocketid.diagnostics.history import ModelHistory
-        from rocketid.diagnostics.refit import confirm
         from rocketid.diagnostics.score import rank_candidates
     except ImportError as exc:
         print(f"  no ranking figures: {exc}")
@@ -158,6 +156,12 @@ def tutorial_figures():
     print(ranking.summary())
     from rocketid.diagnostics.report import _ranking_plot
     _save(_ranking_plot(ranking), "tutorial-candidates.png")
+    try:
+        from rocketid.diagnostics.history import ModelHistory
+        from rocketid.diagnostics.refit import confirm
+    except ImportError as exc:
+        print(f"  no refit figures: {exc}")
+        return
     conf = confirm(fit, ranking.candidates[0].name)
     print(conf.summary())
     after = compare(conf.fit)

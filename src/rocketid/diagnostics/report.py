@@ -312,7 +312,9 @@ def _ranking_plot(ranking):
         return c.name + (f"  [group {g}]" if len(members) > 1 else "")
 
     ax.set_yticks(y, [label(c) for c in cands], fontsize=8)
-    ax.set_xscale("log")
+    for yi, st in zip(y, stat):
+        ax.text(st, yi, f" {st:.3g}", va="center", fontsize=7)
+    ax.set_xlim(0, stat.max() * 1.18)
     ax.set_xlabel("score statistic (red: significant after correction)")
     fig.tight_layout()
     return fig
