@@ -1,0 +1,695 @@
+"""Ranking candidate effects at the base fit by the score (Lagrange-multiplier) test, without refitting.
+
+At the base fit ``p_hat`` every candidate effect is added at once, at zero, to
+one augmented model. Its trajectory at ``(p_hat, beta = 0)`` is the base fit's
+(the effects vanish there), so the base collocation states are feasible for
+it, and one sparse LU of the KKT block ``J_w`` gives the output sensitivities
+to every parameter (:func:`rocketid.sensitivity.sensitivity_at`). Then, with
+residuals ``r`` (model minus measurement), noise covariance ``R`` and ``S``
+the sensitivities of the estimated parameters::
+
+    s~_k = s_k - S (S^T R^-1 S)^-1 S^T R^-1 s_k        (what the fit could not absorb)
+    g_k  = s~_k^T R^-1 r,   I_k = s~_k^T R^-1 s~_k
+    LM_k = g_k^T I_k^-1 g_k  ~  chi2(dof_k)            (dof_k = parameters of effect k)
+
+``LM_k / 2`` is the predicted fall of the objective ``J`` when the effect is
+added (to first order), and ``-I_k^-1 g_k`` the one-step (Gauss-Newton)
+estimate of its parameters from the base fit.
+
+Reported beside each statistic (thresholds are module constants):
+
+* p-values corrected for the number of candidates by Holm's step-down method
+  (it controls the family-wise error rate like Bonferroni, and is uniformly
+  more powerful);
+* confounded groups: a candidate joins the group of a better-ranked one when
+  their score statistics are nearly equal (ratio >= :data:`SCORE_RATIO`) and
+  the output changes they would make, ``u_k = s~_k I_k^-1 g_k`` (weighted by
+  ``R^-1/2``), are nearly collinear (``|cos| >=`` :data:`COLLINEAR_COS`): the
+  data cannot tell them apart at this fit, only a refit can (and sometimes
+  not even that);
+* absorption: when the projection removes more than :data:`ABSORBED` of the
+  squared norm of an effect's sensitivity (for a multi-parameter effect, of
+  its least-absorbed combination), the estimated parameters would absorb the
+  effect and the test cannot see it; the parameter families that absorb it
+  are named ("confounded with CD(t): it would be absorbed into the drag
+  estimate").
+
+Notation
+--------
+==========  =================================================================
+``Sw``      ``R^-1/2 S``: sensitivities divided by each sample's sigma
+``rw``      ``R^-1/2 r``
+``U``       orthonormal basis of the estimated parameters' columns of ``Sw``
+``rho_k``   retained share: ``||s~_k|| / ||s_k||`` (1: nothing absorbed)
+==========  =================================================================
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import time
+from dataclasses import dataclass, field
+from typing import Iterable, Mapping, Sequence
+
+import numpy as np
+import sympy as sp
+from scipy import stats
+
+from ..errors import ModelError, SettingsError
+from ..model import ModelSpec
+from ..sensitivity import sensitivity_at
+from ..solve import EstimationResult, Prepared, prepare
+from .effects import CATALOGUE, Effect, apply_effect, effect_parameter_problems, is_present, resolve_effects
+
+__all__ = ["CandidateScore", "CandidateRanking", "AugmentedModel", "augment", "rank_candidates", "holm",
+           "COLLINEAR_COS", "SCORE_RATIO", "ABSORBED", "DETECTABLE"]
+
+COLLINEAR_COS = 0.95
+"""|cos| of the projected, R^-1-weighted output changes above which two candidates are collinear."""
+
+SCORE_RATIO = 0.8
+"""Smaller over larger score statistic above which two collinear candidates are one group."""
+
+ABSORBED = 0.95
+"""Share of an effect's squared sensitivity norm removed by the projection above which it is absorbed."""
+
+DETECTABLE = 25.0
+"""Expected score statistic (non-centrality) at a realistic size below which an absorbed effect goes unseen."""
+
+PARTLY_ABSORBED = 0.5
+"""Share above which the note says the effect is partly absorbed (and biases those estimates)."""
+
+_DEFINITION_WORDS = {"cd": "the drag estimate", "cl": "the lift estimate", "drag": "the drag estimate",
+                     "lift": "the lift estimate", "thrust": "the thrust estimate", "mass": "the mass estimate",
+                     "rho": "the density estimate", "alpha_thrust": "the thrust-direction estimate"}
+
+
+@dataclass(frozen=True)
+class CandidateScore:
+    """The score test of one candidate effect at the base fit.
+
+    Attributes
+    ----------
+    name, title : str
+    statistic : float
+        The score (LM) statistic.
+    dof : int
+        Its degrees of freedom (parameters of the effect the data can see).
+    p_value : float
+        ``P(chi2(dof) > statistic)``, uncorrected.
+    p_value_corrected : float
+        Holm-corrected over the number of scored candidates.
+    predicted_drop : float
+        Predicted fall of the objective ``J`` (= statistic / 2) when the effect is added.
+    group : int
+        Id (1, 2, ...) of its confounded group, numbered in rank order.
+    absorbed_by : list of str or None
+        Estimated parameters that would absorb the effect (all knots of the
+        families named in the note), or None.
+    significant : bool
+        ``p_value_corrected < level``.
+    note : str
+    kind : str
+    parameters : tuple of str
+        The effect's parameters.
+    retained : float
+        ``||s~|| / ||s||`` of its least-absorbed combination (1: nothing absorbed).
+    one_step : dict
+        One-step (Gauss-Newton) estimate of its parameters from the base fit.
+    rank : int
+        1 for the most significant.
+    realistic_statistic : float or None
+        The expected score statistic were the effect present at its realistic
+        size (``||s~ beta_realistic||^2``, the non-centrality): below
+        :data:`DETECTABLE` an absorbed effect would go unseen. None when the
+        effect declares no realistic magnitude.
+    """
+
+    name: str
+    title: str
+    statistic: float
+    dof: int
+    p_value: float
+    p_value_corrected: float
+    predicted_drop: float
+    group: int
+    absorbed_by: list | None
+    significant: bool
+    note: str
+    kind: str = ""
+    parameters: tuple = ()
+    retained: float = 1.0
+    one_step: dict = field(default_factory=dict)
+    rank: int = 0
+    realistic_statistic: float | None = None
+
+    def to_dict(self) -> dict:
+        """JSON-ready; ``p_value`` is the corrected p-value (``p_value_raw`` the uncorrected)."""
+        return {"name": self.name, "title": self.title, "kind": self.kind, "rank": self.rank,
+                "statistic": float(self.statistic), "dof": int(self.dof),
+                "p_value": float(self.p_value_corrected), "p_value_raw": float(self.p_value),
+                "predicted_drop": float(self.predicted_drop), "group": int(self.group),
+                "absorbed_by": list(self.absorbed_by) if self.absorbed_by else None,
+                "significant": bool(self.significant), "retained": float(self.retained),
+                "parameters": list(self.parameters), "one_step": {k: float(v) for k, v in self.one_step.items()},
+                "realistic_statistic": None if self.realistic_statistic is None else float(self.realistic_statistic),
+                "note": self.note}
+
+
+@dataclass(frozen=True)
+class CandidateRanking:
+    """Candidate effects ranked by the score test at one fit.
+
+    Attributes
+    ----------
+    candidates : list of CandidateScore
+        Best first (smallest p-value, then largest statistic).
+    groups : list of list of str
+        Confounded groups, in rank order of their best member.
+    skipped : dict
+        ``{name: reason}`` for candidates that could not be scored.
+    level : float
+    correction : str
+        ``"holm"``.
+    base : dict
+        The base fit: model, objective, chi2/dof, number of data.
+    notes : tuple of str
+    timings : dict
+        ``build_s`` (augmented model), ``prepare_s`` (code generation, NLP),
+        ``sensitivity_s`` (one LU, all columns), ``score_s``, ``total_s``;
+        ``codegen_cached``.
+    augmented : AugmentedModel
+        The augmented model, reusable by another ranking on the same mesh and sample times.
+    explained : dict
+        ``{name: {channel: array}}``: the part of each channel's residual
+        (model minus measurement, at its samples) that the candidate would
+        remove to first order -- where in the flight it acts.
+    """
+
+    candidates: list
+    groups: list
+    skipped: dict
+    level: float
+    correction: str
+    base: dict
+    notes: tuple
+    timings: dict
+    augmented: "AugmentedModel | None" = field(default=None, repr=False, compare=False)
+    explained: dict = field(default_factory=dict, repr=False, compare=False)
+
+    def __getitem__(self, name: str) -> CandidateScore:
+        for c in self.candidates:
+            if c.name == name:
+                return c
+        raise KeyError(f"no scored candidate named {name!r}; scored: {', '.join(self.names)}"
+                       + (f"; skipped: {', '.join(self.skipped)}" if self.skipped else ""))
+
+    @property
+    def names(self) -> list[str]:
+        """Candidate names, best first."""
+        return [c.name for c in self.candidates]
+
+    @property
+    def significant(self) -> list[CandidateScore]:
+        return [c for c in self.candidates if c.significant]
+
+    def group_of(self, name: str) -> list[str]:
+        """The confounded group holding ``name``."""
+        g = self[name].group
+        return list(self.groups[g - 1])
+
+    def to_dict(self) -> dict:
+        """``{"candidates": [{"name", "statistic", "p_value" (corrected), "group", ...}], ...}`` best first."""
+        return {"candidates": [c.to_dict() for c in self.candidates],
+                "groups": [list(g) for g in self.groups],
+                "skipped": dict(self.skipped), "level": self.level, "correction": self.correction,
+                "base": dict(self.base), "notes": list(self.notes),
+                "timings": {k: (float(v) if not isinstance(v, bool) else v) for k, v in self.timings.items()}}
+
+    def summary(self) -> str:
+        """A table of the candidates, best first, then numbered notes."""
+        b = self.base
+        lines = [f"rocketid candidate effects: score test at the fit of {b['model']}",
+                 "=" * 78,
+                 f"  base fit      : J = {b['objective']:.6g}, chi2/dof = {b['chi2_per_dof']:.4g} "
+                 f"({b['n_data']} data, {b['n_estimated']} estimated)",
+                 f"  test          : score (LM) statistic ~ chi2(dof); p corrected by {self.correction.title()} "
+                 f"over {len(self.candidates)} candidates; level {self.level:g}",
+                 f"  time          : {self.timings.get('total_s', float('nan')):.2f} s "
+                 f"(sensitivities {self.timings.get('sensitivity_s', float('nan')):.2f} s)",
+                 "",
+                 f"  {'#':>2} {'effect':<16}{'LM':>12}{'dof':>4}{'p (corr.)':>11}{'drop of J':>12}{'group':>6}  flags"]
+        notes: list[str] = []
+        for c in self.candidates:
+            flags = []
+            if c.significant:
+                flags.append("*")
+            if c.absorbed_by:
+                flags.append("absorbed")
+            if len(self.groups[c.group - 1]) > 1:
+                flags.append("confounded")
+            if c.note:
+                notes.append(f"{c.name}: {c.note}")
+                flags.append(f"[{len(notes)}]")
+            lines.append(f"  {c.rank:>2} {c.name:<16}{c.statistic:>12.4g}{c.dof:>4}{_fmt_p(c.p_value_corrected):>11}"
+                         f"{c.predicted_drop:>12.4g}{c.group:>6}  {' '.join(flags)}")
+        lines.append("  (* significant at the level; LM / 2 is the predicted fall of J when the effect is added)")
+        for name, why in self.skipped.items():
+            notes.append(f"{name} was not scored: {why}")
+        notes.extend(self.notes)
+        if notes:
+            lines.append("Notes")
+            lines += [f"  [{i}] {n}" for i, n in enumerate(notes, 1)]
+        return "\n".join(lines)
+
+
+def _fmt_p(p: float) -> str:
+    if p == 0.0:
+        return "<1e-300"
+    return f"{p:.3g}" if p >= 1e-3 else f"{p:.1e}"
+
+
+def holm(p: Sequence[float]) -> np.ndarray:
+    """Holm's step-down adjusted p-values (family-wise error rate)."""
+    p = np.asarray(p, float)
+    m = p.size
+    order = np.argsort(p, kind="stable")
+    adj = np.empty(m)
+    running = 0.0
+    for i, k in enumerate(order):
+        running = max(running, min(1.0, (m - i) * p[k]))
+        adj[k] = running
+    return adj
+
+
+# ---------------------------------------------------------------------------
+# the augmented model
+# ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class AugmentedModel:
+    """The base model with every scored candidate at zero, collocated on the fit's mesh.
+
+    Attributes
+    ----------
+    spec : ModelSpec
+    prepared : Prepared
+    effects : tuple of Effect
+        The candidates it holds, in order.
+    parameters : dict
+        ``{effect name: tuple of parameter names}``.
+    skipped : dict
+        ``{effect name: reason}``.
+    base_fingerprint : str
+    build_s, prepare_s : float
+    """
+
+    spec: ModelSpec
+    prepared: Prepared
+    effects: tuple
+    parameters: dict
+    skipped: dict
+    base_fingerprint: str
+    build_s: float
+    prepare_s: float
+
+    def compatible(self, fit: EstimationResult, effects: Sequence[Effect]) -> bool:
+        """Whether it serves a ranking of ``effects`` at ``fit`` (same model, mesh and sample times)."""
+        if self.base_fingerprint != fit.spec.fingerprint():
+            return False
+        if [e.name for e in self.effects] + list(self.skipped) != [e.name for e in effects] and \
+                sorted([e.name for e in self.effects] + list(self.skipped)) != sorted(e.name for e in effects):
+            return False
+        mine, theirs = self.prepared.transcription.mesh, fit.prepared.transcription.mesh
+        if mine.K != theirs.K or not np.array_equal(mine.boundaries, theirs.boundaries):
+            return False
+        a, b = self.prepared.measurements, fit.prepared.measurements
+        if a.names != b.names:
+            return False
+        return all(np.array_equal(a[n].times, b[n].times) and a[n].sigma == b[n].sigma for n in a.names)
+
+
+def augment(fit: EstimationResult, candidates: Iterable[Effect | str] | None = None) -> AugmentedModel:
+    """Build the augmented model of ``candidates`` (default: the whole catalogue) for ``fit``.
+
+    Candidates already in the model, or that need something the model lacks,
+    are left out with a reason (:attr:`AugmentedModel.skipped`).
+    """
+    t0 = time.perf_counter()
+    base = fit.spec
+    effects = resolve_effects(list(CATALOGUE.values()) if candidates is None else list(candidates))
+    skipped: dict[str, str] = {}
+    usable: list[Effect] = []
+    for e in effects:
+        if is_present(base, e):
+            skipped[e.name] = "it is already in the model"
+            continue
+        try:
+            apply_effect(base.to_model(), e)
+        except ModelError as exc:
+            skipped[e.name] = str(exc)
+            continue
+        usable.append(e)
+    while True:
+        m = base.to_model()
+        declared, clash = {}, None
+        for e in usable:
+            try:
+                declared[e.name] = apply_effect(m, e)
+            except ModelError as exc:
+                clash = (e, str(exc))
+                break
+        if clash is not None:
+            skipped[clash[0].name] = f"it clashes with the candidates before it: {clash[1]}"
+            usable.remove(clash[0])
+            continue
+        spec = m.freeze()
+        problems = effect_parameter_problems(spec, declared, base.parameter_names)
+        if problems:
+            skipped.update(problems)
+            usable = [e for e in usable if e.name not in problems]
+            continue
+        break
+    if not usable:
+        raise ModelError("no candidate effect applies to model "
+                         f"{base.name!r}: " + "; ".join(f"{k}: {v}" for k, v in skipped.items()))
+    if any(spec.parameter(s).guess != g for s, g in zip(base.parameter_symbols, base.guess)):
+        spec = spec.with_guess({s: g for s, g in zip(base.parameter_symbols, base.guess)})
+    build = time.perf_counter() - t0
+    t1 = time.perf_counter()
+    prep = prepare(spec, fit.prepared.measurements, mesh=fit.prepared.transcription.mesh)
+    return AugmentedModel(spec, prep, tuple(usable), {k: tuple(map(str, v)) for k, v in declared.items()},
+                          skipped, base.fingerprint(), build, time.perf_counter() - t1)
+
+
+# ---------------------------------------------------------------------------
+# the test
+# ---------------------------------------------------------------------------
+
+
+def _families(spec: ModelSpec, names: Sequence[str]) -> list[tuple[str, list[int]]]:
+    """Group estimated parameters into families: ``(label, indices)``.
+
+    Knots of a time family are ``<F>(t)``; table knots ``<name>_<j>`` are
+    ``<name>(M)`` when their definition uses Mach, else ``<name>(..)``.
+    """
+    fam_of: dict[str, str] = {}
+    mach = next((d for d, _ in spec.definitions if str(d) == "mach"), None)
+    for ps in spec.parameters:
+        n = str(ps.symbol)
+        if n not in names:
+            continue
+        if ps.family is not None:
+            fam_of[n] = f"{ps.family}(t)"
+            continue
+        mt = re.fullmatch(r"(.+)_(\d+)", n)
+        siblings = [q for q in names if mt and re.fullmatch(re.escape(mt.group(1)) + r"_\d+", q)]
+        if mt and len(siblings) >= 2:
+            uses_mach = any(ps.symbol in e.free_symbols and mach is not None and mach in e.free_symbols
+                            for _, e in spec.definitions)
+            fam_of[n] = f"{mt.group(1)}({'M' if uses_mach else '..'})"
+        else:
+            fam_of[n] = n
+    out: dict[str, list[int]] = {}
+    for i, n in enumerate(names):
+        out.setdefault(fam_of.get(n, n), []).append(i)
+    return list(out.items())
+
+
+def _meaning(spec: ModelSpec, members: Sequence[str]) -> str:
+    """Which estimate a family feeds ("the drag estimate")."""
+    by_name = {str(p.symbol): p for p in spec.parameters}
+    syms = {by_name[n].symbol for n in members}
+    fams = {by_name[n].family for n in members} - {None}
+    for d, e in spec.definitions:
+        if (syms | fams) & e.free_symbols and str(d) in _DEFINITION_WORDS:
+            return _DEFINITION_WORDS[str(d)]
+    return "the estimates of " + ", ".join(members)
+
+
+def _tdot(A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``A^T b`` for tall, thin ``A`` (and ``b``) without BLAS: a multi-threaded BLAS is
+    slow on these shapes on a busy machine (20 ms instead of 0.02 ms)."""
+    return np.einsum("ij,i...->j...", A, b)
+
+
+def _orthonormal(X: np.ndarray) -> np.ndarray:
+    if X.shape[1] == 0:
+        return np.zeros((X.shape[0], 0))
+    norms = np.sqrt(np.einsum("ij,ij->j", X, X))
+    keep = norms > 0
+    U, s, _ = np.linalg.svd(X[:, keep] / norms[keep], full_matrices=False)
+    return U[:, s > s[0] * 1e-10] if s.size else U[:, :0]
+
+
+def rank_candidates(fit: EstimationResult, candidates: Iterable[Effect | str] | None = None, *,
+                    level: float = 0.05, augmented: AugmentedModel | None = None) -> CandidateRanking:
+    """Rank candidate effects at ``fit`` by the score test (module notes), without refitting.
+
+    Parameters
+    ----------
+    fit : EstimationResult
+        The converged base fit.
+    candidates : iterable of Effect or str, optional
+        Default: the whole :data:`~rocketid.diagnostics.effects.CATALOGUE`
+        (those that cannot apply to the model are skipped with a note).
+    level : float
+        Significance level of the corrected p-values.
+    augmented : AugmentedModel, optional
+        Reuse the augmented model of an earlier ranking with the same model,
+        candidates, mesh and sample times (``ranking.augmented``): saves
+        building and collocating it again.
+
+    Returns
+    -------
+    CandidateRanking
+
+    Raises
+    ------
+    SettingsError
+        A level outside (0, 1).
+    SensitivityError
+        The sensitivities cannot be formed at the fit.
+    """
+    if not (0.0 < float(level) < 1.0):
+        raise SettingsError(f"level must be in (0, 1), got {level!r}")
+    t_start = time.perf_counter()
+    effects = resolve_effects(list(CATALOGUE.values()) if candidates is None else list(candidates))
+    notes: list[str] = []
+    if not fit.success:
+        notes.append(f"the base fit did not converge ({fit.message}): the score test assumes a converged fit")
+    reused = augmented is not None and augmented.compatible(fit, effects)
+    if augmented is not None and not reused:
+        notes.append("the augmented model given does not match this fit (model, candidates, mesh or sample times); "
+                     "it was built again")
+    aug = augmented if reused else augment(fit, effects)
+    spec_a = aug.spec
+    base = fit.spec
+    n_p = len(base.parameters)
+    if tuple(spec_a.parameter_names[:n_p]) != base.parameter_names:
+        raise ModelError("the augmented model does not start with the base model's parameters")
+    if aug.prepared.nlp.channel_names != fit.nlp.channel_names:
+        raise ModelError("the augmented model's channels differ from the fit's")
+
+    # collocation states of the base fit, extended by the effects' own states (at their initial values)
+    t1 = time.perf_counter()
+    lay_b = fit.prepared.transcription.layout
+    lay_a = aug.prepared.transcription.layout
+    S_b, _ = lay_b.unpack(fit.nlp.full_vector(fit.x))
+    S_a = np.tile(spec_a.initial_state(spec_a.guess), (lay_a.n_nodes, 1))
+    S_a[:, :S_b.shape[1]] = S_b
+    p_a = np.concatenate([fit.p, np.zeros(len(spec_a.parameters) - n_p)])
+    sens = sensitivity_at(aug.prepared, p_a, gamma=S_a.ravel(), solve=True)
+    t2 = time.perf_counter()
+
+    sigma = sens.sigma
+    Sw = sens.S / sigma[:, None]
+    rw = np.concatenate([fit.residuals[c] for c in fit.nlp.channel_names]) / sigma
+    P = fit.nlp.transform.P
+    free = np.ones(n_p, bool)
+    if fit.nlp.transform.is_identity:
+        for s, side in fit.active_bounds():
+            free[base.parameter_symbols.index(s)] = False
+            notes.append(f"{s} is at its {side} bound in the base fit: the test holds it fixed")
+        X = Sw[:, :n_p][:, free]
+        est_names = [n for n, f in zip(base.parameter_names, free) if f]
+    else:
+        X = Sw[:, :n_p] @ P
+        est_names = list(base.parameter_names)
+        notes.append(f"the base fit estimated {P.shape[1]} transformed directions (7.9): the test projects out "
+                     "those directions only")
+    U = _orthonormal(X)
+    Xp = Sw[:, :n_p][:, [base.parameter_names.index(n) for n in est_names]]
+    families = _families(base, est_names)
+    fam_bases = [(label, idx, _orthonormal(Xp[:, idx])) for label, idx in families]
+
+    # all candidate columns projected at once: s~ = s - U U^T s
+    C = Sw[:, n_p:]
+    Ct = C - U @ (U.T @ C)
+    index = {n: i - n_p for i, n in enumerate(spec_a.parameter_names) if i >= n_p}
+    meanings: dict = {}
+    raw = []
+    for e in aug.effects:
+        cols = [index[n] for n in aug.parameters[e.name]]
+        raw.append(_score_one(e, C[:, cols], Ct[:, cols], rw, fam_bases, base, est_names, meanings))
+    t3 = time.perf_counter()
+
+    # order, correct, group
+    logp = np.array([r["logp"] for r in raw])
+    lm = np.array([r["statistic"] for r in raw])
+    order = sorted(range(len(raw)), key=lambda i: (logp[i], -lm[i]))
+    p_raw = np.array([r["p_value"] for r in raw])
+    p_corr = holm(p_raw)
+    # |cos| between the output changes the candidates would make: one Gram matrix (no vector BLAS calls,
+    # which are slow under a multi-threaded BLAS on a busy machine)
+    Dm = np.column_stack([r["direction"] for r in raw])
+    gram = Dm.T @ Dm
+    dnorm = np.sqrt(np.clip(np.diag(gram), 0.0, None))
+    groups: list[list[int]] = []
+    group_of: dict[int, int] = {}
+    link: dict[int, tuple[int, float, float]] = {}
+    for i in order:
+        # single linkage: join the first group holding a better-ranked candidate it is confounded with
+        joined = False
+        for g, members in enumerate(groups):
+            for j in members:
+                if dnorm[i] == 0 or dnorm[j] == 0:
+                    continue
+                cos = abs(float(gram[i, j]) / (dnorm[i] * dnorm[j]))
+                ratio = min(lm[i], lm[j]) / max(lm[i], lm[j]) if max(lm[i], lm[j]) > 0 else 1.0
+                if cos >= COLLINEAR_COS and ratio >= SCORE_RATIO:
+                    members.append(i)
+                    group_of[i] = g
+                    link[i] = (j, cos, ratio)
+                    joined = True
+                    break
+            if joined:
+                break
+        if not joined:
+            group_of[i] = len(groups)
+            groups.append([i])
+
+    scores = []
+    for rank, i in enumerate(order, 1):
+        r = raw[i]
+        e = aug.effects[i]
+        note = list(r["notes"])
+        g = groups[group_of[i]]
+        if i in link:
+            lead, cos, ratio = link[i]
+            note.append(f"confounded with {aug.effects[lead].name} (score statistics {100 * (1 - ratio):.0f} % apart, "
+                        f"|cos| {cos:.3f} of the output changes): the data cannot tell them apart at this fit; "
+                        "refit both (confirm) to decide")
+        elif len(g) > 1:
+            others = ", ".join(aug.effects[j].name for j in g[1:])
+            note.append(f"leads a confounded group with {others}: refit each (confirm) to decide")
+        if r["realistic_statistic"] is not None and r["absorbed_share"] > ABSORBED:
+            lam = r["realistic_statistic"]
+            size = ", ".join(f"{k} = {v:g}" for k, v in e.realistic.items())
+            if lam < DETECTABLE:
+                note.append(f"at a realistic size ({size}) what the fit cannot absorb would raise the score statistic "
+                            f"by only about {lam:.2g}: the effect would go unseen")
+            else:
+                note.append(f"what the fit cannot absorb is still detectable at a realistic size ({size}: score "
+                            f"statistic about {lam:.3g})")
+        scores.append(CandidateScore(
+            name=e.name, title=e.title, statistic=float(r["statistic"]), dof=int(r["dof"]),
+            p_value=float(p_raw[i]), p_value_corrected=float(p_corr[i]), predicted_drop=float(r["statistic"]) / 2,
+            group=group_of[i] + 1, absorbed_by=r["absorbed_by"], significant=bool(p_corr[i] < level),
+            note="; ".join(note), kind=e.kind, parameters=aug.parameters[e.name], retained=float(r["retained"]),
+            one_step=r["one_step"], rank=rank, realistic_statistic=r["realistic_statistic"]))
+    t4 = time.perf_counter()
+    timings = {"build_s": 0.0 if reused else aug.build_s, "prepare_s": 0.0 if reused else aug.prepare_s,
+               "sensitivity_s": t2 - t1, "score_s": t4 - t2, "total_s": t4 - t_start,
+               "codegen_cached": bool(aug.prepared.codegen_cached), "reused_augmented_model": bool(reused)}
+    base_info = {"model": base.name, "objective": float(fit.objective), "chi2_per_dof": float(fit.chi2_per_dof),
+                 "n_data": int(fit.n_data), "n_estimated": int(fit.n_estimated)}
+    slices = sens.channel_slices
+    explained = {aug.effects[i].name: {ch: raw[i]["direction"][sl] * sigma[sl] for ch, sl in slices.items()}
+                 for i in order}
+    return CandidateRanking(scores, [[aug.effects[j].name for j in g] for g in groups], dict(aug.skipped),
+                            float(level), "holm", base_info, tuple(notes + list(sens.notes)), timings, aug,
+                            explained)
+
+
+def _score_one(effect: Effect, Sb: np.ndarray, Sbt: np.ndarray, rw: np.ndarray, fam_bases, base: ModelSpec,
+               est_names: Sequence[str], meanings: dict) -> dict:
+    """LM statistic, dof, retained share, absorption and direction of one candidate
+    (``Sb`` its weighted sensitivity columns, ``Sbt`` the same projected)."""
+    names = list(effect.parameter_names) or [f"{effect.name}[{j}]" for j in range(Sb.shape[1])]
+    notes: list[str] = []
+    norms = np.sqrt(np.einsum("ij,ij->j", Sb, Sb))
+    out = {"statistic": 0.0, "dof": 0, "p_value": 1.0, "logp": 0.0, "retained": 0.0, "absorbed_by": None,
+           "one_step": {}, "direction": np.zeros_like(rw), "notes": notes, "absorbed_share": 1.0,
+           "realistic_statistic": None}
+    if effect.realistic and len(effect.realistic) == Sb.shape[1]:
+        beta = np.array([effect.realistic[n] for n in names])
+        change = Sbt @ beta
+        out["realistic_statistic"] = float(np.einsum("i,i->", change, change))
+    if not np.any(norms > 0):
+        notes.append("its parameters do not change the outputs at this fit")
+        return out
+    live = norms > 0
+    if not live.all():
+        notes.append("parameter(s) " + ", ".join(n for n, l in zip(names, live) if not l)
+                     + " do not change the outputs at this fit")
+    A = Sb[:, live] / norms[live]                   # unit columns
+    At = Sbt[:, live] / norms[live]                 # projected
+    G0 = _tdot(A, A)
+    G1 = _tdot(At, At)
+    # generalized eigenproblem G1 w = mu G0 w: mu = retained squared share of each combination
+    L = np.linalg.cholesky(G0 + 1e-14 * np.eye(G0.shape[0]))
+    Li = np.linalg.inv(L)
+    mu, W = np.linalg.eigh(Li @ G1 @ Li.T)
+    mu = np.clip(mu, 0.0, 1.0)
+    retained = float(np.sqrt(mu.max()))
+    out["retained"] = retained
+    keep = mu > 1e-8
+    absorbed_share = 1.0 - mu.max()
+    out["absorbed_share"] = float(absorbed_share)
+    if absorbed_share > PARTLY_ABSORBED and fam_bases:
+        expl = []
+        best = Li.T @ W[:, np.argmax(mu)]           # least-absorbed combination (in unit-column coordinates)
+        a = A @ best
+        a = a / np.sqrt(np.einsum("i,i->", a, a))
+        for label, idx, Q in fam_bases:
+            expl.append((float(np.sum(_tdot(Q, a) ** 2)), label, idx))
+        expl.sort(key=lambda z: -z[0])
+        total = absorbed_share
+        chosen = [z for z in expl if z[0] >= 0.5 * total] or [z for z in expl if z[0] >= 0.1 * total] or expl[:1]
+        members = [est_names[i] for _, _, idx in chosen for i in idx]
+        labels = ", ".join(label for _, label, _ in chosen)
+        key = tuple(members)
+        if key not in meanings:
+            meanings[key] = _meaning(base, members)
+        meaning = meanings[key]
+        if absorbed_share > ABSORBED:
+            out["absorbed_by"] = members
+            notes.append(f"confounded with {labels}: it would be absorbed into {meaning} (the estimated parameters "
+                         f"take up {100 * absorbed_share:.1f} % of its signature)")
+        else:
+            notes.append(f"partly absorbed ({100 * absorbed_share:.0f} % of its signature) by {labels}: the base "
+                         f"estimates of {meaning.replace('the ', '', 1)} are biased by it")
+    if not keep.any():
+        return out
+    # LM = g^T I^-1 g in the kept directions of the projected columns
+    Wk = Li.T @ W[:, keep]                           # combinations of unit columns, G0-orthonormal
+    B = At @ Wk                                      # projected, orthogonal columns with squared norms mu
+    g = _tdot(B, rw)
+    lam = mu[keep]
+    coef = g / lam
+    lm = float(np.sum(g * coef))
+    dof = int(keep.sum())
+    out["statistic"] = lm
+    out["dof"] = dof
+    out["p_value"] = float(stats.chi2.sf(lm, dof))
+    out["logp"] = float(stats.chi2.logsf(lm, dof))
+    out["direction"] = B @ coef                      # the output change the effect would make (weighted)
+    # one-step estimate of the effect's parameters: beta = -(I^-1 g) in physical units
+    step = -(Wk @ coef)
+    full = np.zeros(len(names))
+    full[live] = step / norms[live]
+    out["one_step"] = {n: float(v) for n, v in zip(names, full)}
+    return out
