@@ -29,3 +29,10 @@ __all__ = [
 # Part B (compare, locate, plausibility, report): its imports and __all__
 # entries go below this line.
 # ---------------------------------------------------------------------------
+from .compare import Comparison, compare
+from .locate import Location, locate
+from .plausibility import Plausibility, check_plausibility
+from .api import DiagnosisReport, diagnose
+
+__all__ += ["compare", "Comparison", "locate", "Location", "check_plausibility", "Plausibility",
+            "diagnose", "DiagnosisReport"]
