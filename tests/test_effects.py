@@ -1,0 +1,231 @@
+"""The catalogue of candidate effects: each applies to both reference cases, its zero value gives back
+the base model exactly, its parameter enters the model, and bad effects are refused with clear errors."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import sympy as sp
+
+import rocketid as ri
+from rocketid.cases import ra66m
+from rocketid.diagnostics import (CATALOGUE, KINDS, Effect, custom_effect, is_present, liftoff_fade, resolve_effects,
+                                  with_effects)
+from rocketid.errors import ModelError
+
+REQUIRED = {"back_pressure", "thrust_level", "mass_flow", "transonic_drag", "wind", "earth_rotation", "misalignment",
+            "density", "bias_x", "bias_h", "bias_v", "scale_v", "time_offset"}
+
+
+@pytest.fixture(scope="module")
+def ra66m_spec():
+    return ra66m()
+
+
+@pytest.fixture(scope="module")
+def ra66_spec():
+    return ri.ra66()
+
+
+def test_catalogue_holds_the_issue_effects():
+    assert REQUIRED <= set(CATALOGUE)
+    for name, e in CATALOGUE.items():
+        assert e.name == name and e.kind in KINDS and e.title and e.description
+        assert e.realistic and all(v != 0 for v in e.realistic.values()), name
+    assert len(CATALOGUE["wind"].realistic) >= 3 and len(CATALOGUE["density"].realistic) >= 3
+    assert CATALOGUE["earth_rotation"].realistic == {"k_rot": 1.0}
+    assert CATALOGUE["back_pressure"].realistic["A_e"] == pytest.approx(0.4)
+
+
+def _random_point(spec: ri.ModelSpec, rng: np.random.Generator) -> dict:
+    """Plausible values of every symbol an expanded equation or output can hold."""
+    vals = {spec.t: rng.uniform(5, 60)}
+    typical = {"x": (0, 1e4), "h": (100, 2e4), "v": (50, 800), "theta": (0.8, 1.5), "wind_speed": (0, 0)}
+    for s in spec.states:
+        lo, hi = typical.get(str(s.symbol), (0, 1))
+        vals[s.symbol] = rng.uniform(lo, hi)
+        vals[s.derivative] = rng.uniform(-1, 1)
+    for u in spec.input_symbols:
+        vals[u] = rng.uniform(-0.03, 0.03)
+    for f in spec.families:
+        vals[f.symbol] = rng.uniform(0.2, 0.6)
+    for p in spec.parameters:
+        vals[p.symbol] = rng.uniform(0.2, 0.6) if p.guess != 0 else 0.0
+    return vals
+
+
+def _values(spec: ri.ModelSpec, exprs, point: dict) -> np.ndarray:
+    out = []
+    for e in exprs:
+        e = spec.expand(e)
+        out.append(float(sp.N(e.xreplace({k: sp.Float(v) for k, v in point.items() if k in e.free_symbols}))))
+    return np.array(out)
+
+
+@pytest.mark.parametrize("name", sorted(CATALOGUE))
+@pytest.mark.parametrize("case", ["ra66m", "ra66"])
+def test_zero_gives_back_the_base_model(name, case, ra66m_spec, ra66_spec):
+    base = ra66m_spec if case == "ra66m" else ra66_spec
+    spec = with_effects(base, [name])
+    assert set(base.parameter_names) < set(spec.parameter_names)
+    new = [n for n in spec.parameter_names if n not in base.parameter_names]
+    assert set(new) == set(CATALOGUE[name].realistic)
+    assert all(spec.parameter(n).guess == 0.0 for n in new)
+    assert spec.state_symbols[:len(base.states)] == base.state_symbols
+    rng = np.random.default_rng(3)
+    for _ in range(2):
+        point = _random_point(spec, rng)
+        # residuals and outputs at zero effect parameters equal the base model's
+        np.testing.assert_allclose(_values(spec, spec.equations[:len(base.states)], point),
+                                   _values(base, base.equations, point), rtol=1e-12, atol=1e-9)
+        np.testing.assert_allclose(_values(spec, [o.expr for o in spec.outputs], point),
+                                   _values(base, [o.expr for o in base.outputs], point), rtol=1e-12, atol=1e-9)
+        # and a realistic value changes them (the parameter enters)
+        moved = dict(point)
+        for n, v in CATALOGUE[name].realistic.items():
+            moved[spec.symbol(n)] = v
+        a = np.concatenate([_values(spec, spec.equations, point), _values(spec, [o.expr for o in spec.outputs], point)])
+        b = np.concatenate([_values(spec, spec.equations, moved), _values(spec, [o.expr for o in spec.outputs], moved)])
+        assert np.max(np.abs(a - b)) > 0, name
+
+
+def test_with_effects_sets_values_and_keeps_the_base_guesses(ra66m_spec):
+    spec = with_effects(ra66m_spec, ["back_pressure", "bias_h"], {"A_e": 0.4, "b_h": 5.0})
+    assert spec.parameter("A_e").guess == 0.4 and spec.parameter("b_h").guess == 5.0
+    for p in ra66m_spec.parameters:
+        assert spec.parameter(p.symbol).guess == p.guess
+    # a spec with changed guesses keeps them through with_effects
+    moved = ra66m_spec.with_guess({"CL_alpha": 2.4})
+    assert with_effects(moved, ["bias_x"]).parameter("CL_alpha").guess == 2.4
+
+
+def test_the_users_model_is_not_changed():
+    m = ra66m(build=False)
+    before = m.freeze()
+    spec = with_effects(m, ["thrust_level", "time_offset"])
+    after = m.freeze()
+    assert after.parameter_names == before.parameter_names
+    assert after.outputs == before.outputs
+    assert "tau" in spec.parameter_names
+
+
+def test_time_offset_uses_state_derivatives(ra66m_spec):
+    spec = with_effects(ra66m_spec, ["time_offset"])
+    tau = spec.symbol("tau")
+    for o in spec.outputs:
+        s = spec.symbol(o.name)
+        assert sp.simplify(o.expr - (s - tau * spec.states[spec.state_symbols.index(s)].derivative)) == 0
+
+
+def test_sensor_effects_edit_their_channel_only(ra66m_spec):
+    spec = with_effects(ra66m_spec, ["bias_h", "scale_v"])
+    out = {o.name: o.expr for o in spec.outputs}
+    assert out["x"] == spec.symbol("x")
+    assert out["h"] == spec.symbol("h") + spec.symbol("b_h")
+    assert sp.expand(out["v"] - (1 + spec.symbol("k_v")) * spec.symbol("v")) == 0
+
+
+def test_liftoff_fade():
+    t = sp.Symbol("t")
+    f = sp.lambdify(t, liftoff_fade(t))
+    assert f(0.0) == 0.0 and f(3.0) == pytest.approx(0.5) and f(30.0) == pytest.approx(1.0, abs=1e-3)
+    # vanishes faster than t at lift-off (no free constant C of the singular start is excited)
+    assert f(1e-3) / 1e-3 < 1e-6
+
+
+def test_zero_effect_simulates_like_the_base(ra66m_spec):
+    times = np.linspace(0.5, 66, 40)
+    spec = with_effects(ra66m_spec, ["wind", "earth_rotation", "misalignment"])
+    p_base = ri.cases.ra66m_truth(ra66m_spec)
+    a = ri.simulate(ra66m_spec, p_base, times).outputs()
+    b = ri.simulate(spec, ri.cases.ra66m_truth(spec), times).outputs()
+    for k in a:
+        np.testing.assert_allclose(b[k], a[k], atol=1e-4)
+
+
+# ---------------------------------------------------------------------------
+# errors
+# ---------------------------------------------------------------------------
+
+
+def test_an_effect_already_present_is_refused(ra66m_spec):
+    spec = with_effects(ra66m_spec, ["bias_h"])
+    with pytest.raises(ModelError, match="already present"):
+        with_effects(spec, ["bias_h"])
+    assert is_present(spec, "bias_h") and not is_present(spec, "bias_x")
+    spec = with_effects(ra66m_spec, ["time_offset"])
+    with pytest.raises(ModelError, match="already present"):
+        with_effects(spec, ["time_offset"])
+    with pytest.raises(ModelError, match="given twice"):
+        with_effects(ra66m_spec, ["bias_h", "bias_h"])
+
+
+def test_a_custom_effect_already_present_is_refused(ra66m_spec):
+    def gravity(m):
+        eps = m.parameter("eps_g", 0.0)
+        m.redefine("g", m.definition("g") * (1 + eps))
+        return eps
+    effect = custom_effect("gravity_scale", gravity)
+    spec = with_effects(ra66m_spec, [effect])
+    with pytest.raises(ModelError, match="already present"):
+        with_effects(spec, [effect])
+
+
+def test_a_parameter_that_does_not_enter_is_refused(ra66m_spec):
+    def idle(m):
+        return m.parameter("k_idle", 0.0)
+    with pytest.raises(ModelError, match="does not enter the model"):
+        with_effects(ra66m_spec, [custom_effect("idle", idle)])
+
+
+def test_other_bad_effects_are_refused(ra66m_spec):
+    with pytest.raises(ModelError, match="did you mean back_pressure"):
+        with_effects(ra66m_spec, ["back_presure"])
+
+    def nonzero(m):
+        k = m.parameter("k_nz", 1.0)
+        m.redefine("thrust", m.definition("thrust") * k)
+        return k
+    with pytest.raises(ModelError, match="guess 0"):
+        with_effects(ra66m_spec, [custom_effect("nonzero", nonzero)])
+
+    def silent(m):
+        m.parameter("k_s", 0.0)
+    with pytest.raises(ModelError, match="must return the parameters"):
+        with_effects(ra66m_spec, [custom_effect("silent", silent)])
+    with pytest.raises(ModelError, match="unknown kind"):
+        Effect("x", "x", "magic", lambda m: ())
+
+
+def test_an_effect_needing_what_the_model_lacks_says_what():
+    m = ri.Model("decay", 0.0, 1.0)
+    y = m.state("y", 1.0)
+    k = m.parameter("k", 0.5)
+    m.ode({y: -k * y})
+    m.output("y", y, sigma=0.1)
+    with pytest.raises(ModelError, match="needs the definition 'thrust'"):
+        with_effects(m, ["back_pressure"])
+    with pytest.raises(ModelError, match="output named 'h'"):
+        with_effects(m, ["bias_h"])
+    # an output-only effect applies to any model
+    assert "tau" in with_effects(m, ["time_offset"]).parameter_names
+
+
+def test_resolve_effects_accepts_names_and_effects():
+    e = CATALOGUE["wind"]
+    assert [x.name for x in resolve_effects(["bias_h", e])] == ["bias_h", "wind"]
+    assert resolve_effects("bias_v")[0] is CATALOGUE["bias_v"]
+    with pytest.raises(ModelError, match="expected an Effect"):
+        resolve_effects([3])
+
+
+def test_effects_are_immutable_values():
+    e = CATALOGUE["thrust_level"]
+    with pytest.raises(Exception):
+        e.name = "other"
+    with pytest.raises(TypeError):
+        e.realistic["eps_thrust"] = 1.0
+    assert hash(e) == hash(CATALOGUE["thrust_level"])
+    assert math.isclose(CATALOGUE["misalignment"].realistic["delta_thrust"], math.radians(0.25))
