@@ -98,11 +98,45 @@ def test_diagnose_confirms_the_leader(report):
     missing = [m for m in ("score", "refit", "history") if not _available(m)]
     if missing:
         pytest.skip(f"rocketid.diagnostics.{', '.join(missing)} (part A of ISSUE 5) not installed yet")
-    rep, _ = report
+    rep, out = report
     assert rep.confirmed == ("back_pressure",) and rep.history is not None
     best = rep.best
+    assert best is rep.confirmations[0] and best.confirmed
+    a_e, se, (lo, hi) = best.effect_estimates["A_e"]
+    assert lo <= 0.1 <= hi and se < 1e-3  # the hidden A_e = 0.1 m^2
+    assert len(rep.history) == 2 and rep.history.latest.label == "+ back_pressure"
+    assert rep.refit_plausibility[0].passed
+    assert any(s.startswith("Refit with back_pressure (confirmed)") for s in rep.verdict())
+    page = (out / "report.html").read_text()
+    assert "After: the model with back_pressure" in page and "history residuals" in page
+    assert (out / "figures" / "history.png").is_file() and (out / "figures" / "after.png").is_file()
+    d = json.loads((out / "diagnosis.json").read_text())
+    assert d["confirmations"][0]["effect"] == "back_pressure" and d["confirmations"][0]["confirmed"] is True
     assert best.fit.chi2_per_dof < 1.1 < rep.fit.chi2_per_dof
     assert rep.after is not None and rep.after.chi2_per_dof == pytest.approx(best.fit.chi2_per_dof)
+    assert rep.after.fits_to_noise
+
+
+def test_the_best_refit_breaks_bic_ties_by_the_hold_out():
+    """Refits within BIC_TIE of each other are told apart by plausibility, then the hold-out
+    prediction (on the tutorial's data back-pressure and a thrust-level error both reach chi2/dof
+    0.992, BIC 19715.2 and 19714.2; the hold-out predictions are 4.2/2.8/1.6 against 10.8/7.1/3.4)."""
+    from types import SimpleNamespace as NS
+    from rocketid.diagnostics.api import BIC_TIE, _choose
+
+    nlp = NS(channel_names=("x", "h"), channel_sigmas=np.array([1.0, 2.0]))
+
+    def conf(bic, hold, ok=True):
+        return NS(fit=NS(success=ok, nlp=nlp), bic=(1e5, bic), holdout_rms=hold)
+
+    bp = conf(19715.2, {"x": (90, 4.2), "h": (91, 2.8)})
+    eps = conf(19714.2, {"x": (90, 10.8), "h": (91, 7.1)})
+    assert _choose([eps, bp]) == (1, f"BIC within {BIC_TIE:g} of each other; the best hold-out prediction")
+    assert _choose([eps, bp], [False, True]) == (1, f"BIC within {BIC_TIE:g} of the lowest, plausible coefficients")
+    far = conf(19714.2 - 2 * BIC_TIE, {"x": (90, 50.0), "h": (91, 50.0)})
+    assert _choose([far, bp]) == (0, "the lowest BIC")
+    assert _choose([conf(1.0, None, ok=False)]) == (None, "no refit converged")
+    assert _choose([conf(5.0, None), conf(4.0, None)]) == (1, "the lowest BIC")
 
 
 def test_the_report_files(report):

@@ -143,10 +143,13 @@ class DiagnosisReport:
         :class:`rocketid.diagnostics.refit.Confirmation` of the leading candidates.
     confirmed : tuple of str
         The candidates' names, in the order of :attr:`confirmations`.
+    refit_plausibility : tuple of Plausibility
+        The plausibility checks of each refit, in the same order.
     after : Comparison or None
         The comparison of the best confirmed refit (the lowest BIC).
     history : object or None
-        :class:`rocketid.diagnostics.history.ModelHistory`: the base fit and the refits.
+        :class:`rocketid.diagnostics.history.ModelHistory`: the base fit, then the
+        best refit (:attr:`best`).
     level : float
     timings : dict
         Wall time of each step, s.
@@ -162,6 +165,7 @@ class DiagnosisReport:
     ranking: Any
     confirmations: tuple
     confirmed: tuple
+    refit_plausibility: tuple
     after: Comparison | None
     history: Any
     level: float
@@ -183,9 +187,21 @@ class DiagnosisReport:
 
     @property
     def best(self):
-        """The confirmation with the lowest BIC (None without confirmations)."""
-        ok = [c for c in self.confirmations if getattr(c.fit, "success", False)]
-        return min(ok, key=lambda c: c.bic) if ok else None
+        """The best refit (None without a converged one): among those within
+        :data:`BIC_TIE` of the lowest BIC, the one with plausible coefficients and
+        then the best hold-out prediction (:attr:`choice`)."""
+        i, _ = self._choice()
+        return None if i is None else self.confirmations[i]
+
+    def _choice(self):
+        pl = [p.passed for p in self.refit_plausibility] if len(self.refit_plausibility) == len(self.confirmations) \
+            else None
+        return _choose(self.confirmations, pl)
+
+    @property
+    def choice(self) -> str:
+        """Why :attr:`best` was chosen."""
+        return self._choice()[1]
 
     def verdict(self) -> list[str]:
         """The diagnosis in a few sentences."""
@@ -220,8 +236,12 @@ class DiagnosisReport:
         b = self.best
         if b is not None:
             name = self.effect_name(b)
-            out.append(f"Refit with {name}: chi2/dof {b.fit.chi2_per_dof:.4g} (was {self.fit.chi2_per_dof:.4g}), "
-                       f"LR p = {b.lr_p_value:.2g}, BIC {b.bic:.6g}.")
+            est = "; ".join(f"{k} = {v[0]:.4g} +- {v[1]:.2g}" for k, v in b.effect_estimates.items())
+            if len(self.confirmations) > 1:
+                out.append(f"Best refit: {name} ({self.choice}).")
+            out.append(f"Refit with {name} ({'confirmed' if b.confirmed else 'NOT confirmed'}): chi2/dof "
+                       f"{b.fit.chi2_per_dof:.4g} (was {self.fit.chi2_per_dof:.4g}), LR p = {b.lr_p_value:.2g}, "
+                       f"BIC {b.bic[0]:.6g} -> {b.bic[1]:.6g}; {est}.")
         return out
 
     def summary(self) -> str:
@@ -284,30 +304,59 @@ class DiagnosisReport:
 
 
 def _effect_name(conf) -> str:
+    effects = getattr(conf, "effects", None)
+    if effects:
+        return " + ".join(map(str, effects))
     est = getattr(conf, "effect_estimates", None) or {}
-    eff = getattr(conf, "effect", None)
-    if eff is not None:
-        return getattr(eff, "name", str(eff))
     return ", ".join(est) if est else "the effect"
 
 
+#: Refits whose BIC lie within this of the lowest are not told apart by BIC (Kass and Raftery's
+#: "very strong" evidence starts at 10); the hold-out prediction decides between them.
+BIC_TIE = 10.0
+
+
+def _holdout_score(c) -> float:
+    """Mean over channels of (hold-out prediction RMS of the new model / sigma)^2; inf without one."""
+    if not c.holdout_rms:
+        return math.inf
+    sig = dict(zip(c.fit.nlp.channel_names, (float(s) for s in c.fit.nlp.channel_sigmas)))
+    return float(np.mean([(b / sig.get(k, 1.0)) ** 2 for k, (_, b) in c.holdout_rms.items()]))
+
+
+def _choose(confirmations, plausible=None) -> tuple:
+    """The index of the best refit and why: among converged refits, those within :data:`BIC_TIE`
+    of the lowest BIC, preferring plausible coefficients, then the best hold-out prediction."""
+    ok = [i for i, c in enumerate(confirmations) if c.fit.success]
+    if not ok:
+        return None, "no refit converged"
+    lo = min(confirmations[i].bic[1] for i in ok)
+    near = [i for i in ok if confirmations[i].bic[1] <= lo + BIC_TIE]
+    why = []
+    if plausible is not None and len(near) > 1:
+        good = [i for i in near if plausible[i]]
+        if good and len(good) < len(near):
+            why.append("plausible coefficients")
+            near = good
+    if len(near) == 1:
+        why.insert(0, "the lowest BIC" if confirmations[near[0]].bic[1] == lo else f"BIC within {BIC_TIE:g} of the lowest")
+        return near[0], ", ".join(why)
+    score = {i: _holdout_score(confirmations[i]) for i in near}
+    if all(math.isfinite(v) for v in score.values()):
+        best = min(near, key=lambda i: score[i])
+        why.insert(0, f"BIC within {BIC_TIE:g} of each other; the best hold-out prediction")
+        return best, ", ".join(why)
+    best = min(near, key=lambda i: confirmations[i].bic[1])
+    why.insert(0, "the lowest BIC")
+    return best, ", ".join(why)
+
+
+
+
 def _confirmation_dict(c, name: str | None = None) -> dict:
-    def num(x):
-        try:
-            return float(x)
-        except (TypeError, ValueError):
-            return None
-    d = {"effect": name or _effect_name(c), "lr_statistic": num(getattr(c, "lr_statistic", None)),
-         "lr_p_value": num(getattr(c, "lr_p_value", None)), "aic": num(getattr(c, "aic", None)),
-         "bic": num(getattr(c, "bic", None)), "chi2_per_dof": num(c.fit.chi2_per_dof),
-         "holdout_rms": getattr(c, "holdout_rms", None), "rms": getattr(c, "rms", None),
-         "effect_estimates": {str(k): (num(v) if num(v) is not None else str(v))
-                              for k, v in (getattr(c, "effect_estimates", None) or {}).items()}}
-    for k in ("holdout_rms", "rms"):
-        if isinstance(d[k], Mapping):
-            d[k] = {str(a): num(b) for a, b in d[k].items()}
-        else:
-            d[k] = num(d[k])
+    """:meth:`Confirmation.to_dict` with the candidate's name as ``effect``."""
+    d = dict(c.to_dict())
+    d["effect"] = name or _effect_name(c)
     return d
 
 
@@ -403,28 +452,34 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
                         confirmed.append(c.name)
                 except RocketidError as exc:
                     notes.append(f"refitting with {c.name} failed: {exc}")
+    refit_pl = []
+    for c in confirmations:
+        try:
+            refit_pl.append(check_plausibility(c.fit, level=level))
+        except RocketidError as exc:
+            notes.append(f"the plausibility of the refit with {confirmed[len(refit_pl)]} could not be checked: {exc}")
+            refit_pl = []
+            break
+    best_i, _ = _choose(confirmations, [p.passed for p in refit_pl] if refit_pl else None)
     timings["confirm_s"] = time.perf_counter() - t0
     try:
         from .history import ModelHistory
-        history = ModelHistory()
-        history.add(f"{spec.name} (base)", fit)
-        for c, name in zip(confirmations, confirmed):
-            history.add(f"+ {name}", c.fit)
+        history = ModelHistory().add(f"{spec.name}", fit)
+        if best_i is not None:
+            history = history.add(f"+ {confirmed[best_i]}", confirmations[best_i].fit)
     except ImportError as exc:
         history = None
         notes.append(f"model history is not available ({exc})")
     except RocketidError as exc:
         notes.append(f"model history failed: {exc}")
-    ok = [c for c in confirmations if c.fit.success]
-    if ok:
-        best = min(ok, key=lambda c: c.bic)
+    if best_i is not None:
         try:
-            after = compare(best.fit, level=level)
+            after = compare(confirmations[best_i].fit, level=level)
         except RocketidError as exc:
             notes.append(f"the best refit could not be compared: {exc}")
     report = DiagnosisReport(model=label, data_label=data_label, fit=fit, comparison=comp, location=loc,
                              plausibility=plaus, ranking=ranking, confirmations=tuple(confirmations),
-                             confirmed=tuple(confirmed), after=after,
+                             confirmed=tuple(confirmed), refit_plausibility=tuple(refit_pl), after=after,
                              history=history, level=float(level), timings=timings, notes=tuple(notes))
     if out is not None:
         report.write(out)

@@ -412,7 +412,8 @@ class Comparison:
         fig, axes = plt.subplots(n, 2, figsize=(11, 2.5 * n + 0.6), squeeze=False,
                                  gridspec_kw={"width_ratios": [1, 1.4]})
         for (a1, a2), c in zip(axes, self.channels):
-            a1.plot(c.times, c.measured, ".", ms=1.5, color="0.55", label="measured", rasterized=True)
+            k = _stride(c.n)
+            a1.plot(c.times[::k], c.measured[::k], ".", ms=1.5, color="0.55", label="measured", rasterized=True)
             a1.plot(c.times, c.predicted, "-", lw=1.2, color="tab:blue", label="model")
             a1.set_ylabel(c.name)
             a1.legend(loc="upper left", fontsize=8, frameon=False)
@@ -462,6 +463,14 @@ def _pyplot():
     return plt
 
 
+#: Most samples a scatter plot draws per channel (every k-th sample beyond; statistics use all).
+PLOT_POINTS = 2500
+
+
+def _stride(n: int) -> int:
+    return max(1, int(math.ceil(n / PLOT_POINTS)))
+
+
 def running_mean(times: np.ndarray, e: np.ndarray, width: float) -> np.ndarray:
     """Centred running mean of ``e`` over ``width`` seconds (by sample count at the median step)."""
     if times.size < 3:
@@ -480,7 +489,8 @@ def residual_panel(ax, times: np.ndarray, e: np.ndarray, *, width: float = 1.0, 
     """Normalized residuals against time, the +-2 band, and a running mean."""
     ax.axhspan(-2, 2, color="tab:green", alpha=0.12, lw=0, label="+-2 sigma")
     ax.axhline(0, color="0.4", lw=0.6)
-    ax.plot(times, e, ".", ms=1.2, color="0.5", alpha=0.6, rasterized=True)
+    k = _stride(e.size)
+    ax.plot(times[::k], e[::k], ".", ms=1.2, color="0.5", alpha=0.6, rasterized=True)
     ax.plot(times, running_mean(times, e, width), "-", lw=1.3, color=color,
             label=label or f"{width:g} s running mean")
     lim = max(4.0, float(np.percentile(np.abs(e), 99.5)) * 1.1)

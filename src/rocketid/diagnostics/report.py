@@ -361,22 +361,34 @@ def _candidates_section(report, figs: _Figures) -> str:
 
 
 def _confirm_section(report, figs: _Figures) -> str:
-    from .api import _confirmation_dict
     if not report.confirmations:
         return "<p>No candidate was refitted" + (" (none is significant)." if report.ranking is not None else ".") + "</p>"
-    rows = []
-    for c, name in zip(report.confirmations, report.confirmed):
-        d = _confirmation_dict(c, name)
-        est = ", ".join(f"{k} = {_num(v, '.4g')}" for k, v in d["effect_estimates"].items())
-        hold = d["holdout_rms"]
-        hold = ", ".join(f"{k} {_num(v, '.3g')}" for k, v in hold.items()) if isinstance(hold, dict) else _num(hold)
-        rows.append([d["effect"], est, _num(d["chi2_per_dof"]), _num(d["lr_statistic"], ".4g"),
-                     _num(d["lr_p_value"], ".2g"), _num(d["aic"], ".6g"), _num(d["bic"], ".6g"), hold])
-    parts = [f"<p>Base fit: chi2/dof {report.fit.chi2_per_dof:.4g}. Each leading candidate refitted from nominal "
-             "values: likelihood-ratio test against the base fit, AIC, BIC (lower is better) and the hold-out "
-             "RMS.</p>",
-             html_table(["effect", "estimates", "chi2/dof", "LR statistic", "LR p", "AIC", "BIC", "hold-out RMS"],
-                        rows, left=2)]
+    rows, cls = [], []
+    pls = list(report.refit_plausibility) if len(report.refit_plausibility) == len(report.confirmations) \
+        else [None] * len(report.confirmations)
+    for c, name, pl in zip(report.confirmations, report.confirmed, pls):
+        est = "; ".join(f"{k} = {v:.4g} +- {s:.2g} [{lo:.4g}, {hi:.4g}]"
+                        for k, (v, s, (lo, hi)) in c.effect_estimates.items())
+        hold = ("-" if not c.holdout_rms else
+                ", ".join(f"{k} {a:.3g} -> {b:.3g}" for k, (a, b) in c.holdout_rms.items()))
+        white = ", ".join(f"{k} {_num(a, '.2g')} -> {_num(b, '.2g')}" for k, (a, b) in c.whiteness.items())
+        rows.append([name, ("html", '<span class="ok">confirmed</span>' if c.confirmed
+                            else '<span class="fail">not confirmed</span>'), est,
+                     f"{c.chi2_per_dof[0]:.4g} -> {c.chi2_per_dof[1]:.4g}", _num(c.lr_statistic, ".4g"),
+                     _num(c.lr_p_value, ".2g"), f"{c.bic[1] - c.bic[0]:+.5g}", white, hold,
+                     "-" if pl is None else ("plausible" if pl.passed else
+                                             "implausible: " + ", ".join(pl.flagged_parameters()))])
+        cls.append("sig" if c is report.best else "")
+    hold_txt = (f"fit {report.confirmations[0].holdout[0]:g}-{report.confirmations[0].holdout[1]:g} s, predict the rest"
+                if report.confirmations[0].holdout else "no hold-out")
+    parts = [f"<p>Each leading candidate added to the model and refitted from nominal values: likelihood-ratio "
+             f"test against the base fit, the change of BIC (negative is better), Ljung-Box p before and after, and "
+             f"the hold-out check ({_e(hold_txt)}: prediction RMS, base -> new). Highlighted: the lowest BIC.</p>",
+             html_table(["effect", "verdict", "estimate (95 % interval)", "chi2/dof", "LR statistic", "LR p",
+                         "delta BIC", "Ljung-Box p", "hold-out RMS", "coefficients"], rows, left=3,
+                        row_classes=cls)]
+    if report.best is not None:
+        parts.append(f"<p>Chosen: <strong>{_e(report.effect_name(report.best))}</strong> ({_e(report.choice)}).</p>")
     for c in report.confirmations:
         try:
             parts.append(f"<details><summary>{_e(c.summary().splitlines()[0])}</summary><pre>{_e(c.summary())}</pre>"
@@ -404,11 +416,15 @@ def _history_section(report, figs: _Figures) -> str:
         try:
             figs.folder.mkdir(parents=True, exist_ok=True)
             res = h.plot_residuals(path)
-            if not path.is_file() and res is not None and hasattr(res, "savefig"):
-                res.savefig(path, dpi=100)
+            if res is not None and hasattr(res, "savefig"):
+                if not path.is_file():
+                    res.savefig(path, dpi=100)
+                import matplotlib.pyplot as plt
+                plt.close(res)
             if path.is_file():
                 parts.append(f'<figure><img alt="history residuals" src="{data_uri(path.read_bytes())}">'
-                             "<figcaption>Normalized residuals of each model in the history.</figcaption></figure>")
+                             "<figcaption>Residuals of the base model and of the best refit: samples and 1 s moving "
+                             "average.</figcaption></figure>")
                 figs.files.append(path)
         except Exception as exc:  # noqa: BLE001 - a report must not fail on one plot
             parts.append(f"<p class=\"warn\">history plot unavailable: {_e(exc)}</p>")
