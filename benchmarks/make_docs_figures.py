@@ -162,18 +162,16 @@ def tutorial_figures():
     except ImportError as exc:
         print(f"  no refit figures: {exc}")
         return
-    conf = confirm(fit, ranking.candidates[0].name)
+    conf = confirm(fit, "back_pressure")
     print(conf.summary())
+    alt = confirm(fit, "thrust_level")
+    print(alt.summary())
     after = compare(conf.fit)
-    _save(after.plot(title=f"RA-66M + {ranking.candidates[0].name}: chi2/dof {conf.fit.chi2_per_dof:.3g}"),
+    _save(after.plot(title=f"RA-66M + back_pressure: chi2/dof {conf.fit.chi2_per_dof:.3g}"),
           "tutorial-compare-after.png")
-    history = ModelHistory()
-    history.add("RA-66M", fit)
-    history.add(f"+ {ranking.candidates[0].name}", conf.fit)
+    history = ModelHistory().add("RA-66M", fit).add("+ back_pressure", conf.fit)
     print(history.table())
-    res = history.plot_residuals(FIGURES / "tutorial-history.png")
-    if res is not None and hasattr(res, "savefig") and not (FIGURES / "tutorial-history.png").exists():
-        _save(res, "tutorial-history.png")
+    _save(history.plot_residuals(), "tutorial-history.png")
     plt.close("all")
     print(f"  tutorial loop in {time.perf_counter() - t0:.1f} s")
 

@@ -134,11 +134,11 @@ def _num(x, fmt: str = ".4g") -> str:
 
 
 def html_table(header: Sequence[str], rows: Iterable[Sequence[Any]], *, left: int = 1,
-               row_classes: Sequence[str] | None = None) -> str:
-    """An HTML table; the first ``left`` columns are left-aligned; cells are escaped
-    unless given as ``("html", markup)``."""
+               row_classes: Sequence[str] | None = None, text_cols: Sequence[int] = ()) -> str:
+    """An HTML table; the first ``left`` columns and those in ``text_cols`` are
+    left-aligned; cells are escaped unless given as ``("html", markup)``."""
     def cell(v, i, tag):
-        cls = ' class="l"' if i < left else ""
+        cls = ' class="l"' if i < left or i in text_cols else ""
         if isinstance(v, tuple) and len(v) == 2 and v[0] == "html":
             return f"<{tag}{cls}>{v[1]}</{tag}>"
         return f"<{tag}{cls}>{_e(v)}</{tag}>"
@@ -148,6 +148,31 @@ def html_table(header: Sequence[str], rows: Iterable[Sequence[Any]], *, left: in
         out.append(f"<tr{cls}>" + "".join(cell(v, i, "td") for i, v in enumerate(r)) + "</tr>")
     out.append("</table>")
     return "\n".join(out)
+
+
+def _compact(names) -> str:
+    """``CD_M_1, CD_M_2, CD_M_3`` -> ``CD_M_1..3``: runs of numbered names shortened."""
+    import re as _re
+    out, run = [], []
+
+    def flush():
+        if len(run) > 2:
+            out.append(f"{run[0][0]}{run[0][1]}..{run[-1][1]}")
+        else:
+            out.extend(f"{a}{b}" for a, b in run)
+        run.clear()
+    for n in map(str, names):
+        m = _re.fullmatch(r"(.*?)(\d+)", n)
+        if m and run and run[-1][0] == m.group(1) and int(run[-1][1]) + 1 == int(m.group(2)):
+            run.append((m.group(1), m.group(2)))
+            continue
+        flush()
+        if m:
+            run.append((m.group(1), m.group(2)))
+        else:
+            out.append(n)
+    flush()
+    return ", ".join(out)
 
 
 class _Figures:
@@ -328,7 +353,7 @@ def _candidates_section(report, figs: _Figures) -> str:
     for i, c in enumerate(r.candidates, 1):
         absorbed = getattr(c, "absorbed_by", None)
         if isinstance(absorbed, (list, tuple)):
-            absorbed = ", ".join(map(str, absorbed))
+            absorbed = _compact(absorbed)
         rows.append([i, c.name, getattr(c, "title", ""), _num(c.statistic, ".4g"), getattr(c, "dof", "-"),
                      _num(getattr(c, "p_value", None), ".2g"), _num(getattr(c, "p_value_corrected", None), ".2g"),
                      _num(getattr(c, "predicted_drop", None), ".4g"), getattr(c, "group", "") or "-",
@@ -339,7 +364,8 @@ def _candidates_section(report, figs: _Figures) -> str:
              f"corrected for the number of candidates; significant at {report.level:g} highlighted. "
              "Candidates in one group are confounded: decide between them by refitting.</p>",
              html_table(["#", "effect", "title", "statistic", "dof", "p", "p corrected", "predicted drop", "group",
-                         "absorbed by", "significant", "note"], rows, left=3, row_classes=cls)]
+                         "absorbed by", "significant", "note"], rows, left=3, row_classes=cls,
+                        text_cols=(9, 11))]
     groups = getattr(r, "groups", None)
     if groups:
         try:
@@ -352,7 +378,7 @@ def _candidates_section(report, figs: _Figures) -> str:
                                  "</li>" for k, v in multi) + "</ul>")
         except Exception:  # noqa: BLE001 - an unexpected shape is shown as text
             parts.append(f"<pre>{_e(groups)}</pre>")
-    parts.append(figs.add("candidates", _ranking_plot(r), "Score statistic of each candidate (log scale)."))
+    parts.append(figs.add("candidates", _ranking_plot(r), "Score statistic of each candidate; red: significant after the correction."))
     try:
         parts.append(f"<details><summary>ranking summary</summary><pre>{_e(r.summary())}</pre></details>")
     except Exception:  # noqa: BLE001
@@ -383,10 +409,10 @@ def _confirm_section(report, figs: _Figures) -> str:
                 if report.confirmations[0].holdout else "no hold-out")
     parts = [f"<p>Each leading candidate added to the model and refitted from nominal values: likelihood-ratio "
              f"test against the base fit, the change of BIC (negative is better), Ljung-Box p before and after, and "
-             f"the hold-out check ({_e(hold_txt)}: prediction RMS, base -> new). Highlighted: the lowest BIC.</p>",
+             f"the hold-out check ({_e(hold_txt)}: prediction RMS, base -> new). Highlighted: the chosen refit.</p>",
              html_table(["effect", "verdict", "estimate (95 % interval)", "chi2/dof", "LR statistic", "LR p",
                          "delta BIC", "Ljung-Box p", "hold-out RMS", "coefficients"], rows, left=3,
-                        row_classes=cls)]
+                        row_classes=cls, text_cols=(7, 8, 9))]
     if report.best is not None:
         parts.append(f"<p>Chosen: <strong>{_e(report.effect_name(report.best))}</strong> ({_e(report.choice)}).</p>")
     for c in report.confirmations:
