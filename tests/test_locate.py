@@ -12,6 +12,8 @@ visible; each must be located where its physics acts:
 * altitude sensor bias (``z_h = h + b_h``): the fitted trajectory can shift by
   ``b_h`` only once it flies, so the h residual fails at lift-off (h(0) = 0 is
   fixed);
+* thrust misalignment (a normal force from lift-off): the downrange residual fails
+  first, from the first seconds after lift-off;
 * speed scale factor (``z_v = (1 + k_v) v``): a v residual of one sign over the
   whole flight.
 
@@ -182,6 +184,21 @@ def test_altitude_bias_is_located_at_lift_off(hbias_fit):
     z = {r["phase"]: r["z"] for r in loc.phase_table if r["channel"] == "h"}
     assert min(z, key=z.get) == "lift-off" and z["lift-off"] < -20
     assert abs(z["supersonic climb"]) < loc.z_critical
+
+
+def test_misalignment_is_located_from_lift_off_in_downrange():
+    """A thrust misalignment (0.05 deg, phased in over the first 2 s as the catalogue defines it)
+    pushes the vehicle sideways from lift-off: the downrange residual is the first to fail, from
+    the first seconds of the pitch-over on, at Mach 0.1 and q near 1 kPa."""
+    spec = ra66m()
+    fit = ri.estimate(spec, _data(spec, "misalignment", {"delta_thrust": np.radians(0.05)}))
+    loc = locate(fit)
+    first = loc.earliest
+    assert first.channel == "x" and first.sign > 0
+    assert first.t_start < 6.0 and first.phases[0] in ("lift-off", "pitch-over")
+    assert first.conditions["mach"][0] < 0.2 and first.conditions["qbar"][0] < 2.0
+    departures = {k: c.departure_time for k, c in loc.cusums.items()}
+    assert departures["x"] < 10.0 and departures["x"] == min(d for d in departures.values() if d is not None)
 
 
 def test_speed_scale_is_a_whole_flight_offset(vscale_fit):
