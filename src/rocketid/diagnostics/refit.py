@@ -134,6 +134,8 @@ class Confirmation:
     timings : dict
     holdout_fits : tuple or None
         (base, new) fits on the hold-out window.
+    effect_covariance : ndarray or None
+        Covariance of the effect's parameters (in ``effect_estimates`` order).
     """
 
     effects: tuple
@@ -156,6 +158,7 @@ class Confirmation:
     notes: tuple = ()
     timings: dict = field(default_factory=dict)
     holdout_fits: tuple | None = field(default=None, repr=False)
+    effect_covariance: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def confirmed(self) -> bool:
@@ -166,6 +169,17 @@ class Confirmation:
         """Whether each 95 % interval covers a known true value (for studies with synthetic data)."""
         return {k: bool(self.effect_estimates[k][2][0] <= float(v) <= self.effect_estimates[k][2][1])
                 for k, v in truth.items()}
+
+    def joint_coverage(self, truth: Mapping[str, float]) -> tuple[float, float]:
+        """``(d^T C^-1 d, p)`` for ``d`` the estimates minus ``truth`` of all the effect's parameters
+        and ``C`` their covariance: the truth lies in the joint 95 % region when ``p > 0.05``
+        (the check for a multi-parameter effect, whose separate intervals are correlated)."""
+        names = list(self.effect_estimates)
+        if self.effect_covariance is None or set(truth) != set(names):
+            raise SettingsError(f"give a true value for each of {', '.join(names)}")
+        d = np.array([self.effect_estimates[n][0] - float(truth[n]) for n in names])
+        m = float(d @ np.linalg.solve(self.effect_covariance, d))
+        return m, float(stats.chi2.sf(m, len(names)))
 
     def to_dict(self) -> dict:
         def pair(t):
@@ -330,12 +344,15 @@ def confirm(fit: EstimationResult, effect: Effect | str | Sequence[Effect | str]
     # the effect's parameters with their uncertainty
     declared = [n for n in spec.parameter_names if n not in set(base_spec.parameter_names)]
     estimates = {}
+    cov = None
     try:
         unc = uncertainty(new)
         iv = unc.interval(0.95)
         for n in declared:
             i = spec.parameter_names.index(n)
             estimates[n] = (float(new.p[i]), float(unc.standard_errors[i]), (float(iv[i, 0]), float(iv[i, 1])))
+        idx = [spec.parameter_names.index(n) for n in declared]
+        cov = unc.parameter_covariance[np.ix_(idx, idx)]
         for note in unc.notes:
             notes.append(f"uncertainty: {note}")
         realistic = {k: v for e in effects for k, v in e.realistic.items()}
@@ -414,4 +431,4 @@ def confirm(fit: EstimationResult, effect: Effect | str | Sequence[Effect | str]
         discretization=disc, holdout=None if holdout is None else (float(holdout[0]), float(holdout[1])),
         level=float(level), lags=int(lags), notes=tuple(notes),
         timings={"refit_s": t1 - t0, "checks_s": t2 - t1, "holdout_s": t3 - t2, "total_s": t3 - t0},
-        holdout_fits=hold_fits)
+        holdout_fits=hold_fits, effect_covariance=cov)
