@@ -364,3 +364,11 @@ def test_cli_missing_data_file(tmp_path):
     result = invoke("estimability", tmp_path / "nope.csv", "--out", tmp_path / "x.json")
     assert result.exit_code == 2
     assert result.stderr.startswith("Error: ") and "nope.csv" in result.stderr
+
+
+def test_cli_at_fit_refuses_an_unconverged_fit(ra66_csv, tmp_path):
+    out = tmp_path / "est.json"
+    result = invoke("estimability", ra66_csv, "--at", "fit", "--ipopt", "max_iter=1", "--out", out)
+    assert result.exit_code == 1
+    assert result.stderr.startswith("Error: the full fit did not converge")
+    assert not out.exists()
