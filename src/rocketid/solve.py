@@ -69,7 +69,11 @@ IPOPT_OPTIONS: dict[str, str] = {
     "derivative_test_print_all": _S, "timing_statistics": _S,
 }
 
-DEFAULT_IPOPT = {"tol": 1e-8, "print_level": 0, "sb": "yes", "max_iter": 500, "mu_strategy": "adaptive"}
+# mumps_pivtol 1e-4, not IPOPT's 1e-6: with 1e-6 and MUMPS 5.5.1 (cyipopt-wheels) IPOPT corrects the
+# inertia (regularizes the Hessian) in 4-5 of 7 iterations on RA-66 from N = 264 on, and RA-66 at N = 528,
+# K = 4 took 695 s; with 1e-4: 5 iterations, none regularized, the same estimates (docs/performance.md).
+DEFAULT_IPOPT = {"tol": 1e-8, "print_level": 0, "sb": "yes", "max_iter": 500, "mu_strategy": "adaptive",
+                 "mumps_pivtol": 1e-4}
 
 
 def check_ipopt_options(options: Mapping[str, Any] | None) -> dict[str, Any]:
@@ -189,7 +193,8 @@ def solve_nlp(nlp: CollocationNLP, x0: np.ndarray, *, options: Mapping[str, Any]
         opts.update({"warm_start_init_point": "yes", "warm_start_bound_push": 1e-9, "warm_start_bound_frac": 1e-9,
                      "warm_start_slack_bound_push": 1e-9, "warm_start_slack_bound_frac": 1e-9,
                      "warm_start_mult_bound_push": 1e-9, "mu_init": 1e-6, "mu_strategy": "monotone"})
-    opts.update(check_ipopt_options(options))
+    user = check_ipopt_options(options)
+    opts.update(user)
     x0 = np.asarray(x0, dtype=float)
     if x0.shape != (nlp.n,):
         raise SettingsError(f"x0 has shape {x0.shape}; the NLP has {nlp.n} variables")
@@ -197,7 +202,12 @@ def solve_nlp(nlp: CollocationNLP, x0: np.ndarray, *, options: Mapping[str, Any]
     prob = cyipopt.Problem(n=nlp.n, m=nlp.m, problem_obj=adapter, lb=nlp.x_lower, ub=nlp.x_upper,
                            cl=nlp.c_lower, cu=nlp.c_upper)
     for k, v in opts.items():
-        prob.add_option(k, v)
+        try:
+            prob.add_option(k, v)
+        except TypeError:
+            if k.startswith("mumps_") and k not in user:
+                continue  # rocketid's MUMPS default, and this Ipopt was built without MUMPS
+            raise
     if warm is not None:
         if warm.mult_g.shape != (nlp.m,) or warm.mult_x_L.shape != (nlp.n,):
             raise SettingsError("the warm-start solution comes from a problem of another size")
