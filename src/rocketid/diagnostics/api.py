@@ -16,12 +16,11 @@ from __future__ import annotations
 
 import hashlib
 import importlib.util
-import json
 import math
 import sys
 import time
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 

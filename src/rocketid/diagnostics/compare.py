@@ -37,7 +37,7 @@ say where the residuals fail.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Mapping
 
 import numpy as np
@@ -50,6 +50,8 @@ __all__ = ["LjungBox", "Normality", "Theil", "ChannelComparison", "Comparison", 
 
 #: Lags of the Ljung-Box test (0.2 s at 100 Hz), fewer for short channels (n // 5).
 DEFAULT_LAGS = 20
+#: chi2/dof above which the comparison calls the misfit gross (a wrong model, input or unit).
+GROSS_MISMATCH = 1000.0
 #: Two-sided share of N(0, 1) outside +-2: what a correct model leaves outside the band.
 EXPECTED_OUTSIDE_2SIGMA = 0.04550026
 
@@ -561,6 +563,10 @@ def compare(fit: EstimationResult, *, lags: int | None = None, level: float = 0.
     if fit.chi2_per_dof > hi:
         notes.append(f"chi2/dof = {fit.chi2_per_dof:.3g} is above {hi:.3f}, the 99.9 % bound for white noise with the "
                      "stated sigma: the model does not fit to the noise level")
+        if fit.chi2_per_dof > GROSS_MISMATCH:
+            notes.append(f"chi2/dof above {GROSS_MISMATCH:g} is a gross mismatch rather than a small missing effect: "
+                         "check that the model is the vehicle's (its inputs, constants, units) and the sigma of each "
+                         "channel before ranking effects")
     elif fit.chi2_per_dof < chi2.ppf(0.001, dof) / dof:
         notes.append(f"chi2/dof = {fit.chi2_per_dof:.3g} is below 1: the stated sigma is larger than the residuals' "
                      "scatter (check the sigma of each channel)")

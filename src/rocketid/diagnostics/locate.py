@@ -41,7 +41,7 @@ supersonic climb    after max-q (``climb`` if still subsonic)
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 

@@ -46,8 +46,7 @@ RA-66's vehicle (p = 0.009) that the default family accepts (p = 0.9).
 from __future__ import annotations
 
 import fnmatch
-import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
