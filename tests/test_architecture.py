@@ -34,10 +34,11 @@ LAYERS: list[tuple[str, ...]] = [
     ("solve",),
     ("sensitivity",),
     ("estimability",),
-    ("sampling",),       # statistic-criterion sampling (7.10), not written yet
-    ("diagnostics",),    # not written yet
+    ("sampling",),       # statistic-criterion sampling (7.10)
+    ("study",),          # the chapter's RA-66 study (Tables 7.1-7.3) on top of sampling
+    ("diagnostics",),    # compare, locate, candidate effects, score test, report
     ("reports", "plots"),  # not written yet
-    ("cli",),            # the command line may import anything; cli_<name> modules too
+    ("cli", "commands"),  # the command line may import anything; cli_<name> modules too
 ]
 #: Not a stage: the package's front door imports every stage.
 FACADE = {"__init__", "__main__"}
