@@ -114,7 +114,7 @@ def resolve_model(model: str | Path | ModelSpec | Model) -> tuple[ModelSpec, str
 
 def _read_data(data, spec: ModelSpec) -> tuple[Measurements, str]:
     if isinstance(data, Measurements):
-        return data, "measurements"
+        return data, "the given measurements"
     if isinstance(data, (str, Path)):
         return read_csv(data, spec.output_names), str(data)
     raise DataError(f"data must be Measurements or the path of a CSV file, got {type(data).__name__}")
@@ -228,7 +228,7 @@ class DiagnosisReport:
             sig = [k for k in self.ranking.candidates if getattr(k, "significant", False)]
             if sig:
                 out.append(f"The score test ranks {top.name} ({top.title}) first (statistic {top.statistic:.4g}, "
-                           f"corrected p = {top.p_value_corrected:.2g}); {len(sig)} candidate(s) significant at "
+                           f"corrected {_p(top.p_value_corrected)}); {len(sig)} candidate(s) significant at "
                            f"{self.level:g}.")
             else:
                 out.append(f"No candidate effect is significant at {self.level:g} (best: {top.name}).")
@@ -239,7 +239,7 @@ class DiagnosisReport:
             if len(self.confirmations) > 1:
                 out.append(f"Best refit: {name} ({self.choice}).")
             out.append(f"Refit with {name} ({'confirmed' if b.confirmed else 'NOT confirmed'}): chi2/dof "
-                       f"{b.fit.chi2_per_dof:.4g} (was {self.fit.chi2_per_dof:.4g}), LR p = {b.lr_p_value:.2g}, "
+                       f"{b.fit.chi2_per_dof:.4g} (was {self.fit.chi2_per_dof:.4g}), LR {_p(b.lr_p_value)}, "
                        f"BIC {b.bic[0]:.6g} -> {b.bic[1]:.6g}; {est}.")
         return out
 
@@ -300,6 +300,10 @@ class DiagnosisReport:
         returns the path of report.html."""
         from .report import write_report
         return write_report(self, out)
+
+
+def _p(p: float) -> str:
+    return "p < 1e-300" if p == 0 else f"p = {p:.2g}"
 
 
 def _effect_name(conf) -> str:
