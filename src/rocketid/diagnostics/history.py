@@ -163,7 +163,7 @@ class ModelHistory:
         chans = list(self.revisions[0].fit.rms)
         head = (f"{'rev':>3}  {'model':<26}{'n_p':>4}{'J':>13}{'chi2/dof':>10}{'eta':>9}"
                 + "".join(f"{'RMS ' + c:>10}" for c in chans)
-                + f"{'white p':>9}{'LR':>12}{'p':>10}{'dBIC':>11}")
+                + f"{'white p':>9}{'LR':>12}{'p':>10}{'dBIC':>12}")
         lines = [head, "-" * len(head)]
         notes = []
         for r in self.revisions:
@@ -176,7 +176,7 @@ class ModelHistory:
             label = r.label if len(r.label) <= 25 else r.label[:24] + "~"
             lines.append(f"{r.number:>3}  {label:<26}{r.n_parameters:>4}{r.objective:>13.6g}{r.chi2_per_dof:>10.4g}"
                          f"{r.eta:>9.3g}" + "".join(f"{r.rms.get(c, math.nan):>10.4g}" for c in chans)
-                         + f"{(f'{wp:.2g}' if wp >= 1e-99 else '<1e-99'):>9}{lr:>12}{p:>10}{db:>11}")
+                         + f"{(f'{wp:.2g}' if wp >= 1e-99 else '<1e-99'):>9}{lr:>12}{p:>10}{db:>12}")
             if r.note:
                 notes.append(f"revision {r.number} ({r.label}): {r.note}")
             if t.get("note"):

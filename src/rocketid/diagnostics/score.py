@@ -29,10 +29,12 @@ Reported beside each statistic (thresholds are module constants):
   not even that);
 * absorption: when the projection removes more than :data:`ABSORBED` of the
   squared norm of an effect's sensitivity (for a multi-parameter effect, of
-  its least-absorbed combination), the estimated parameters would absorb the
-  effect and the test cannot see it; the parameter families that absorb it
-  are named ("confounded with CD(t): it would be absorbed into the drag
-  estimate").
+  its least-absorbed combination), the estimated parameters would absorb
+  the effect; the parameter families that absorb it are named ("confounded
+  with CD(t): it would be absorbed into the drag estimate"). The note adds
+  whether what is left would still be seen at a realistic size of the
+  effect (expected statistic above :data:`DETECTABLE`) -- then the base fit
+  has distorted those coefficients -- or would go unseen.
 
 Notation
 --------
@@ -106,7 +108,9 @@ class CandidateScore:
         Id (1, 2, ...) of its confounded group, numbered in rank order.
     absorbed_by : list of str or None
         Estimated parameters that would absorb the effect (all knots of the
-        families named in the note), or None.
+        families named in the note): they take up more than :data:`ABSORBED`
+        of its signature. Whether what is left is still detectable at a
+        realistic size is ``realistic_statistic`` (and the note).
     significant : bool
         ``p_value_corrected < level``.
     note : str
@@ -120,8 +124,10 @@ class CandidateScore:
     rank : int
         1 for the most significant.
     realistic_statistic : float or None
-        The expected score statistic were the effect present at its realistic
-        size (``||s~ beta_realistic||^2``, the non-centrality): below
+        The expected score statistic (non-centrality ``||s~ beta||^2``) were
+        the effect present at a realistic size, ``|beta_j| <=`` its realistic
+        magnitude: for one parameter exactly, for k an upper bound (the
+        ellipsoid ``beta = D w``, ``|w| <= sqrt(k)``, holding that box). Below
         :data:`DETECTABLE` an absorbed effect would go unseen. None when the
         effect declares no realistic magnitude.
     """
@@ -246,7 +252,8 @@ class CandidateRanking:
             if c.significant:
                 flags.append("*")
             if c.absorbed_by:
-                flags.append("absorbed")
+                unseen = c.realistic_statistic is None or c.realistic_statistic < DETECTABLE
+                flags.append("absorbed" if unseen else "absorbed(visible)")
             if len(self.groups[c.group - 1]) > 1:
                 flags.append("confounded")
             if c.note:
@@ -585,15 +592,6 @@ def rank_candidates(fit: EstimationResult, candidates: Iterable[Effect | str] | 
         elif len(g) > 1:
             others = ", ".join(aug.effects[j].name for j in g[1:])
             note.append(f"leads a confounded group with {others}: refit each (confirm) to decide")
-        if r["realistic_statistic"] is not None and r["absorbed_share"] > ABSORBED:
-            lam = r["realistic_statistic"]
-            size = ", ".join(f"{k} = {v:g}" for k, v in e.realistic.items())
-            if lam < DETECTABLE:
-                note.append(f"at a realistic size ({size}) what the fit cannot absorb would raise the score statistic "
-                            f"by only about {lam:.2g}: the effect would go unseen")
-            else:
-                note.append(f"what the fit cannot absorb is still detectable at a realistic size ({size}: score "
-                            f"statistic about {lam:.3g})")
         scores.append(CandidateScore(
             name=e.name, title=e.title, statistic=float(r["statistic"]), dof=int(r["dof"]),
             p_value=float(p_raw[i]), p_value_corrected=float(p_corr[i]), predicted_drop=float(r["statistic"]) / 2,
@@ -625,9 +623,10 @@ def _score_one(effect: Effect, Sb: np.ndarray, Sbt: np.ndarray, rw: np.ndarray, 
            "one_step": {}, "direction": np.zeros_like(rw), "notes": notes, "absorbed_share": 1.0,
            "realistic_statistic": None}
     if effect.realistic and len(effect.realistic) == Sb.shape[1]:
-        beta = np.array([effect.realistic[n] for n in names])
-        change = Sbt @ beta
-        out["realistic_statistic"] = float(np.einsum("i,i->", change, change))
+        # the most visible combination of realistic size, |beta_j| <= realistic_j: bounded by the
+        # ellipsoid beta = D w, |w| <= sqrt(k), that holds that box (k parameters, D = diag(realistic))
+        Dm = Sbt * np.array([abs(effect.realistic[n]) for n in names])
+        out["realistic_statistic"] = float(len(names) * np.linalg.eigvalsh(_tdot(Dm, Dm))[-1])
     if not np.any(norms > 0):
         notes.append("its parameters do not change the outputs at this fit")
         return out
@@ -665,13 +664,22 @@ def _score_one(effect: Effect, Sb: np.ndarray, Sbt: np.ndarray, rw: np.ndarray, 
         if key not in meanings:
             meanings[key] = _meaning(base, members)
         meaning = meanings[key]
+        lam = out["realistic_statistic"]
+        size = ", ".join(f"{k} = {v:.3g}" for k, v in effect.realistic.items())
         if absorbed_share > ABSORBED:
             out["absorbed_by"] = members
-            notes.append(f"confounded with {labels}: it would be absorbed into {meaning} (the estimated parameters "
-                         f"take up {100 * absorbed_share:.1f} % of its signature)")
+            note = (f"confounded with {labels}: it would be absorbed into {meaning} (they take up "
+                    f"{100 * absorbed_share:.1f} % of its signature)")
+            if lam is not None and lam < DETECTABLE:
+                note += (f"; at a realistic size ({size}) what they cannot take up would raise the score statistic "
+                         f"by only about {lam:.2g}: the effect would go unseen")
+            elif lam is not None:
+                note += (f"; at a realistic size ({size}) what they cannot take up is still detectable (score "
+                         f"statistic about {lam:.3g}), and the base fit has distorted {meaning}")
+            notes.append(note)
         else:
-            notes.append(f"partly absorbed ({100 * absorbed_share:.0f} % of its signature) by {labels}: the base "
-                         f"estimates of {meaning.replace('the ', '', 1)} are biased by it")
+            notes.append(f"partly confounded with {labels} ({100 * absorbed_share:.0f} % of its signature): "
+                         f"the base fit has distorted {meaning}")
     if not keep.any():
         return out
     # LM = g^T I^-1 g in the kept directions of the projected columns
