@@ -180,7 +180,7 @@ def _gauss(h: sp.Expr, centre: float, width: float) -> sp.Expr:
 def _back_pressure(m: Model) -> tuple:
     thrust = _definition(m, "thrust", "back_pressure")
     h = _state(m, "h", "back_pressure")
-    area = m.parameter("A_e", 0.0, nominal=0.4)
+    area = m.parameter("A_e", 0.0, bounds=(0.0, math.inf), nominal=0.4)   # an area: not negative
     m.redefine("thrust", thrust - area * _define(m, "p_ambient", us76_pressure(h), "back_pressure"))
     return (area,)
 
@@ -408,7 +408,7 @@ def earth_rotation_effect(latitude_deg: float = 28.5, azimuth_deg: float = 90.0,
 def _build_catalogue() -> dict[str, Effect]:
     effects = [
         Effect("back_pressure", "nozzle back-pressure", "propulsion", _back_pressure,
-               "thrust P(h) = P - A_e p_a(h), p_a the 1976 standard's pressure; A_e the nozzle exit area, m^2",
+               "thrust P(h) = P - A_e p_a(h), p_a the 1976 standard's pressure; A_e >= 0 the nozzle exit area, m^2",
                {"A_e": 0.4}),
         Effect("thrust_level", "thrust-level error", "propulsion", _thrust_level,
                "thrust P (1 + eps_thrust)", {"eps_thrust": 0.02}),

@@ -211,6 +211,11 @@ class CandidateRanking:
         raise KeyError(f"no scored candidate named {name!r}; scored: {', '.join(self.names)}"
                        + (f"; skipped: {', '.join(self.skipped)}" if self.skipped else ""))
 
+    def effect(self, name: str) -> Effect:
+        """The :class:`Effect` scored under ``name`` (to pass on to ``confirm``, custom effects too)."""
+        self[name]
+        return next(e for e in self.augmented.effects if e.name == name)
+
     @property
     def names(self) -> list[str]:
         """Candidate names, best first."""
@@ -592,6 +597,11 @@ def rank_candidates(fit: EstimationResult, candidates: Iterable[Effect | str] | 
         elif len(g) > 1:
             others = ", ".join(aug.effects[j].name for j in g[1:])
             note.append(f"leads a confounded group with {others}: refit each (confirm) to decide")
+        outside = [f"{k} = {v:.3g}" for k, v in r["one_step"].items()
+                   if k in spec_a.parameter_names and not (spec_a.parameter(k).lower <= v <= spec_a.parameter(k).upper)]
+        if outside:
+            note.append(f"the data ask for {', '.join(outside)} (one-step estimate), outside its bounds: physically "
+                        "impossible, so probably another effect's signature (the statistic is two-sided)")
         scores.append(CandidateScore(
             name=e.name, title=e.title, statistic=float(r["statistic"]), dof=int(r["dof"]),
             p_value=float(p_raw[i]), p_value_corrected=float(p_corr[i]), predicted_drop=float(r["statistic"]) / 2,
