@@ -290,6 +290,16 @@ def wind_effect(centres_km: Sequence[float] = WIND_CENTRES_KM, width_km: float =
         Effect name, and parameter names ``<prefix>1 ..``.
     realistic_speed : float
         Realistic magnitude of each coefficient, m/s.
+    air_mach, air_alpha : bool
+        Use the airspeed in the Mach number, and the air-relative attack angle
+        ``alpha + (theta - theta_air)`` in the lift coefficient (both physical;
+        switch off only to study their share).
+
+    Notes
+    -----
+    ``W`` is carried as the state ``<name>_speed`` with ``dW/dt = W'(h) v
+    sin(theta)`` from ``W = 0``: the launch is at ``h = 0``, where the surface
+    layer makes the wind vanish.
     """
     centres = tuple(float(c) * 1000.0 for c in centres_km)
     width = float(width_km) * 1000.0

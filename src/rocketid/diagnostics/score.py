@@ -331,8 +331,10 @@ class AugmentedModel:
         """Whether it serves a ranking of ``effects`` at ``fit`` (same model, mesh and sample times)."""
         if self.base_fingerprint != fit.spec.fingerprint():
             return False
-        if [e.name for e in self.effects] + list(self.skipped) != [e.name for e in effects] and \
-                sorted([e.name for e in self.effects] + list(self.skipped)) != sorted(e.name for e in effects):
+        if sorted([e.name for e in self.effects] + list(self.skipped)) != sorted(e.name for e in effects):
+            return False
+        given = {e.name: e for e in effects}
+        if any(given[e.name] is not e for e in self.effects):      # the same Effect values (custom ones too)
             return False
         mine, theirs = self.prepared.transcription.mesh, fit.prepared.transcription.mesh
         if mine.K != theirs.K or not np.array_equal(mine.boundaries, theirs.boundaries):
