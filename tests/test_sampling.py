@@ -337,6 +337,14 @@ def test_dask_local_cluster_matches_serial(problem, serial):
     _same_runs(par, serial)
 
 
+def test_a_worker_with_other_code_refuses(problem):
+    from rocketid.errors import RocketidError
+    other = replace(problem.recipe, code="0" * 16, token="other-code")
+    with pytest.raises(RocketidError, match="other rocketid code"):
+        worker_mod.evaluate_batch(other, 1, 1, 2)
+    worker_mod._CONTEXTS.pop("other-code", None)
+
+
 def test_unknown_executor(problem):
     with pytest.raises(SettingsError, match="serial, processes, dask"):
         sample(problem, seeds=[1], executor="threads", progress=False)

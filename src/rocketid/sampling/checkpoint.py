@@ -195,8 +195,8 @@ def read_checkpoint(directory: str | os.PathLike, seed: int, *, token: str, sett
     if d.get("token") != token:
         raise SettingsError(
             f"checkpoint {str(path)!r} was written for another problem (the data, model, mesh, p0, sampling "
-            "settings or the reference solution differ); resume with the same settings on the same machine, or "
-            "use another output directory")
+            "settings, the reference solution or rocketid's code differ); resume with the same settings and the "
+            "same rocketid on the same machine, or use another output directory")
     if d.get("settings") != settings_key:
         raise SettingsError(f"checkpoint {str(path)!r} was written with settings {d.get('settings')}, not "
                             f"{settings_key}; use the same settings or another output directory")

@@ -155,6 +155,10 @@ class DaskExecutor:
         return True
 
     def close(self, cancel: bool = False) -> None:
+        try:
+            self.recipe.release()  # the scattered recipe leaves the workers' memory
+        except Exception:  # pragma: no cover - a closed or lost client
+            pass
         if self._own:
             self.client.close()
 

@@ -29,6 +29,7 @@ import math
 import os
 import time
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -45,6 +46,30 @@ from .settings import SamplingSettings
 __all__ = ["DrawOutcome", "Recipe", "WorkerContext", "evaluate_draw", "evaluate_batch", "install"]
 
 _FAILURE_EXCEPTIONS = (RocketidError, ArithmeticError, ValueError, np.linalg.LinAlgError, RuntimeError)
+
+#: The stages whose code decides a draw's outcome (rocketid subpackages and modules).
+_DRAW_STAGES = ("errors", "data", "model", "simulate", "physics", "symbolic", "codegen", "collocation", "cases",
+                "nlp", "solve", "sensitivity", "estimability", "sampling")
+
+
+def _code_fingerprint() -> str:
+    """A hash of the source of every stage a draw runs through, read when this
+    module is imported (so it describes the code this process runs)."""
+    root = Path(__file__).resolve().parents[1]
+    h = hashlib.sha256()
+    for name in _DRAW_STAGES:
+        d = root / name
+        files = sorted(d.rglob("*.py")) if d.is_dir() else [root / f"{name}.py"]
+        for f in files:
+            if f.is_file():
+                h.update(f.relative_to(root).as_posix().encode())
+                h.update(f.read_bytes())
+    return h.hexdigest()[:16]
+
+
+#: This process's :func:`_code_fingerprint`. A recipe records the coordinator's; a worker
+#: whose code differs refuses to evaluate draws (its outcomes would not be the same).
+CODE_FINGERPRINT = _code_fingerprint()
 
 
 def _num(v: float | None) -> float | None:
@@ -135,8 +160,11 @@ class Recipe:
     Attributes
     ----------
     token : str
-        Content hash: data, model fingerprint, mesh, p0, settings, V and the
-        reference solution. Checkpoints record it.
+        Content hash: data, model fingerprint, mesh, p0, settings, V, the
+        reference solution and the code (:data:`CODE_FINGERPRINT`).
+        Checkpoints record it.
+    code : str
+        The coordinator's :data:`CODE_FINGERPRINT`.
     spec, measurements, mesh, settings
     estimability : Estimability
         Steps 2-3 at p0 (its sensitivity matrices removed).
@@ -147,6 +175,7 @@ class Recipe:
     """
 
     token: str
+    code: str
     spec: ModelSpec
     measurements: Measurements
     mesh: Mesh
@@ -174,7 +203,8 @@ class Recipe:
                   np.asarray(q2_ref), reference.solution.x, reference.solution.mult_g):
             h.update(np.ascontiguousarray(a, dtype=float).tobytes())
         h.update(repr(sorted(settings.key().items())).encode())
-        return cls(h.hexdigest()[:24], prepared.spec, prepared.measurements, mesh, settings, est,
+        h.update(CODE_FINGERPRINT.encode())
+        return cls(h.hexdigest()[:24], CODE_FINGERPRINT, prepared.spec, prepared.measurements, mesh, settings, est,
                    reference.solution, np.asarray(reference.p, float), np.asarray(q2_ref, float))
 
 
@@ -312,6 +342,11 @@ def evaluate_batch(recipe: Recipe | str, seed: int, k0: int, k1: int) -> BatchRe
                                 "initializer did not run)")
     else:
         ctx = install(recipe)
+    if ctx.recipe.code != CODE_FINGERPRINT:
+        raise RocketidError(
+            f"worker process {os.getpid()} runs other rocketid code (fingerprint {CODE_FINGERPRINT}) than the "
+            f"coordinator ({ctx.recipe.code}): its draws would not reproduce the serial result. Install the same "
+            "rocketid everywhere (and restart workers started before a change)")
     outs = tuple(evaluate_draw(ctx, seed, k) for k in range(k0, k1))
     return BatchResult(int(seed), int(k0), outs, os.getpid(), ctx.setup_s, time.perf_counter() - t0)
 
