@@ -417,7 +417,11 @@ class ModelSpec:
         """A copy whose initial guesses are replaced."""
         p = self.parameter_vector(values)
         params = tuple(replace(ps, guess=float(v)) for ps, v in zip(self.parameters, p))
-        new = replace(self, parameters=params)
+        builder = None
+        if self._builder is not None:
+            builder = self._builder.copy()
+            builder._parameters = list(params)
+        new = replace(self, parameters=params, _builder=builder)
         _check_guesses(new)
         return new
 

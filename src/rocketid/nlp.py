@@ -317,7 +317,19 @@ class CollocationNLP:
         self.n_residuals = sum(c.n for c in chans)
         self._stack_linear()
 
-        # ---- Hessian structure: constraint part, objective (constant linear part + nonlinear parts)
+        self._hess_built = False  # the Hessian's structure is built on first use (_build_hessian)
+
+    def _build_hessian(self) -> None:
+        """Structure and expansion matrices of the Lagrangian Hessian: the
+        constraint part, the constant objective part of the linear channels and
+        the nonlinear channels' parts. Built on first use: sensitivities and the
+        score test never need it."""
+        if self._hess_built:
+            return
+        g = self.generated
+        tr = self.transcription
+        n_col = self._ncol
+        chans = self._channels
         hr, hc = g.HESS_ROWS, g.HESS_COLS
         con_tr = _hess_triples(self._Mz, n_col, tr.nz, hr, hc)
         triples = [con_tr]
@@ -350,6 +362,7 @@ class CollocationNLP:
         self._E_hess_con = (P @ Es[0]).tocsr()
         self._hess_obj_const = P @ (Es[1] @ H_lin.data)
         self._E_hess_obj = [(P @ E).tocsr() for E in Es[2:]]
+        self._hess_built = True
 
     # ------------------------------------------------------------------ helpers
     def points(self, x: np.ndarray) -> np.ndarray:
@@ -461,9 +474,11 @@ class CollocationNLP:
         return self._E_jac @ vals.ravel() + self._jac_const
 
     def hessianstructure(self) -> tuple[np.ndarray, np.ndarray]:
+        self._build_hessian()
         return self._hess_rows, self._hess_cols
 
     def hessian(self, x: np.ndarray, lagrange: np.ndarray, obj_factor: float) -> np.ndarray:
+        self._build_hessian()
         lam = np.asarray(lagrange)[self.m_ic:self.m_ic + self.m_col].reshape(self._ncol, self._ns)
         vals = self.generated.hessian(self.points(x), self._D, lam)
         H = self._E_hess_con @ vals.ravel() + obj_factor * self._hess_obj_const
@@ -528,8 +543,9 @@ class CollocationNLP:
             chans.append(replace(ch, u0=u0, g0=g0))
         new._channels = tuple(chans)
         new._stack_linear()
-        new._obj_templates = [(chans[[c_.index for c_ in chans].index(t[0].index)],) + tuple(t[1:])
-                              for t in self._obj_templates]
+        if self._hess_built:
+            new._obj_templates = [(chans[[c_.index for c_ in chans].index(t[0].index)],) + tuple(t[1:])
+                                  for t in self._obj_templates]
         if self._lin_bounded is not None:
             lo, hi = self.spec.lower, self.spec.upper
             b = self._lin_bounded

@@ -403,6 +403,12 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
     notes: list[str] = []
     timings = {}
     t0 = time.perf_counter()
+    if mesh is None:
+        # a short first element: effects that act from lift-off (misalignment, Earth
+        # rotation) are otherwise blurred by the singular start (docs/effects.md); the
+        # candidates' refits reuse this mesh
+        from ..solve import default_mesh
+        mesh = default_mesh(spec, refine_first=3)
     fit = estimate(spec, meas, guess=guess, mesh=mesh, options=options)
     timings["fit_s"] = time.perf_counter() - t0
     if not fit.success:
