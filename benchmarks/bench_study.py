@@ -43,6 +43,19 @@ def loadavg() -> list[float]:
         return []
 
 
+def git_state() -> dict:
+    """The commit and the files changed in the working tree (the code measured)."""
+    root = Path(__file__).resolve().parents[1]
+    try:
+        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root, capture_output=True, text=True,
+                              check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=root,
+                               capture_output=True, text=True, check=True).stdout.split("\n")
+        return {"commit": head, "modified": [l[3:] for l in dirty if l.strip()]}
+    except (OSError, subprocess.CalledProcessError):
+        return {}
+
+
 def cold_codegen_s() -> float:
     """``prepare`` for RA-66 with an empty code cache, in a fresh process."""
     code = ("import time, rocketid as ri\n"
@@ -80,7 +93,7 @@ def main() -> None:
     out = Path(args.out)
     report = {"machine": {"cpus": os.cpu_count(), "workers": workers, "python": platform.python_version(),
                           "numpy": np.__version__, "loadavg_start": loadavg()},
-              "command": " ".join([Path(sys.executable).name, *sys.argv])}
+              "command": " ".join([Path(sys.executable).name, *sys.argv]), "git": git_state()}
     print(json.dumps(report["machine"]), flush=True)
 
     # 1. code generation from scratch vs the worker rebuild (measured in the workers below)

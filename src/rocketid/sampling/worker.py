@@ -242,6 +242,10 @@ class WorkerContext:
         est = recipe.estimability
         tf = est.transform(recipe.reference_q2)
         nlp = prepared.nlp.with_transform(tf)
+        # build the (lazily built) Hessian structure once here: every draw's
+        # re-offset copy (CollocationNLP.with_offset) then shares it
+        nlp.hessianstructure()
+        nlp.jacobianstructure()
         sol = recipe.reference
         ref = EstimationResult(success=sol.success, status=sol.status, message=sol.message,
                                p=recipe.reference_p, objective=sol.objective, iterations=sol.iterations, x=sol.x,
