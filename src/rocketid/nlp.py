@@ -525,6 +525,9 @@ class CollocationNLP:
         where (7.9) is re-solved for many values of the fixed ``q2``.
         """
         import copy
+        # re-offset copies solve (7.9): build the Hessian structure once here, so that
+        # every copy shares it instead of rebuilding it per solve
+        self._build_hessian()
         c = np.asarray(c, dtype=float)
         if c.shape != self.transform.c.shape:
             raise SettingsError(f"offset has shape {c.shape}, expected {self.transform.c.shape}")
@@ -543,7 +546,7 @@ class CollocationNLP:
             chans.append(replace(ch, u0=u0, g0=g0))
         new._channels = tuple(chans)
         new._stack_linear()
-        if self._hess_built:
+        if self._obj_templates:
             new._obj_templates = [(chans[[c_.index for c_ in chans].index(t[0].index)],) + tuple(t[1:])
                                   for t in self._obj_templates]
         if self._lin_bounded is not None:
