@@ -471,10 +471,11 @@ def sample(prepared: Prepared | SamplingProblem, *, p0: Sequence[float] | Mappin
                 except SettingsError:
                     old = None
                 if old is not None and old.stopped_by is None:
-                    raise SettingsError(f"{str(checkpoint_path(checkpoint_dir, s))!r} holds an unfinished run "
-                                        f"({old.draws} draws); resume it (resume=True, --resume) or remove the "
-                                        "checkpoints folder")
-                log.info("replacing the checkpoint of finished run %s", s)
+                    raise SettingsError(f"{str(checkpoint_path(checkpoint_dir, s))!r} holds a run that is unfinished "
+                                        f"under these settings ({old.draws} draws); continue it with resume=True "
+                                        "(--resume) or remove the checkpoints folder")
+                log.warning("replacing the checkpoint %s (a finished run, or one of another problem)",
+                            checkpoint_path(checkpoint_dir, s))
         st = st or RunState(s)
         if st.stopped_by is None and max_draws is not None and st.draws >= max_draws:
             st.stopped_by = "max_draws"
