@@ -41,9 +41,7 @@ file), :class:`NameValue` / :func:`assignments` / :func:`parameter_values`
 from __future__ import annotations
 
 import difflib
-import hashlib
 import importlib
-import importlib.util
 import json
 import math
 import os
@@ -58,9 +56,10 @@ import click
 import numpy as np
 
 from .cases import ra66, ra66_times, ra66_truth
+from .cases.files import load_model_file
 from .data import Measurements, read_csv
 from .errors import ModelError, RocketidError, SettingsError
-from .model import Model, ModelSpec
+from .model import ModelSpec
 
 __all__ = [
     "main", "simulate_command", "estimate_command",
@@ -110,23 +109,6 @@ def _ra66_source() -> ModelSource:
 BUILTIN_MODELS: dict[str, Callable[[], ModelSource]] = {"ra66": _ra66_source}
 
 
-def _load_module(path: Path):
-    name = "rocketid_user_model_" + hashlib.sha256(str(path.resolve()).encode()).hexdigest()[:12]
-    spec = importlib.util.spec_from_file_location(name, path)
-    if spec is None or spec.loader is None:
-        raise ModelError(f"model file {str(path)!r} cannot be imported; it must be a Python file (.py)")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module  # dataclasses and inspect look modules up here
-    try:
-        spec.loader.exec_module(module)
-    except RocketidError:
-        raise
-    except Exception as exc:
-        sys.modules.pop(name, None)
-        raise ModelError(f"model file {str(path)!r} failed to import: {type(exc).__name__}: {exc}") from exc
-    return module
-
-
 def load_model(name_or_path: str) -> ModelSource:
     """Resolve ``--model``: a built-in name (``ra66``) or a Python file.
 
@@ -143,28 +125,10 @@ def load_model(name_or_path: str) -> ModelSource:
     key = str(name_or_path)
     if key in BUILTIN_MODELS:
         return BUILTIN_MODELS[key]()
-    path = Path(key)
-    if path.suffix != ".py":
+    if Path(key).suffix != ".py":
         raise ModelError(f"unknown model {key!r}: use one of {', '.join(sorted(BUILTIN_MODELS))} or the path of a "
                          "Python file (.py) that defines build_model()")
-    if not path.is_file():
-        raise ModelError(f"model file {key!r} does not exist")
-    module = _load_module(path)
-    build = getattr(module, "build_model", None)
-    if not callable(build):
-        raise ModelError(f"model file {key!r} does not define build_model(); add a function build_model() that "
-                         "returns a ModelSpec (Model(...).freeze())")
-    try:
-        spec = build()
-        if isinstance(spec, Model):
-            spec = spec.freeze()
-    except RocketidError as exc:
-        raise type(exc)(f"model file {key!r}: {exc}") from exc
-    except Exception as exc:
-        raise ModelError(f"model file {key!r}: build_model() failed: {type(exc).__name__}: {exc}") from exc
-    if not isinstance(spec, ModelSpec):
-        raise ModelError(f"model file {key!r}: build_model() returned {type(spec).__name__}, not a ModelSpec; "
-                         "return Model(...).freeze()")
+    spec, module = load_model_file(key)
     truth = spec.guess
     if callable(getattr(module, "truth", None)):
         truth = spec.parameter_vector(module.truth(spec))

@@ -14,10 +14,7 @@ path of a model file defining ``build_model()``.
 
 from __future__ import annotations
 
-import hashlib
-import importlib.util
 import math
-import sys
 import time
 import warnings
 from dataclasses import dataclass
@@ -26,6 +23,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from ..cases.files import load_model_file
 from ..data import Measurements, read_csv
 from ..errors import DataError, ModelError, RocketidError, SettingsError
 from ..model import Model, ModelSpec
@@ -76,39 +74,10 @@ def resolve_model(model: str | Path | ModelSpec | Model) -> tuple[ModelSpec, str
     key = str(model)
     if key in BUILTIN_MODELS:
         return BUILTIN_MODELS[key](), key
-    path = Path(key)
-    if path.suffix != ".py":
+    if Path(key).suffix != ".py":
         raise ModelError(f"unknown model {key!r}: use {', '.join(BUILTIN_MODELS)} or the path of a Python file (.py) "
                          "that defines build_model()")
-    if not path.is_file():
-        raise ModelError(f"model file {key!r} does not exist")
-    name = "rocketid_user_model_" + hashlib.sha256(str(path.resolve()).encode()).hexdigest()[:12]
-    spec_ = importlib.util.spec_from_file_location(name, path)
-    if spec_ is None or spec_.loader is None:
-        raise ModelError(f"model file {key!r} cannot be imported")
-    module = importlib.util.module_from_spec(spec_)
-    sys.modules[name] = module
-    try:
-        spec_.loader.exec_module(module)
-    except RocketidError:
-        raise
-    except Exception as exc:
-        sys.modules.pop(name, None)
-        raise ModelError(f"model file {key!r} failed to import: {type(exc).__name__}: {exc}") from exc
-    build = getattr(module, "build_model", None)
-    if not callable(build):
-        raise ModelError(f"model file {key!r} does not define build_model(); add a function build_model() that "
-                         "returns a ModelSpec (Model(...).freeze())")
-    try:
-        spec = build()
-        if isinstance(spec, Model):
-            spec = spec.freeze()
-    except RocketidError as exc:
-        raise type(exc)(f"model file {key!r}: {exc}") from exc
-    except Exception as exc:
-        raise ModelError(f"model file {key!r}: build_model() failed: {type(exc).__name__}: {exc}") from exc
-    if not isinstance(spec, ModelSpec):
-        raise ModelError(f"model file {key!r}: build_model() returned {type(spec).__name__}, not a ModelSpec")
+    spec, _ = load_model_file(key)
     return spec, key
 
 

@@ -1,0 +1,79 @@
+"""User model files: a Python file whose ``build_model()`` returns the model.
+
+One loader serves the command line (``--model PATH.py``) and the API
+(``rocketid.diagnostics.diagnose(model=PATH)``).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import sys
+from pathlib import Path
+from types import ModuleType
+
+from ..errors import ModelError, RocketidError
+from ..model import Model, ModelSpec
+
+__all__ = ["load_model_file"]
+
+
+def _import(path: Path) -> ModuleType:
+    name = "rocketid_user_model_" + hashlib.sha256(str(path.resolve()).encode()).hexdigest()[:12]
+    spec = importlib.util.spec_from_file_location(name, path)
+    if spec is None or spec.loader is None:
+        raise ModelError(f"model file {str(path)!r} cannot be imported; it must be a Python file (.py)")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module  # dataclasses and inspect look modules up here
+    try:
+        spec.loader.exec_module(module)
+    except RocketidError:
+        raise
+    except Exception as exc:
+        sys.modules.pop(name, None)
+        raise ModelError(f"model file {str(path)!r} failed to import: {type(exc).__name__}: {exc}") from exc
+    return module
+
+
+def load_model_file(path: str | Path) -> tuple[ModelSpec, ModuleType]:
+    """Import a model file and build its model.
+
+    The file defines ``build_model()`` returning a :class:`ModelSpec` (a
+    :class:`Model` is frozen here); it may define more (the command line reads
+    ``truth(spec)`` and ``sample_times()`` from the returned module).
+
+    Returns
+    -------
+    spec : ModelSpec
+    module : module
+        The imported file.
+
+    Raises
+    ------
+    ModelError
+        Missing file, not a .py file, no ``build_model``, or a file or
+        ``build_model()`` that fails (the message names the file).
+    """
+    key = str(path)
+    path = Path(path)
+    if path.suffix != ".py":
+        raise ModelError(f"model file {key!r} is not a Python file (.py) that defines build_model()")
+    if not path.is_file():
+        raise ModelError(f"model file {key!r} does not exist")
+    module = _import(path)
+    build = getattr(module, "build_model", None)
+    if not callable(build):
+        raise ModelError(f"model file {key!r} does not define build_model(); add a function build_model() that "
+                         "returns a ModelSpec (Model(...).freeze())")
+    try:
+        spec = build()
+        if isinstance(spec, Model):
+            spec = spec.freeze()
+    except RocketidError as exc:
+        raise type(exc)(f"model file {key!r}: {exc}") from exc
+    except Exception as exc:
+        raise ModelError(f"model file {key!r}: build_model() failed: {type(exc).__name__}: {exc}") from exc
+    if not isinstance(spec, ModelSpec):
+        raise ModelError(f"model file {key!r}: build_model() returned {type(spec).__name__}, not a ModelSpec; "
+                         "return Model(...).freeze()")
+    return spec, module
