@@ -63,7 +63,7 @@ from .model import ModelSpec
 
 __all__ = [
     "main", "simulate_command", "estimate_command",
-    "ModelSource", "BUILTIN_MODELS", "load_model", "model_option", "verbose_option",
+    "ModelSource", "BUILTIN_MODELS", "load_model", "model_option", "data_options", "verbose_option",
     "NameValue", "assignments", "parameter_values", "ipopt_options", "read_data", "make_mesh", "write_json",
     "status", "progress", "LAZY_COMMANDS",
 ]
@@ -316,6 +316,24 @@ def verbose_option(f):
                         help="Show progress and full tracebacks.")(f)
 
 
+def data_options(f):
+    """``--column``, ``--time-column``, ``--sigma`` (reading DATA.csv) and ``--elements``,
+    ``--K`` (the mesh): the options of every command that fits a model to a data file."""
+    for opt in reversed([
+        click.option("--column", "columns", multiple=True, type=NameValue(str, "CSV column name"),
+                     metavar="NAME=CSVCOL", help="Read output NAME from column CSVCOL (repeatable)."),
+        click.option("--time-column", default="t", show_default=True, help="Name of the time column."),
+        click.option("--sigma", "sigmas", multiple=True, type=NameValue(float), metavar="NAME=VALUE",
+                     help="Noise standard deviation of an output (repeatable; default: the model's)."),
+        click.option("--elements", "n_elements", type=click.IntRange(min=1), default=None, metavar="N",
+                     help="About N finite elements (default: elements of about 1 s)."),
+        click.option("--K", "K", type=click.IntRange(min=1), default=4, show_default=True, metavar="K",
+                     help="Radau collocation points per element."),
+    ]):
+        f = opt(f)
+    return f
+
+
 def model_option(f):
     """``--model ra66|PATH.py`` (passed to the command as the string ``model``)."""
     return click.option("--model", "model", default="ra66", show_default=True, metavar="ra66|PATH.py",
@@ -442,15 +460,7 @@ def simulate_command(out, model, seed, no_noise, params):
 @main.command("estimate")
 @click.argument("data_file", metavar="DATA.csv", type=click.Path(dir_okay=False))
 @model_option
-@click.option("--column", "columns", multiple=True, type=NameValue(str, "CSV column name"), metavar="NAME=CSVCOL",
-              help="Read output NAME from column CSVCOL (repeatable).")
-@click.option("--time-column", default="t", show_default=True, help="Name of the time column.")
-@click.option("--sigma", "sigmas", multiple=True, type=NameValue(float), metavar="NAME=VALUE",
-              help="Noise standard deviation of an output (repeatable; default: the model's).")
-@click.option("--elements", "n_elements", type=click.IntRange(min=1), default=None, metavar="N",
-              help="About N finite elements (default: elements of about 1 s).")
-@click.option("--K", "K", type=click.IntRange(min=1), default=4, show_default=True, metavar="K",
-              help="Radau collocation points per element.")
+@data_options
 @click.option("--guess", "guesses", multiple=True, type=NameValue(float), metavar="NAME=VALUE",
               help="Initial guess of a parameter (repeatable; default: the model's p0).")
 @click.option("--ipopt", "ipopt", multiple=True, type=NameValue(str, "value"), metavar="NAME=VALUE",

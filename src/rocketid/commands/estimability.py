@@ -21,7 +21,7 @@ from dataclasses import replace
 
 import click
 
-from ..cli import (EXIT_NOT_CONVERGED, BUILTIN_MODELS, ModelSource, NameValue, assignments, ipopt_options,
+from ..cli import (data_options, EXIT_NOT_CONVERGED, BUILTIN_MODELS, ModelSource, NameValue, assignments, ipopt_options,
                    load_model, make_mesh, parameter_values, read_data, status, verbose_option, write_json)
 from ..errors import SettingsError
 
@@ -52,15 +52,7 @@ def model_source(name: str) -> ModelSource:
               help="Form H_r at the guess p0 (the chapter's step 2) or at the full fit's estimate.")
 @click.option("--guess", "guesses", multiple=True, type=NameValue(float), metavar="NAME=VALUE",
               help="Change a parameter of the guess (repeatable; default: the model's p0).")
-@click.option("--column", "columns", multiple=True, type=NameValue(str, "CSV column name"), metavar="NAME=CSVCOL",
-              help="Read output NAME from column CSVCOL (repeatable).")
-@click.option("--time-column", default="t", show_default=True, help="Name of the time column.")
-@click.option("--sigma", "sigmas", multiple=True, type=NameValue(float), metavar="NAME=VALUE",
-              help="Noise standard deviation of an output (repeatable; default: the model's).")
-@click.option("--elements", "n_elements", type=click.IntRange(min=1), default=None, metavar="N",
-              help="About N finite elements (default: elements of about 1 s).")
-@click.option("--K", "K", type=click.IntRange(min=1), default=4, show_default=True, metavar="K",
-              help="Radau collocation points per element.")
+@data_options
 @click.option("--ipopt", "ipopt", multiple=True, type=NameValue(str, "value"), metavar="NAME=VALUE",
               help="IPOPT option for the full fit of --at fit (repeatable).")
 @click.option("--out", "out", required=True, type=click.Path(dir_okay=False), metavar="EST.json",
