@@ -185,14 +185,7 @@ class _Figures:
     def add(self, name: str, fig, caption: str) -> str:
         if fig is None:
             return ""
-        png = figure_png(fig)
-        if self.folder is not None:
-            self.folder.mkdir(parents=True, exist_ok=True)
-            path = self.folder / f"{name}.png"
-            path.write_bytes(png)
-            self.files.append(path)
-        return (f'<figure><img alt="{_e(caption)}" src="{data_uri(png)}">'
-                f"<figcaption>{_e(caption)}</figcaption></figure>")
+        return self.add_png(name, figure_png(fig), caption)
 
     def add_png(self, name: str, png: bytes, caption: str) -> str:
         if self.folder is not None:
