@@ -63,7 +63,7 @@ from .model import ModelSpec
 
 __all__ = [
     "main", "simulate_command", "estimate_command",
-    "ModelSource", "BUILTIN_MODELS", "load_model", "model_option", "data_options", "verbose_option",
+    "ModelSource", "BUILTIN_MODELS", "load_model", "model_option", "data_options", "fit_inputs", "verbose_option",
     "NameValue", "assignments", "parameter_values", "ipopt_options", "read_data", "make_mesh", "write_json",
     "status", "progress", "LAZY_COMMANDS",
 ]
@@ -334,6 +334,19 @@ def data_options(f):
     return f
 
 
+def fit_inputs(spec: ModelSpec, data_file, *, guesses, columns, time_column, sigmas, n_elements, K):
+    """``(guess, mesh, data)`` from the options of a command that fits ``spec`` to DATA.csv
+    (``--guess`` checked against the bounds, :func:`data_options`)."""
+    guess = parameter_values(spec, assignments(guesses, "--guess"), "--guess")
+    for s, v, lo, hi in zip(spec.parameter_names, guess, spec.lower, spec.upper):
+        if not lo <= v <= hi:
+            raise SettingsError(f"--guess {s}={v:g} lies outside the bounds [{lo:g}, {hi:g}] of {s}")
+    mesh = make_mesh(spec, n_elements, K)
+    data = read_data(data_file, spec, time_column=time_column, columns=assignments(columns, "--column"),
+                     sigma=assignments(sigmas, "--sigma"))
+    return guess, mesh, data
+
+
 def model_option(f):
     """``--model ra66|PATH.py`` (passed to the command as the string ``model``)."""
     return click.option("--model", "model", default="ra66", show_default=True, metavar="ra66|PATH.py",
@@ -480,13 +493,8 @@ def estimate_command(data_file, model, columns, time_column, sigmas, n_elements,
     options = ipopt_options(ipopt)
     src = load_model(model)
     spec = src.spec
-    guess = parameter_values(spec, assignments(guesses, "--guess"), "--guess")
-    for s, v, lo, hi in zip(spec.parameter_names, guess, spec.lower, spec.upper):
-        if not lo <= v <= hi:
-            raise SettingsError(f"--guess {s}={v:g} lies outside the bounds [{lo:g}, {hi:g}] of {s}")
-    mesh = make_mesh(spec, n_elements, K)
-    data = read_data(data_file, spec, time_column=time_column, columns=assignments(columns, "--column"),
-                     sigma=assignments(sigmas, "--sigma"))
+    guess, mesh, data = fit_inputs(spec, data_file, guesses=guesses, columns=columns, time_column=time_column,
+                                   sigmas=sigmas, n_elements=n_elements, K=K)
     status(f"read {data.n_samples} values of {', '.join(data.names)} from {data_file}; "
            f"building and solving the NLP on {mesh.describe()}")
     result = estimate(spec, data, guess=guess, mesh=mesh, options=options)

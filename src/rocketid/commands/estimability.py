@@ -21,8 +21,8 @@ from dataclasses import replace
 
 import click
 
-from ..cli import (data_options, EXIT_NOT_CONVERGED, BUILTIN_MODELS, ModelSource, NameValue, assignments, ipopt_options,
-                   load_model, make_mesh, parameter_values, read_data, status, verbose_option, write_json)
+from ..cli import (EXIT_NOT_CONVERGED, BUILTIN_MODELS, ModelSource, NameValue, data_options, fit_inputs,
+                   ipopt_options, load_model, status, verbose_option, write_json)
 from ..errors import SettingsError
 
 __all__ = ["command", "model_source"]
@@ -82,13 +82,8 @@ def command(data_file, model, scaling, threshold, n_estimated, at, guesses, colu
     if n_estimated is not None and not 1 <= n_estimated <= n_p:
         raise SettingsError(f"--np must be from 1 to {n_p} (the number of parameters of {spec.name}), "
                             f"got {n_estimated}")
-    guess = parameter_values(spec, assignments(guesses, "--guess"), "--guess")
-    for s, v, lo, hi in zip(spec.parameter_names, guess, spec.lower, spec.upper):
-        if not lo <= v <= hi:
-            raise SettingsError(f"--guess {s}={v:g} lies outside the bounds [{lo:g}, {hi:g}] of {s}")
-    mesh = make_mesh(spec, n_elements, K)
-    data = read_data(data_file, spec, time_column=time_column, columns=assignments(columns, "--column"),
-                     sigma=assignments(sigmas, "--sigma"))
+    guess, mesh, data = fit_inputs(spec, data_file, guesses=guesses, columns=columns, time_column=time_column,
+                                   sigmas=sigmas, n_elements=n_elements, K=K)
     status(f"read {data.n_samples} values of {', '.join(data.names)} from {data_file}; collocating on "
            f"{mesh.describe()}")
     t0 = time.perf_counter()
