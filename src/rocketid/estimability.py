@@ -22,7 +22,7 @@ import enum
 import json
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
@@ -31,7 +31,7 @@ import numpy as np
 from .errors import SensitivityError, SettingsError
 from .nlp import ParameterTransform
 from .sensitivity import Sensitivity, sensitivity_at, sensitivity_of
-from .solve import EstimationResult, NLPSolution, Prepared, solve_nlp
+from .solve import EstimationResult, Prepared, solve_nlp
 
 __all__ = ["Scaling", "Estimability", "analyze", "estimate_q1", "Uncertainty", "uncertainty",
            "DEFAULT_THRESHOLD"]

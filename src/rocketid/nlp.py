@@ -30,8 +30,7 @@ Notation
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
-from functools import cached_property
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.sparse as sps
@@ -39,7 +38,7 @@ import scipy.sparse as sps
 from .codegen import GeneratedModel
 from .collocation.transcription import Transcription
 from .data import Measurements
-from .errors import DataError, SettingsError
+from .errors import SettingsError
 
 __all__ = ["CollocationNLP", "ParameterTransform", "build_nlp"]
 
@@ -137,10 +136,9 @@ def _hess_triples(M: sps.csr_matrix, n_items: int, width: int, t_rows, t_cols):
         if a == b:
             # Q[a,a] M_a^T M_a: keep each unordered pair once
             keep = (ia - sa[item]) <= (ib - sb[item])
+            # an unordered pair of distinct columns stands for H[ci, cj] and H[cj, ci], which
+            # the lower triangle stores once: counted once is right
             ci, cj, coef, item = ci[keep], cj[keep], coef[keep], item[keep]
-            same = ci == cj
-            # off-diagonal unordered pairs of distinct columns appear once; pairs with
-            # ci != cj but from positions i<j also represent (j,i): counted once is right
         else:
             coef = np.where(ci == cj, 2.0 * coef, coef)
         out[0].append(np.maximum(ci, cj))

@@ -33,7 +33,7 @@ Notation
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sps
@@ -185,7 +185,6 @@ def sensitivity_at(prepared: Prepared, p: np.ndarray | None = None, *, gamma: np
     nlp = _full(prepared.nlp)
     spec = prepared.spec
     p = spec.guess if p is None else spec.parameter_vector(p)
-    lay = prepared.transcription.layout
     if gamma is None:
         S0, _ = prepared.initial_states(p)
         gamma = S0.ravel()

@@ -22,7 +22,6 @@ families, input kinks), where the right-hand side is not smooth.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Mapping, Sequence
 

@@ -18,7 +18,7 @@ import json
 import math
 import time
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from functools import cached_property
 from typing import Any, Mapping, Sequence
 
@@ -26,11 +26,11 @@ import numpy as np
 import sympy as sp
 
 from .codegen import generate
-from .collocation.transcription import Mesh, Transcription, transcribe, uniform_mesh
+from .collocation.transcription import Mesh, Transcription, transcribe
 from .data import Measurements
 from .errors import DataError, ModelError, SettingsError, SolverError
 from .model import ModelSpec
-from .nlp import CollocationNLP, ParameterTransform
+from .nlp import CollocationNLP
 
 __all__ = ["IPOPT_OPTIONS", "check_ipopt_options", "NLPSolution", "solve_nlp", "EstimationResult",
            "estimate", "prepare", "default_mesh", "Prepared"]
@@ -211,7 +211,6 @@ def solve_nlp(nlp: CollocationNLP, x0: np.ndarray, *, options: Mapping[str, Any]
     if warm is not None:
         if warm.mult_g.shape != (nlp.m,) or warm.mult_x_L.shape != (nlp.n,):
             raise SettingsError("the warm-start solution comes from a problem of another size")
-        prob.set_problem_scaling()  # no-op, keeps cyipopt's state consistent
         lagrange, zl, zu = warm.mult_g, warm.mult_x_L, warm.mult_x_U
     else:
         lagrange, zl, zu = [], [], []
@@ -245,7 +244,6 @@ def default_mesh(spec: ModelSpec, K: int = 4, element_length: float | None = Non
     and grading the first element does not bring K = 3 under 0.01 m; see
     docs/accuracy.md).
     """
-    from .collocation.transcription import graded_mesh
     span = spec.tf - spec.t0
     h = element_length if element_length is not None else min(1.0, span / 20)
     fam_bps = sorted({float(b) for f in spec.families for b in f.breakpoints} | {spec.t0, spec.tf})

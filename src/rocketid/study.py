@@ -27,16 +27,15 @@ import csv
 import json
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any, Callable
 
 import numpy as np
 
 from .cases import ra66, ra66_times, ra66_truth
 from .errors import SettingsError
 from .sampling import SamplingResult, SamplingSettings, prepare_sampling, sample
-from .sampling.criterion import TERM_NAMES
 from .simulate import simulate, simulate_measurements
 from .solve import prepare
 

@@ -48,14 +48,12 @@ Notation
 
 from __future__ import annotations
 
-import math
 import re
 import time
 from dataclasses import dataclass, field
-from typing import Iterable, Mapping, Sequence
+from typing import Iterable, Sequence
 
 import numpy as np
-import sympy as sp
 from scipy import stats
 
 from ..errors import ModelError, SettingsError
@@ -548,7 +546,6 @@ def rank_candidates(fit: EstimationResult, candidates: Iterable[Effect | str] | 
     for e in aug.effects:
         cols = [index[n] for n in aug.parameters[e.name]]
         raw.append(_score_one(e, C[:, cols], Ct[:, cols], rw, fam_bases, base, est_names, meanings))
-    t3 = time.perf_counter()
 
     # order, correct, group
     logp = np.array([r["logp"] for r in raw])

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import sympy as sp
 
 from ..model import Model
-from .atmosphere import us76_speed_of_sound, us76_temperature, yang1983_density, us76_density
+from .atmosphere import us76_speed_of_sound, yang1983_density, us76_density
 from .gravity import EARTH_RADIUS, G0, inverse_square_gravity
 
 __all__ = ["AscentStates", "AscentForces", "FlightConditions", "ascent_states", "flight_conditions",

@@ -29,7 +29,7 @@ import logging
 import math
 import sys
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence
 
@@ -42,7 +42,7 @@ from .checkpoint import RunState, checkpoint_path, read_checkpoint, write_checkp
 from .criterion import TERM_NAMES, criterion_of
 from .executors import make_executor
 from .settings import SamplingSettings
-from .worker import DrawOutcome, Recipe, WorkerContext, install
+from .worker import DrawOutcome, Recipe, install
 
 __all__ = ["SamplingProblem", "prepare_sampling", "sample", "RunResult", "SamplingResult"]
 
