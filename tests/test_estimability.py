@@ -52,7 +52,7 @@ def analysis(request, noisy_prepared, p0_sensitivity):
 
 def test_np_and_ratios_of_ra66_under_each_scaling(analysis):
     est = analysis
-    print("\n" + est.summary())
+    print("\n" + est.summary().text())
     key = est.scaling.value
     assert est.n_estimated == RA66_NP[key]
     assert est.threshold == DEFAULT_THRESHOLD == 3000
@@ -81,7 +81,7 @@ def test_scaling_setting_is_explicit_and_reported(analysis):
     est = analysis
     nominal = np.array([0.5] * 7 + [0.1])
     assert np.array_equal(est.D, nominal if est.scaling is Scaling.NOMINAL else np.ones(8))
-    assert f"scaling       : {est.scaling.value}" in est.summary()
+    assert f"scaling       : {est.scaling.value}" in est.summary().text()
     d = est.to_dict()
     assert d["scaling"] == est.scaling.value
 

@@ -498,7 +498,7 @@ def estimate_command(data_file, model, columns, time_column, sigmas, n_elements,
     status(f"read {data.n_samples} values of {', '.join(data.names)} from {data_file}; "
            f"building and solving the NLP on {mesh.describe()}")
     result = estimate(spec, data, guess=guess, mesh=mesh, options=options)
-    click.echo(result.summary())
+    click.echo(result.summary().text())
     if out is not None:
         path = write_json(out, result.to_dict())
         status(f"wrote {path}")

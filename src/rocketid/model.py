@@ -49,6 +49,7 @@ import numpy as np
 import sympy as sp
 
 from .errors import ModelError
+from .summary import Section, Summary, Text
 
 __all__ = [
     "Model",
@@ -425,17 +426,16 @@ class ModelSpec:
         _check_guesses(new)
         return new
 
-    def summary(self) -> str:
-        """A short description of the model."""
-        lines = [f"Model {self.name!r}: t in [{self.t0:g}, {self.tf:g}]",
-                 f"  states     : {', '.join(map(str, self.state_symbols))}",
-                 f"  inputs     : {', '.join(map(str, self.input_symbols)) or '-'}",
-                 f"  parameters : {', '.join(self.parameter_names)}",
-                 f"  outputs    : {', '.join(f'{o.name} (sigma {o.sigma:g})' for o in self.outputs)}"]
-        for f in self.families:
-            lines.append(f"  family {f.symbol}: breakpoints {list(f.breakpoints)} -> knots "
-                         f"{', '.join(map(str, f.knots))}")
-        return "\n".join(lines)
+    def summary(self) -> Summary:
+        """A short description of the model: its components and coefficient families."""
+        rows = [("states", ", ".join(map(str, self.state_symbols))),
+                ("inputs", ", ".join(map(str, self.input_symbols)) or "-"),
+                ("parameters", ", ".join(self.parameter_names)),
+                ("outputs", ", ".join(f"{o.name} (sigma {o.sigma:g})" for o in self.outputs))]
+        rows += [Text(f"family {f.symbol}: breakpoints {list(f.breakpoints)} -> knots {', '.join(map(str, f.knots))}")
+                 for f in self.families]
+        return Summary(f"Model {self.name!r}: t in [{self.t0:g}, {self.tf:g}]", (Section("", rows),), rule=False,
+                       key_width=11)
 
 
 # ---------------------------------------------------------------------------

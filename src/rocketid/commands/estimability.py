@@ -110,7 +110,7 @@ def command(data_file, model, scaling, threshold, n_estimated, at, guesses, colu
     if extra_notes:
         est = replace(est, notes=est.notes + tuple(extra_notes))
     status(f"formed H_r in {sens.formed_s:.3f} s ({time.perf_counter() - t0:.2f} s in all)")
-    click.echo(est.summary())
+    click.echo(est.summary().text())
     payload = est.to_dict()
     payload.update({
         "model": spec.name,
