@@ -354,7 +354,7 @@ def test_cli_model_file_and_ra66m(ra66_csv, tmp_path):
     (["--np", "9"], "--np must be from 1 to 8"),
     (["--scaling", "log"], "'log' is not one of 'none', 'nominal'"),
     (["--guess", "CD9=0.5"], "'CD9' is not a parameter of model 'RA-66'"),
-    (["--guess", "CL=2"], "--guess CL=2 lies outside the bounds"),
+    (["--guess", "CL=2"], "--guess: the guess 2 of parameter CL lies outside its bounds"),
     (["--model", "ra67"], "unknown model 'ra67'"),
 ])
 def test_cli_bad_input(ra66_csv, tmp_path, args, message):

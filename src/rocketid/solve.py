@@ -29,7 +29,7 @@ from .codegen import generate
 from .collocation.transcription import Mesh, Transcription, transcribe
 from .data import Measurements
 from .errors import DataError, ModelError, SettingsError, SolverError
-from .model import ModelSpec
+from .model import ModelSpec, check_guess
 from .nlp import CollocationNLP
 from .summary import Section, Summary, Table
 
@@ -252,13 +252,7 @@ def default_mesh(spec: ModelSpec, K: int = 4, element_length: float | None = Non
     for a, b in zip(fam_bps[:-1], fam_bps[1:]):
         n = max(1, int(math.ceil((b - a) / h - 1e-9)))
         bounds.extend(np.linspace(a, b, n + 1)[1:])
-    bounds = np.array(bounds)
-    if refine_first > 0:
-        h0 = bounds[1] - bounds[0]
-        w = 4.0 ** np.arange(refine_first + 1, dtype=float)
-        cuts = bounds[0] + h0 * np.cumsum(w)[:-1] / w.sum()
-        bounds = np.concatenate([[bounds[0]], cuts, bounds[1:]])
-    return Mesh(bounds, K)
+    return Mesh(np.array(bounds), K).refine_first(refine_first)
 
 
 @dataclass(frozen=True)
@@ -511,12 +505,7 @@ def estimate(spec: ModelSpec, data: Measurements, *, guess: Mapping | Sequence[f
     nlp = prepared.nlp
     notes = []
     p0 = spec.parameter_vector(guess)
-    lo, hi = spec.lower, spec.upper
-    bad = [(str(s), v, a, b) for s, v, a, b in zip(spec.parameter_symbols, p0, lo, hi) if not a <= v <= b]
-    if bad:
-        s, v, a, b = bad[0]
-        raise ModelError(f"the guess {v:g} of parameter {s} lies outside its bounds [{a:g}, {b:g}]; "
-                         "move the guess inside or widen the bounds")
+    check_guess(spec, p0)
     warm = None
     if warm_start is not None:
         x0 = warm_start.x.copy()
