@@ -540,7 +540,7 @@ def _drive(sched: Scheduler, ex, bars: "_Progress", save: Callable[[RunState], N
             got = sched.receive(handles.pop(h), res.outcomes)
             for b in got.to_cancel:
                 hb = next(k for k, v in handles.items() if v == b)
-                if ex.cancel(hb):
+                if hb not in done and ex.cancel(hb):  # one that has finished comes back as waste
                     handles.pop(hb)
                     sched.cancelled(b)
             st = sched.states[got.seed]
