@@ -585,6 +585,31 @@ class Model:
         new._tables = list(self.__dict__.get("_tables", []))
         return new
 
+    def remove_family(self, family: sp.Symbol | str) -> None:
+        """Remove a time family and its knot parameters (to replace it by another
+        parameterization: redefine every expression that uses it first).
+
+        Raises
+        ------
+        ModelError
+            Not a family of the model, or still used by an equation, definition or output.
+        """
+        sym = self._names.get(family) if isinstance(family, str) else family
+        fam = next((f for f in self._families if f.symbol == sym), None)
+        if fam is None:
+            raise ModelError(f"{family} is not a family of model {self.name!r}")
+        used = [str(k) for k, e in self._equations.items() if sym in e.free_symbols]
+        used += [str(d) for d, e in self._definitions if sym in e.free_symbols]
+        used += [o.name for o in self._outputs if sym in o.expr.free_symbols]
+        if used:
+            raise ModelError(f"family {sym} of model {self.name!r} is still used by {', '.join(used)}; redefine them "
+                             "before removing it")
+        knots = set(fam.knots)
+        self._families = [f for f in self._families if f is not fam]
+        self._parameters = [p for p in self._parameters if p.symbol not in knots]
+        for s in knots | {sym}:
+            self._names.pop(str(s), None)
+
     # -- physical roles --------------------------------------------------------
     def declare_role(self, role: str, expr: sp.Expr | str) -> None:
         """Declare that ``expr`` (a component, or an expression of them) plays ``role``.
