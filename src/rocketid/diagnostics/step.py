@@ -40,7 +40,7 @@ from ..solve import EstimationResult, estimate
 from .accept import Acceptance, NoiseBand, accept, fits_to_noise
 from .effects import Effect, Vehicle, with_effects
 from .refit import REFIT_TIMEOUT, Refit, RefitTask, refit_all
-from .screen import Screen, screen, vehicle_of
+from .screen import Contender, Screen, screen, vehicle_of
 
 __all__ = ["Step", "Discovery", "discover", "VERDICTS", "MAX_EFFECTS"]
 
@@ -137,7 +137,7 @@ class Discovery:
 
 
 def _task(base_spec, fit: EstimationResult, effects: Sequence[Effect], added: Sequence[str], start: Mapping,
-          vehicle: Vehicle, *, base: EstimationResult, options, timeout, level) -> RefitTask:
+          vehicle: Vehicle, *, base: EstimationResult, options, timeout, level, band_upper=math.inf) -> RefitTask:
     sizes = {}
     for e in effects:
         if e.name in added:
@@ -148,7 +148,7 @@ def _task(base_spec, fit: EstimationResult, effects: Sequence[Effect], added: Se
                      effects=tuple(effects), added=tuple(added), start=st, sizes=sizes,
                      base_objective=float(base.objective), base_n_estimated=int(base.n_estimated),
                      base_parameters=tuple(base.spec.parameter_names), options=dict(options or {}),
-                     timeout=float(timeout), level=float(level))
+                     timeout=float(timeout), level=float(level), band_upper=float(band_upper))
 
 
 def _choose(accs: Sequence[Acceptance]) -> tuple[int | None, str]:
@@ -256,10 +256,26 @@ def discover(fit: EstimationResult, candidates: Sequence[Effect], *, level: floa
                               tuple(e.name for e in chosen_effects), None))
             break
         tasks = [_task(base_spec, current, chosen_effects + [c.effect], (c.effect.name,), c.start, vehicle,
-                       base=current, options=options, timeout=timeout, level=level) for c in scr.contenders]
+                       base=current, options=options, timeout=timeout, level=level, band_upper=band.upper) for c in scr.contenders]
         refits = refit_all(tasks, workers=workers)
         accs = [accept(r, band, level=level, n_tests=len(tasks)) for r in refits]
         i, why = _choose(accs)
+        if i is None and refine:
+            # nothing admissible: the right family may need another shape (a surface wind, a jet off the
+            # basis); refine the families of the two refits that lowered J most
+            helped = sorted((j for j, a in enumerate(accs) if a.refit.success and a.check("significant").passed
+                             and scr.contenders[j].effect.refinements(vehicle)), key=lambda j: accs[j].refit.objective)
+            variants = [v for j in helped[:2] for v in scr.contenders[j].effect.refinements(vehicle)]
+            if variants:
+                vt = [_task(base_spec, current, chosen_effects + [v], (v.name,), {}, vehicle, base=current,
+                            options=options, timeout=timeout, level=level, band_upper=band.upper) for v in variants]
+                va = [accept(r, band, level=level, n_tests=len(tasks) + len(vt)) for r in refit_all(vt, workers=workers)]
+                j, why_v = _choose(va)
+                accs += va
+                scr = Screen(scr.ranking, scr.contenders + tuple(Contender(v, "a refined shape") for v in variants),
+                             scr.notes)
+                if j is not None:
+                    i, why = len(accs) - len(va) + j, f"refined shape {variants[j].name}: {why_v}"
         if i is None:
             steps.append(Step(number, scr, tuple(accs), None, why, (), tuple(e.name for e in chosen_effects), None))
             break
@@ -274,7 +290,7 @@ def discover(fit: EstimationResult, candidates: Sequence[Effect], *, level: floa
         if refine and not pick.accepted and effect.refinements(vehicle):
             variants = effect.refinements(vehicle)
             vt = [_task(base_spec, current, chosen_effects + [v], (v.name,), {}, vehicle, base=current,
-                        options=options, timeout=timeout, level=level) for v in variants]
+                        options=options, timeout=timeout, level=level, band_upper=band.upper) for v in variants]
             vr = refit_all(vt, workers=workers)
             va = [accept(r, band, level=level, n_tests=len(tasks) + len(vt)) for r in vr]
             accs += va
@@ -290,7 +306,7 @@ def discover(fit: EstimationResult, candidates: Sequence[Effect], *, level: floa
             for k, e in enumerate(new_effects[:-1]):
                 rest = [x for x in new_effects if x is not e]
                 bt.append((e, _task(base_spec, current, rest, (effect.name,), {}, vehicle, base=current,
-                                    options=options, timeout=timeout, level=level)))
+                                    options=options, timeout=timeout, level=level, band_upper=band.upper)))
             br = refit_all([t for _, t in bt], workers=workers)
             for (e, _), r in zip(bt, br):
                 if r.success and r.bic[1] < pick.refit.bic[1]:
@@ -304,7 +320,7 @@ def discover(fit: EstimationResult, candidates: Sequence[Effect], *, level: floa
             if new_fit is None:
                 # refit the reduced set in this process
                 rt = _task(base_spec, current, new_effects, (effect.name,), {}, vehicle, base=current,
-                           options=options, timeout=timeout, level=level)
+                           options=options, timeout=timeout, level=level, band_upper=band.upper)
                 r = refit_all([rt], workers=1)[0]
                 pick = accept(r, band, level=level, n_tests=1)
                 new_fit = _fit_of(base_spec, new_effects, r, current.prepared.measurements,
