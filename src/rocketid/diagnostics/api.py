@@ -494,8 +494,12 @@ def _final(disc, ranking, level, window) -> FinalModel | None:
                 "no candidate effect is both significant and needed.")
     elif disc.verdict == "explained":
         r = disc.refit
-        est = "; ".join(f"{n} = {params[n][0]:.4g} +- {params[n][1]:.2g} (realistic {r.sizes.get(n, math.nan):.3g})"
-                        for n in (r.effect_parameters if r is not None else ()) if n in params)
+        base_names = set(disc.base_fit.spec.parameter_names)
+        sizes = {}
+        for e in disc.effects:
+            sizes.update(e.sizes(disc.vehicle))
+        est = "; ".join(f"{n} = {v:.4g} +- {s:.2g}" + (f" (realistic {sizes[n]:.3g})" if n in sizes else "")
+                        for n, (v, s) in params.items() if n not in base_names)
         text = f"the model with {names} reaches the noise (chi2/dof {fit.chi2_per_dof:.4g}): {est}."
         if r is not None and r.identifiability:
             text += f" Caution: {r.identifiability}."

@@ -894,6 +894,8 @@ def effect_parameter_problems(spec: ModelSpec, declared: Mapping[str, Sequence[s
     for o in spec.outputs:
         used |= spec.expand(o.expr).free_symbols
     params = {p.symbol: p for p in spec.parameters}
+    # a knot of a time family enters through the family's symbol
+    used |= {k for f in spec.families if f.symbol in used for k in f.knots}
     problems: dict[str, str] = {}
     for name, syms in declared.items():
         for s in syms:
