@@ -23,7 +23,9 @@ answer comes from taking the best helper for the explanation. An effect is
 5. keeps the **base coefficients plausible** (the plausibility checks);
 6. has a **plausible size**: every added parameter within :data:`SIZE_FACTOR` times
    its realistic size *for this vehicle* (a fraction of its thrust, mass flow,
-   speed; :meth:`~rocketid.diagnostics.effects.Effect.sizes`), and not held at a bound.
+   speed; :meth:`~rocketid.diagnostics.effects.Effect.sizes`), not below the least
+   its physics allows (:attr:`~rocketid.diagnostics.effects.Effect.least`: Earth's
+   rotation), and not held at a bound.
 
 A refit that passes 1, 2, 5 and 6 but not 3-4 is **admissible**: it is a step
 toward the explanation (the stepwise search adds it and looks for the rest) but
@@ -62,7 +64,7 @@ class NoiseBand:
     Attributes
     ----------
     upper : float
-        ``chi2.isf(BAND_LEVEL, dof) / dof + 2 D / dof``.
+        ``chi2.isf(BAND_LEVEL, dof) / dof + D / dof``.
     dof : int
     discretization : float
         ``D = sum((collocation - simulation)^2 / sigma^2)`` at the base fit: what the
@@ -105,7 +107,7 @@ def noise_band(fit: EstimationResult, *, timeout: float = 60.0) -> NoiseBand:
             note = f"the discretization error could not be measured ({traj.message}); the band holds none"
     except Exception as exc:  # noqa: BLE001 - the band stays usable without it
         note = f"the discretization error could not be measured ({exc}); the band holds none"
-    extra = 2.0 * D / dof if np.isfinite(D) else 0.0
+    extra = D / dof if np.isfinite(D) else 0.0
     return NoiseBand(base + extra, dof, D, note)
 
 
@@ -235,10 +237,12 @@ def accept(refit: Refit, band: NoiseBand, *, level: float = 0.05, n_tests: int =
                             "plausible" if refit.plausible_coefficients else "; ".join(refit.implausible[:3])))
     ratios = refit.size_ratio() if refit.success else {}
     big = {k: r for k, r in ratios.items() if r > SIZE_FACTOR}
+    small = {k: m for k, m in refit.least.items() if refit.success and abs(refit.estimate(k)[0]) < m}
     bound = list(refit.at_bound)
-    if big or bound:
+    if big or bound or small:
         bits = [f"{k} = {refit.estimate(k)[0]:.4g} is {r:.1f} times its realistic size {refit.sizes[k]:.3g}"
                 for k, r in big.items()]
+        bits += [f"{k} = {refit.estimate(k)[0]:.3g} is below {m:g}, the least its physics allows" for k, m in small.items()]
         bits += [f"{k} is held at a bound" for k in bound]
         checks.append(Check("size", False, "; ".join(bits)))
     else:

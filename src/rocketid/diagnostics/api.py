@@ -489,6 +489,7 @@ def _final(disc, ranking, level, window) -> FinalModel | None:
     params = {n: (float(v), std.get(n, math.nan)) for n, v in zip(fit.spec.parameter_names, fit.p)}
     names = ", ".join(disc.effect_names)
     band = disc.band
+    amb = f" {disc.ambiguous[0].upper()}{disc.ambiguous[1:]}." if disc.ambiguous else ""
     if disc.verdict == "nothing missing":
         text = (f"{fit.spec.name} reaches the noise (chi2/dof {fit.chi2_per_dof:.4g}, band <= {band.upper:.4g}); "
                 "no candidate effect is both significant and needed.")
@@ -503,15 +504,15 @@ def _final(disc, ranking, level, window) -> FinalModel | None:
         text = f"the model with {names} reaches the noise (chi2/dof {fit.chi2_per_dof:.4g}): {est}."
         if r is not None and r.identifiability:
             text += f" Caution: {r.identifiability}."
-        ties = [n.split(": ", 1)[1] for n in disc.notes if "BIC within" in n and ": " in n]
+        ties = [n.split(": ", 1)[1] for n in disc.notes if "BIC within" in n and ": " in n and "ambiguous" not in n]
         if ties:
             text += f" Rivals: {ties[-1]}."
     elif disc.verdict == "partly explained":
         text = (f"the model with {names} still leaves chi2/dof {fit.chi2_per_dof:.4g} (band <= {band.upper:.4g}), "
-                f"located in: {_where(fit, level, window)}. Try {_suggest(ranking)}.")
+                f"located in: {_where(fit, level, window)}.{amb} Try {_suggest(ranking)}.")
     else:
         text = (f"no catalogue effect explains the misfit (chi2/dof {fit.chi2_per_dof:.4g}, band <= {band.upper:.4g}); "
-                f"the residual sits in: {_where(fit, level, window)}. Try {_suggest(ranking)}.")
+                f"the residual sits in: {_where(fit, level, window)}.{amb} Try {_suggest(ranking)}.")
     return FinalModel(disc.effect_names, params, float(fit.chi2_per_dof), bool(disc.fits_to_noise), disc.verdict,
                       text[0].upper() + text[1:], fit)
 

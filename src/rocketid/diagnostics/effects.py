@@ -99,6 +99,9 @@ class Effect:
         ``refine(vehicle) -> list of Effect``: more flexible shapes of the same
         physics (more knots, a surface value), tried when this effect leaves a
         residual (the knot count is chosen by BIC).
+    least : mapping of str to float
+        The smallest plausible magnitude of a parameter whose size physics fixes
+        (Earth's rotation rate factor ``k_rot``); empty for most effects.
     """
 
     name: str
@@ -109,6 +112,7 @@ class Effect:
     realistic: Mapping[str, float] = field(default_factory=dict, compare=False)
     relative: Callable | None = field(default=None, compare=False, repr=False)
     refine: Callable | None = field(default=None, compare=False, repr=False)
+    least: Mapping[str, float] = field(default_factory=dict, compare=False)
 
     def __post_init__(self):
         if not isinstance(self.name, str) or not self.name.isidentifier():
@@ -118,6 +122,7 @@ class Effect:
         if not callable(self.apply):
             raise ModelError(f"effect {self.name!r}: apply must be a function apply(model) -> parameters")
         object.__setattr__(self, "realistic", MappingProxyType({str(k): float(v) for k, v in self.realistic.items()}))
+        object.__setattr__(self, "least", MappingProxyType({str(k): float(v) for k, v in self.least.items()}))
 
     @property
     def parameter_names(self) -> tuple[str, ...]:
@@ -588,7 +593,10 @@ def earth_rotation_effect(latitude_deg: float = 28.5, azimuth_deg: float = 90.0,
         v dtheta/dt += f_lo(t) 2 Omega v cos(phi) sin(A)
                        + Omega^2 r cos(phi) (cos(theta) cos(phi) + sin(theta) sin(phi) cos(A))
 
-    ``k_rot`` = 1 is the real Earth; the Coriolis term is phased in by the lift-off fade.
+    ``k_rot`` = 1 is the real Earth; from rest the Coriolis term is phased in by the lift-off fade,
+    from a moving start it acts from ``t0``. ``k_rot`` is fixed by physics: an estimate below
+    0.2 (another latitude or azimuth changes it by a factor of order one, not by 100) is not
+    Earth's rotation (:attr:`Effect.least`).
     """
     phi = math.radians(latitude_deg)
     az = math.radians(azimuth_deg)
@@ -602,7 +610,10 @@ def earth_rotation_effect(latitude_deg: float = 28.5, azimuth_deg: float = 90.0,
         r = EARTH_RADIUS + h
         cphi, sphi, saz, caz = math.cos(phi), math.sin(phi), math.sin(az), math.cos(az)
         m.add_term(v, om ** 2 * r * cphi * (sp.sin(th) * cphi - sp.cos(th) * sphi * caz))
-        normal = (liftoff_fade(m.t - m.t0) * 2 * om * v * cphi * saz
+        # from rest the Coriolis term is phased in by the lift-off fade (module notes); a vehicle that
+        # starts moving takes it from t0 on
+        fade = sp.S.One if _initial_value(m, v) > 0 else liftoff_fade(m.t - m.t0)
+        normal = (fade * 2 * om * v * cphi * saz
                   + om ** 2 * r * cphi * (sp.cos(th) * cphi + sp.sin(th) * sphi * caz))
         # add_term adds to d theta/dt: the model's v-multiplied form gets v * (normal / v) = normal, exactly
         m.add_term(th, normal / v)
@@ -611,7 +622,7 @@ def earth_rotation_effect(latitude_deg: float = 28.5, azimuth_deg: float = 90.0,
     desc = (f"Earth rotation at latitude {latitude_deg:g} deg, azimuth {azimuth_deg:g} deg: Coriolis "
             "(2 Omega v cos(lat) sin(az) in v dtheta/dt, phased in by the lift-off fade) and centrifugal "
             "(Omega^2 r cos(lat) ...) accelerations, Omega = k_rot * 7.292e-5 rad/s")
-    return Effect(name, "Earth rotation", "kinematics", apply, desc, {"k_rot": 1.0})
+    return Effect(name, "Earth rotation", "kinematics", apply, desc, {"k_rot": 1.0}, least={"k_rot": 0.2})
 
 
 def thrust_profile_effect(knot_times: Sequence[float], *, name: str | None = None) -> Effect:

@@ -464,9 +464,10 @@ def _acceptance(fit: EstimationResult, new: EstimationResult, effects: Sequence[
         for e in effects:
             sizes.update({k: v for k, v in e.sizes(vehicle).items() if math.isfinite(v) and v > 0})
         r = summarize_refit(new, fit.objective, fit.n_estimated, effects, tuple(e.name for e in effects), sizes,
-                            level=level, base_parameters=base_spec.parameter_names)
+                            level=level, base_parameters=base_spec.parameter_names,
+                            least={k: v for e in effects for k, v in e.least.items()})
         dof = max(1, new.n_data - new.n_estimated)
-        upper = float(stats.chi2.isf(BAND_LEVEL, dof) / dof) + (2.0 * D / dof if np.isfinite(D) else 0.0)
+        upper = float(stats.chi2.isf(BAND_LEVEL, dof) / dof) + (D / dof if np.isfinite(D) else 0.0)
         return accept(r, NoiseBand(upper, dof, D), level=level)
     except (RocketidError, ValueError, np.linalg.LinAlgError):
         return None
@@ -550,6 +551,7 @@ class Refit:
     identifiability: str = ""
     seconds: float = 0.0
     notes: tuple = ()
+    least: dict = field(default_factory=dict)
 
     @property
     def name(self) -> str:
@@ -651,7 +653,8 @@ def identifiability(names: Sequence[str], cov: np.ndarray, effect_parameters: Se
 
 def summarize_refit(new: EstimationResult, base_objective: float, base_n_estimated: int, effects: Sequence[Effect],
                     added: Sequence[str], sizes: Mapping[str, float], *, level: float = 0.05,
-                    base_parameters: Sequence[str] = (), seconds: float = 0.0, notes: Sequence[str] = ()) -> Refit:
+                    base_parameters: Sequence[str] = (), seconds: float = 0.0, notes: Sequence[str] = (),
+                    least: Mapping[str, float] | None = None) -> Refit:
     """The :class:`Refit` of a fitted model with ``effects``: whiteness per channel, standard
     errors, the base coefficients' plausibility, the added parameters' identifiability."""
     from .plausibility import check_plausibility
@@ -693,7 +696,7 @@ def summarize_refit(new: EstimationResult, base_objective: float, base_n_estimat
                  base_objective=float(base_objective), base_n_estimated=int(base_n_estimated), whiteness=white,
                  sizes={k: float(v) for k, v in sizes.items() if k in eff_params}, at_bound=bound,
                  plausible_coefficients=plaus, implausible=failing, identifiability=ident, seconds=float(seconds),
-                 notes=tuple(notes))
+                 notes=tuple(notes), least={k: float(v) for k, v in (least or {}).items() if k in eff_params})
 
 
 def _declared_by(effect: Effect, declared: Sequence[str]) -> set:
@@ -782,7 +785,8 @@ def run_refit(task: RefitTask) -> tuple[Refit, EstimationResult | None]:
     return summarize_refit(new, task.base_objective, task.base_n_estimated,
                            [e for e in task.effects], task.added, task.sizes, level=task.level,
                            base_parameters=task.base_parameters, seconds=time.perf_counter() - t0,
-                           notes=notes), new
+                           notes=notes, least={k: v for e in task.effects if e.name in task.added
+                                               for k, v in e.least.items()}), new
 
 
 def _failed(task: RefitTask, message: str, seconds: float, gave_up: bool = False) -> Refit:

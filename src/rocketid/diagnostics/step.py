@@ -49,7 +49,11 @@ MAX_EFFECTS = 3
 
 BIC_TIE = 10.0
 """Accepted refits whose BIC lie within this of the lowest are not told apart by BIC (Kass and Raftery's
-"very strong" evidence starts at 10): the hold-out prediction decides, and the verdict names the rivals."""
+"very strong" evidence starts at 10): the hold-out prediction decides when it is decisive
+(:data:`HOLDOUT_DECISIVE`); otherwise no effect is taken and the verdict names the rivals."""
+
+HOLDOUT_DECISIVE = 0.5
+"""The best hold-out prediction error must be at most this share of the next one to decide a BIC tie."""
 
 VERDICTS = ("nothing missing", "explained", "partly explained", "not explained by the catalogue")
 
@@ -116,6 +120,8 @@ class Discovery:
         One of :data:`VERDICTS`.
     notes : tuple of str
     timings : dict
+    ambiguous : str
+        Non-empty when the search stopped at rivals the data cannot tell apart (which, and why).
     """
 
     base_fit: EstimationResult
@@ -130,6 +136,7 @@ class Discovery:
     verdict: str
     notes: tuple = ()
     timings: dict = field(default_factory=dict)
+    ambiguous: str = ""
 
     @property
     def effect_names(self) -> tuple:
@@ -167,7 +174,8 @@ def _choose(accs: Sequence[Acceptance]) -> tuple[int | None, str]:
 def _tie_break(accs, i, fit, chosen_effects, contenders_effects, holdout, level, options, timeout) -> tuple:
     """Among accepted refits within :data:`BIC_TIE` of the chosen one, the best hold-out prediction.
 
-    Returns ``(index, note)``; the note names the rivals (empty when there are none)."""
+    Returns ``(index, note)``; the note names the rivals (empty when there are none). The index is
+    None when the rivals cannot be told apart (no hold-out, or a hold-out that is not decisive)."""
     from .refit import confirm
     if i is None or not accs[i].accepted:
         return i, ""
@@ -177,7 +185,7 @@ def _tie_break(accs, i, fit, chosen_effects, contenders_effects, holdout, level,
         return i, ""
     names = ", ".join(accs[j].refit.name for j in tied)
     if holdout is None:
-        return i, f"{names} reach the noise with BIC within {BIC_TIE:g} of each other: the data cannot tell them apart"
+        return None, f"{names} reach the noise with BIC within {BIC_TIE:g} of each other: the data cannot tell them apart"
     score = {}
     for j in tied:
         r = accs[j].refit
@@ -191,11 +199,22 @@ def _tie_break(accs, i, fit, chosen_effects, contenders_effects, holdout, level,
             sig = dict(zip(c.fit.nlp.channel_names, (float(x) for x in c.fit.nlp.channel_sigmas)))
             score[j] = float(np.mean([(b / sig.get(k, 1.0)) ** 2 for k, (_, b) in c.holdout_rms.items()]))
     if len(score) < 2:
-        return i, f"{names} reach the noise with BIC within {BIC_TIE:g} of each other: the data cannot tell them apart"
-    best = min(score, key=score.get)
-    txt = ", ".join(f"{accs[j].refit.name} {score[j]:.3g}" for j in sorted(score, key=score.get))
+        return None, (f"{names} reach the noise with BIC within {BIC_TIE:g} of each other: the data cannot tell "
+                      "them apart")
+    order = sorted(score, key=score.get)
+    txt = ", ".join(f"{accs[j].refit.name} {score[j]:.3g}" for j in order)
+    if score[order[0]] > HOLDOUT_DECISIVE * score[order[1]]:
+        return None, (f"{names} reach the noise with BIC within {BIC_TIE:g} of each other and predict the hold-out "
+                      f"alike (mean squared prediction error / sigma^2: {txt}): the data cannot tell them apart")
+    best = order[0]
     return best, (f"{names} reach the noise with BIC within {BIC_TIE:g} of each other; the hold-out prediction "
                   f"(mean squared prediction error / sigma^2: {txt}) prefers {accs[best].refit.name}")
+
+
+def _holm(white: Mapping[str, float]) -> float:
+    from .accept import holm_min
+    v = holm_min(list(white.values()))
+    return v if np.isfinite(v) else 0.0
 
 
 def _fit_of(base_spec, effects: Sequence[Effect], refit: Refit, data, mesh, options) -> EstimationResult:
@@ -245,6 +264,7 @@ def discover(fit: EstimationResult, candidates: Sequence[Effect], *, level: floa
     notes = [band.note] if band.note else []
     current, chosen_effects, last_refit = fit, [], None
     steps = []
+    ambiguous = ""
     ok, detail = fits_to_noise(fit, band)
     for number in range(1, max_effects + 1):
         if number > 1 and ok:
@@ -284,10 +304,16 @@ def discover(fit: EstimationResult, candidates: Sequence[Effect], *, level: floa
         if tie:
             why = f"{why}; {tie}"
             notes.append(f"step {number}: {tie}")
+        if i is None:
+            ambiguous = tie
+            steps.append(Step(number, scr, tuple(accs), None, why, (), tuple(e.name for e in chosen_effects), None))
+            break
         effect = scr.contenders[i].effect
         pick = accs[i]
         # shape refinement: a chosen effect that leaves a residual, with more flexible shapes
-        if refine and not pick.accepted and effect.refinements(vehicle):
+        snug = pick.accepted and pick.refit.chi2_per_dof <= 1.0 + math.sqrt(2.0 / max(1, band.dof)) and \
+            _holm(pick.refit.whiteness) >= 0.05
+        if refine and not snug and effect.refinements(vehicle):
             variants = effect.refinements(vehicle)
             vt = [_task(base_spec, current, chosen_effects + [v], (v.name,), {}, vehicle, base=current,
                         options=options, timeout=timeout, level=level, band_upper=band.upper) for v in variants]
@@ -295,7 +321,7 @@ def discover(fit: EstimationResult, candidates: Sequence[Effect], *, level: floa
             va = [accept(r, band, level=level, n_tests=len(tasks) + len(vt)) for r in vr]
             accs += va
             j, why_v = _choose([pick] + va)
-            if j is not None and j > 0:
+            if j is not None and j > 0 and va[j - 1].refit.bic[1] < pick.refit.bic[1] - (BIC_TIE if pick.accepted else 0):
                 effect, pick = variants[j - 1], va[j - 1]
                 why = f"{why}; refined to {effect.name} ({why_v})"
         new_effects = chosen_effects + [effect]
@@ -336,8 +362,10 @@ def discover(fit: EstimationResult, candidates: Sequence[Effect], *, level: floa
         steps.append(Step(number, scr, tuple(accs), pick, why, tuple(dropped), tuple(e.name for e in chosen_effects),
                           current))
     base_ok, _ = fits_to_noise(fit, band)
+    if ambiguous:
+        notes.append(f"ambiguous: {ambiguous}")
     if not chosen_effects:
-        verdict = "nothing missing" if base_ok else "not explained by the catalogue"
+        verdict = "nothing missing" if base_ok and not ambiguous else "not explained by the catalogue"
     elif ok:
         verdict = "explained"
     else:
@@ -346,5 +374,7 @@ def discover(fit: EstimationResult, candidates: Sequence[Effect], *, level: floa
         ratios = last_refit.size_ratio()
         if any(r > 5.0 for r in ratios.values()):
             verdict = "partly explained"
+    if ambiguous and verdict == "explained":
+        verdict = "partly explained"
     return Discovery(fit, band, vehicle, tuple(steps), tuple(chosen_effects), current, last_refit, bool(ok), detail,
-                     verdict, tuple(notes), {"discover_s": time.perf_counter() - t_start})
+                     verdict, tuple(notes), {"discover_s": time.perf_counter() - t_start}, ambiguous)
