@@ -550,7 +550,7 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
              confirm_top: int = 2, window: float | None = None, guess: Mapping | Sequence[float] | None = None,
              mesh=None, options: Mapping[str, Any] | None = None, holdout: tuple | str | None = "auto",
              max_effects: int = 3, workers: int | None = None, refit_timeout: float = 180.0,
-             refine: bool = True, variant: bool = True) -> DiagnosisReport:
+             refine: bool = True, variant: bool | str = "auto") -> DiagnosisReport:
     """Fit ``model`` to ``data`` and find what it misses::
 
         fit -> compare -> locate -> plausibility
@@ -591,8 +591,11 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
         Seconds each refit and hold-out prediction may take before it is given up.
     refine : bool
         Try more flexible shapes of a chosen effect that leaves a residual.
-    variant : bool
-        For a model with time-knot drag, also run the discovery on its Mach-indexed variant.
+    variant : "auto" or bool
+        For a model with time-knot drag, also run the discovery on its Mach-indexed
+        variant (``rocketid.diagnostics.variant``): ``"auto"`` does so unless the model
+        itself is explained (the time-knot drag absorbs most force effects, so "nothing
+        missing" or a partial answer on it needs the variant's word); True always.
 
     Returns
     -------
@@ -603,6 +606,8 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
     from .step import discover
 
     _check_settings(level, confirm_top, max_effects, refit_timeout)
+    if variant not in (True, False, "auto"):
+        raise SettingsError(f"variant must be 'auto', True or False, got {variant!r}")
     spec, label = resolve_model(model)
     holdout_window(spec, holdout)           # refuse a bad window before any work
     meas, data_label = _read_data(data, spec)
@@ -640,7 +645,7 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
     after = compare(disc.fit, level=level) if disc is not None and disc.effects else None
     final = _final(disc, ranking, level, window)
     var = None
-    if variant and confirm_top > 0:
+    if confirm_top > 0 and (variant is True or (variant == "auto" and (final is None or final.verdict != "explained"))):
         settings = dict(level=level, confirm_top=confirm_top, window=window, options=options,
                         max_effects=max_effects, workers=workers, refit_timeout=refit_timeout, refine=refine)
         var = timed("variant_s", _variant, fit, meas, effects, settings, notes)
