@@ -510,9 +510,13 @@ def _final(disc, ranking, level, window) -> FinalModel | None:
     elif disc.verdict == "partly explained":
         text = (f"the model with {names} still leaves chi2/dof {fit.chi2_per_dof:.4g} (band <= {band.upper:.4g}), "
                 f"located in: {_where(fit, level, window)}.{amb} Try {_suggest(ranking)}.")
+    elif disc.ambiguous:
+        text = (f"{disc.ambiguous} (chi2/dof {fit.chi2_per_dof:.4g} without them, band <= {band.upper:.4g}); the "
+                f"residual sits in: {_where(fit, level, window)}. Other data (another channel, a measured thrust or "
+                "mass, an atmosphere sounding) would separate them.")
     else:
         text = (f"no catalogue effect explains the misfit (chi2/dof {fit.chi2_per_dof:.4g}, band <= {band.upper:.4g}); "
-                f"the residual sits in: {_where(fit, level, window)}.{amb} Try {_suggest(ranking)}.")
+                f"the residual sits in: {_where(fit, level, window)}. Try {_suggest(ranking)}.")
     return FinalModel(disc.effect_names, params, float(fit.chi2_per_dof), bool(disc.fits_to_noise), disc.verdict,
                       text[0].upper() + text[1:], fit)
 

@@ -426,7 +426,10 @@ def confirm(fit: EstimationResult, effect: Effect | str | Sequence[Effect | str]
             try:
                 window = data.window(a, b)
                 fb, blind_b = _fit_window(base_spec, window, mesh, None, options, fit.p)
-                fn, blind_n = _fit_window(spec, window, mesh, guess, options, new.p)
+                # from the model's own guesses, as the base model: a parameter the window's data do not
+                # reach is held at its guess, and a guess taken from the full-data estimate would carry
+                # the predicted samples into the prediction
+                fn, blind_n = _fit_window(spec, window, mesh, None, options, new.p)
                 hold_fits = (fb, fn)
                 pb, pn = _predict(fb, rest, timeout), _predict(fn, rest, timeout)
                 hold_rms = {c.name: (float(np.sqrt(np.mean((pb[c.name] - c.values) ** 2))),
