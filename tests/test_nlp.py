@@ -116,3 +116,34 @@ def test_a_transform_is_checked():
         ParameterTransform(np.eye(2), np.zeros(3), ("a", "b"))
     with pytest.raises(SettingsError, match="1 names for 2 reduced parameters"):
         ParameterTransform(np.eye(2), np.zeros(2), ("a",))
+
+
+def _tiny_spec():
+    m = ri.Model("nocache_probe", 0.0, 1.0)
+    y = m.state("y", 1.0)
+    k = m.parameter("k", 0.5, bounds=(0.0, 2.0))
+    m.ode({y: -k * y})
+    m.output("y", y, sigma=1.0)
+    return m.freeze()
+
+
+def test_use_cache_false_neither_reads_nor_writes_the_cache(tmp_path, monkeypatch):
+    from rocketid.codegen import generate
+    monkeypatch.setenv("ROCKETID_CACHE_DIR", str(tmp_path / "cache"))
+    spec = _tiny_spec()
+    g = generate(spec, use_cache=False)
+    assert not (tmp_path / "cache").exists() or not any((tmp_path / "cache").iterdir())
+    assert not g.cached and g.path.is_file() and g.path.read_text() == g.source
+    cached = generate(spec)  # now it is written, and the next call reads it
+    assert cached.path.parent == tmp_path / "cache" and generate(spec).cached
+    assert cached.source == g.source  # deterministic: the same model gives the same source
+    assert not generate(spec, use_cache=False).cached
+
+
+def test_the_cache_key_follows_the_generator(monkeypatch, tmp_path):
+    from rocketid import codegen
+    monkeypatch.setenv("ROCKETID_CACHE_DIR", str(tmp_path))
+    spec = _tiny_spec()
+    before = codegen.generate(spec).path.name
+    monkeypatch.setattr(codegen, "generator_fingerprint", lambda: "a-changed-generator")
+    assert codegen.generate(spec).path.name != before

@@ -23,11 +23,13 @@ n_states) multipliers, ``U`` (n, nu) output variables.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import importlib.util
 import keyword
 import os
 import sys
+import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import ModuleType
@@ -43,6 +45,17 @@ from .symbolic import SymbolicModel, derive
 __all__ = ["GeneratedModel", "OutputFunction", "generate", "generate_source", "cache_dir"]
 
 CODEGEN_VERSION = "2"
+
+
+@functools.lru_cache(maxsize=None)
+def generator_fingerprint() -> str:
+    """A hash of the code generator's own source (this module and :mod:`rocketid.symbolic`),
+    part of every cache key: a change to the generator never reuses a stale module."""
+    here = Path(__file__).resolve().parent
+    h = hashlib.sha256()
+    for name in ("codegen.py", "symbolic.py"):
+        h.update((here / name).read_bytes())
+    return h.hexdigest()[:16]
 
 
 def cache_dir() -> Path:
@@ -293,13 +306,15 @@ def generate(spec: ModelSpec, *, use_cache: bool = True) -> GeneratedModel:
     ----------
     spec : ModelSpec
     use_cache : bool
-        Look up and store the generated module by content hash.
+        Look up and store the generated module by content hash. False: generate afresh into a
+        private temporary folder; the cache is neither read nor written.
 
     Returns
     -------
     GeneratedModel
     """
-    key = hashlib.sha256(f"{CODEGEN_VERSION}:{spec.fingerprint()}".encode()).hexdigest()[:20]
+    key = hashlib.sha256(f"{CODEGEN_VERSION}:{generator_fingerprint()}:{spec.fingerprint()}".encode()
+                         ).hexdigest()[:20]
     folder = cache_dir()
     path = folder / f"rocketid_gen_{key}.py"
     modname = f"rocketid_gen_{key}"
@@ -308,6 +323,11 @@ def generate(spec: ModelSpec, *, use_cache: bool = True) -> GeneratedModel:
         module = sys.modules.get(modname) or _load(path, modname)
         return GeneratedModel(source, path, module, True)
     source = generate_source(derive(spec), spec.name)
+    if not use_cache:
+        # a private folder outside the cache: the module still has a file (inspect.getsource works)
+        folder = Path(tempfile.mkdtemp(prefix="rocketid_gen_"))
+        modname = f"{modname}_{folder.name}"
+        path = folder / f"{modname}.py"
     folder.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(f".tmp{os.getpid()}")
     tmp.write_text(source)

@@ -181,32 +181,72 @@ class Estimability:
         path.write_text(json.dumps(self.to_dict(), indent=2))
         return path
 
-    def plot(self, path=None):
-        """Eigenvalue spectrum with the threshold, and the composition of each
-        direction (a heat map); returns the matplotlib figure."""
-        import matplotlib
-        matplotlib.use("Agg", force=False)
-        import matplotlib.pyplot as plt
-        fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4.2))
+    def plot_spectrum(self, ax=None):
+        """The eigenvalues of H_r (estimated directions in blue) and the threshold line.
+
+        Parameters
+        ----------
+        ax : matplotlib Axes, optional
+            Where to draw (default: a new figure's axes).
+
+        Returns
+        -------
+        matplotlib Axes
+        """
+        ax = _axes(ax, (5.5, 4.2))
         k = np.arange(1, self.eigenvalues.size + 1)
         colors = ["tab:blue" if i < self.n_estimated else "tab:gray" for i in range(k.size)]
-        a1.bar(k, self.eigenvalues, color=colors)
-        a1.set_yscale("log")
-        a1.axhline(self.eigenvalues[0] / self.threshold, color="tab:red", ls="--",
+        ax.bar(k, self.eigenvalues, color=colors)
+        ax.set_yscale("log")
+        ax.axhline(self.eigenvalues[0] / self.threshold, color="tab:red", ls="--",
                    label=f"lambda_1 / {self.threshold:g}")
-        a1.set_xlabel("direction k")
-        a1.set_ylabel("eigenvalue of H_r" + (" (scaled)" if self.scaling is Scaling.NOMINAL else ""))
-        a1.set_title(f"np = {self.n_estimated} (scaling: {self.scaling.value})")
-        a1.legend()
-        im = a2.imshow(self.V, cmap="RdBu_r", vmin=-1, vmax=1, aspect="auto")
-        a2.set_xticks(range(k.size), [f"q{i}" for i in k])
-        a2.set_yticks(range(k.size), self.parameter_names)
-        a2.set_title("directions: V[i, k]")
-        fig.colorbar(im, ax=a2)
+        ax.set_xlabel("direction k")
+        ax.set_ylabel("eigenvalue of H_r" + (" (scaled)" if self.scaling is Scaling.NOMINAL else ""))
+        ax.set_title(f"np = {self.n_estimated} (scaling: {self.scaling.value})")
+        ax.legend()
+        return ax
+
+    def plot_directions(self, ax=None):
+        """The directions ``V[i, k]`` as a heat map (parameters by directions), with a colour bar.
+
+        Parameters
+        ----------
+        ax : matplotlib Axes, optional
+
+        Returns
+        -------
+        matplotlib Axes
+        """
+        ax = _axes(ax, (5.5, 4.2))
+        n = self.eigenvalues.size
+        im = ax.imshow(self.V, cmap="RdBu_r", vmin=-1, vmax=1, aspect="auto")
+        ax.set_xticks(range(n), [f"q{i}" for i in range(1, n + 1)])
+        ax.set_yticks(range(n), self.parameter_names)
+        ax.set_title("directions: V[i, k]")
+        ax.figure.colorbar(im, ax=ax)
+        return ax
+
+    def plot(self, path=None):
+        """Eigenvalue spectrum with the threshold, and the composition of each direction
+        (:meth:`plot_spectrum` and :meth:`plot_directions` side by side); returns the
+        figure, saved to ``path`` when given. The matplotlib backend is left alone."""
+        from matplotlib.figure import Figure
+        fig = Figure(figsize=(11, 4.2))
+        a1, a2 = fig.subplots(1, 2)
+        self.plot_spectrum(a1)
+        self.plot_directions(a2)
         fig.tight_layout()
         if path is not None:
             fig.savefig(path, dpi=120)
         return fig
+
+
+def _axes(ax, figsize):
+    """``ax``, or the axes of a new figure (not registered with pyplot: no backend is touched)."""
+    if ax is not None:
+        return ax
+    from matplotlib.figure import Figure
+    return Figure(figsize=figsize).subplots()
 
 
 def select_np(eigenvalues: np.ndarray, threshold: float) -> int:

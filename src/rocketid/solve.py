@@ -17,7 +17,6 @@ import difflib
 import json
 import math
 import time
-import warnings
 from dataclasses import dataclass, replace
 from functools import cached_property
 from typing import Any, Callable, Mapping, Sequence
@@ -218,9 +217,7 @@ def solve_nlp(nlp: CollocationNLP, x0: np.ndarray, *, options: Mapping[str, Any]
     # keep x0 strictly inside bounds (IPOPT would push it anyway)
     x0 = np.clip(x0, nlp.x_lower, nlp.x_upper)
     t0 = time.perf_counter()
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        x, info = prob.solve(x0, lagrange=lagrange, zl=zl, zu=zu)
+    x, info = prob.solve(x0, lagrange=lagrange, zl=zl, zu=zu)
     solve_s = time.perf_counter() - t0
     msg = info["status_msg"]
     msg = msg.decode() if isinstance(msg, bytes) else str(msg)

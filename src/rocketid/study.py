@@ -364,14 +364,34 @@ class StudyResult:
         return files
 
     def plot(self, out: str | Path) -> list[Path]:
-        """``predictions.png`` (prediction minus truth over time) and ``eta.png``
-        (eta of every draw and the running best, per run)."""
-        import matplotlib
-        matplotlib.use("Agg", force=False)
-        import matplotlib.pyplot as plt
+        """Write ``predictions.png`` (:meth:`plot_prediction_errors`) and ``eta.png`` (:meth:`plot_eta`)."""
+        from matplotlib.figure import Figure
         out = Path(out)
-        files = []
-        fig, axes = plt.subplots(3, 1, figsize=(9, 8), sharex=True)
+        fig = Figure(figsize=(9, 8))
+        self.plot_prediction_errors(fig.subplots(3, 1, sharex=True))
+        fig.suptitle("RA-66: high-accuracy predictions with the estimates, minus the noise-free truth")
+        fig.tight_layout()
+        fig.savefig(out / "predictions.png", dpi=110)
+        ax = self.plot_eta(Figure(figsize=(9, 5)).subplots())
+        ax.figure.tight_layout()
+        ax.figure.savefig(out / "eta.png", dpi=110)
+        return [out / "predictions.png", out / "eta.png"]
+
+    def plot_prediction_errors(self, axes=None):
+        """Prediction minus truth over time for x, h, v: index 0, the least-eta run, the other runs.
+
+        Parameters
+        ----------
+        axes : sequence of 3 matplotlib Axes, optional
+            One per channel (default: a new figure's).
+
+        Returns
+        -------
+        sequence of matplotlib Axes
+        """
+        if axes is None:
+            from matplotlib.figure import Figure
+            axes = Figure(figsize=(9, 8)).subplots(3, 1, sharex=True)
         units = {"x": "m", "h": "m", "v": "m/s"}
         for j, (ax, c) in enumerate(zip(axes, CHANNELS)):
             for i in range(1, self.predictions.shape[0]):
@@ -388,14 +408,24 @@ class StudyResult:
             ax.set_ylabel(f"{c} prediction - truth ({units[c]})")
             ax.legend(fontsize=8, loc="best")
         axes[-1].set_xlabel("t (s)")
-        fig.suptitle("RA-66: high-accuracy predictions with the estimates, minus the noise-free truth")
-        fig.tight_layout()
-        files.append(out / "predictions.png")
-        fig.savefig(files[-1], dpi=110)
-        plt.close(fig)
+        return axes
 
-        fig, ax = plt.subplots(figsize=(9, 5))
-        cmap = plt.get_cmap("tab10")
+    def plot_eta(self, ax=None):
+        """eta of every draw (points) and the best so far (lines), per run, on log axes.
+
+        Parameters
+        ----------
+        ax : matplotlib Axes, optional
+
+        Returns
+        -------
+        matplotlib Axes
+        """
+        if ax is None:
+            from matplotlib.figure import Figure
+            ax = Figure(figsize=(9, 5)).subplots()
+        from matplotlib import colormaps
+        cmap = colormaps["tab10"]
         for i, r in enumerate(self.sampling.runs):
             k = np.arange(1, r.n_draws + 1)
             ax.scatter(k, r.history, s=2, color=cmap(i % 10), alpha=0.25)
@@ -408,11 +438,7 @@ class StudyResult:
         ax.set_ylabel("eta (7.10)")
         ax.set_title(f"eta over draws: points every draw, lines the best so far (n_iter = {self.settings.n_iter})")
         ax.legend(fontsize=7, ncol=2)
-        fig.tight_layout()
-        files.append(out / "eta.png")
-        fig.savefig(files[-1], dpi=110)
-        plt.close(fig)
-        return files
+        return ax
 
 
 def _mean_abs_errors(spec, p: np.ndarray, times: np.ndarray, truth: np.ndarray,

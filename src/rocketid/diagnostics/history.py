@@ -205,8 +205,6 @@ class ModelHistory:
         average boldly. Returns the figure; saves it to ``path`` when given (Agg backend)."""
         if not self.revisions:
             raise SettingsError("the history is empty; add a revision first")
-        import matplotlib
-        matplotlib.use("Agg", force=False)
         import matplotlib.pyplot as plt
         if revisions is None:
             revisions = [0, len(self.revisions) - 1] if len(self.revisions) > 1 else [0]

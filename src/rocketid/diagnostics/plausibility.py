@@ -297,10 +297,7 @@ def _kind(name: str) -> str:
 
 def _realistic_sizes() -> dict:
     """Realistic magnitudes of the catalogue effects' parameters, by name."""
-    try:
-        from .effects import CATALOGUE
-    except ImportError:  # pragma: no cover - the catalogue is part of the package
-        return {}
+    from .effects import CATALOGUE
     out = {}
     for e in CATALOGUE.values():
         out.update({k: float(v) for k, v in e.realistic.items()})

@@ -24,6 +24,7 @@ and keeps the result in a per-process cache keyed by the recipe's token.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import math
 import os
@@ -52,9 +53,11 @@ _DRAW_STAGES = ("errors", "data", "model", "simulate", "physics", "symbolic", "c
                 "nlp", "solve", "sensitivity", "estimability", "sampling")
 
 
-def _code_fingerprint() -> str:
-    """A hash of the source of every stage a draw runs through, read when this
-    module is imported (so it describes the code this process runs)."""
+@functools.lru_cache(maxsize=None)
+def code_fingerprint() -> str:
+    """A hash of the source of every stage a draw runs through, read once per process on
+    first use: when the coordinator makes a recipe, and when a worker process installs one
+    (right after it starts, so it describes the code that process runs)."""
     root = Path(__file__).resolve().parents[1]
     h = hashlib.sha256()
     for name in _DRAW_STAGES:
@@ -67,9 +70,12 @@ def _code_fingerprint() -> str:
     return h.hexdigest()[:16]
 
 
-#: This process's :func:`_code_fingerprint`. A recipe records the coordinator's; a worker
-#: whose code differs refuses to evaluate draws (its outcomes would not be the same).
-CODE_FINGERPRINT = _code_fingerprint()
+def __getattr__(name: str):
+    # ``CODE_FINGERPRINT``: this process's :func:`code_fingerprint` (read lazily). A recipe records
+    # the coordinator's; a worker whose code differs refuses to evaluate draws.
+    if name == "CODE_FINGERPRINT":
+        return code_fingerprint()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def _num(v: float | None) -> float | None:
@@ -161,10 +167,10 @@ class Recipe:
     ----------
     token : str
         Content hash: data, model fingerprint, mesh, p0, settings, V, the
-        reference solution and the code (:data:`CODE_FINGERPRINT`).
+        reference solution and the code (:func:`code_fingerprint`).
         Checkpoints record it.
     code : str
-        The coordinator's :data:`CODE_FINGERPRINT`.
+        The coordinator's :func:`code_fingerprint`.
     spec, measurements, mesh, settings
     estimability : Estimability
         Steps 2-3 at p0 (its sensitivity matrices removed).
@@ -203,8 +209,9 @@ class Recipe:
                   np.asarray(q2_ref), reference.solution.x, reference.solution.mult_g):
             h.update(np.ascontiguousarray(a, dtype=float).tobytes())
         h.update(repr(sorted(settings.key().items())).encode())
-        h.update(CODE_FINGERPRINT.encode())
-        return cls(h.hexdigest()[:24], CODE_FINGERPRINT, prepared.spec, prepared.measurements, mesh, settings, est,
+        code = code_fingerprint()
+        h.update(code.encode())
+        return cls(h.hexdigest()[:24], code, prepared.spec, prepared.measurements, mesh, settings, est,
                    reference.solution, np.asarray(reference.p, float), np.asarray(q2_ref, float))
 
 
@@ -311,6 +318,7 @@ _MAX_CONTEXTS = 2
 def install(recipe: Recipe, prepared: Prepared | None = None) -> WorkerContext:
     """Build (once per process) and cache the context of ``recipe``; a process
     pool's initializer."""
+    code_fingerprint()  # read this process's code now, before anything can change on disk
     ctx = _CONTEXTS.get(recipe.token)
     if ctx is None:
         ctx = WorkerContext.build(recipe, prepared)
@@ -347,9 +355,9 @@ def evaluate_batch(recipe: Recipe | str, seed: int, k0: int, k1: int) -> BatchRe
                                 "initializer did not run)")
     else:
         ctx = install(recipe)
-    if ctx.recipe.code != CODE_FINGERPRINT:
+    if ctx.recipe.code != code_fingerprint():
         raise RocketidError(
-            f"worker process {os.getpid()} runs other rocketid code (fingerprint {CODE_FINGERPRINT}) than the "
+            f"worker process {os.getpid()} runs other rocketid code (fingerprint {code_fingerprint()}) than the "
             f"coordinator ({ctx.recipe.code}): its draws would not reproduce the serial result. Install the same "
             "rocketid everywhere (and restart workers started before a change)")
     outs = tuple(evaluate_draw(ctx, seed, k) for k in range(k0, k1))
