@@ -163,16 +163,16 @@ def test_parameter_bounds_reversed():
     _raises(ModelError, lambda: m.parameter("k", 0.5, bounds=(1.0, 0.0)), "parameter k", "lower bound")
 
 
-def test_estimate_guess_outside_bounds(ra66_spec, ra66_noisy_fit):
-    data, pr = ra66_noisy_fit.prepared.measurements, ra66_noisy_fit.prepared
+def test_estimate_guess_outside_bounds(ra66_spec, ra66_noisy_prepared):
+    data, pr = ra66_noisy_prepared.measurements, ra66_noisy_prepared
     _raises(ModelError, lambda: ri.estimate(ra66_spec, data, guess={"CD0": 2.0}, prepared=pr),
             "parameter CD0", "2", "bounds")
     _raises(ModelError, lambda: ri.estimate(ra66_spec, data, guess=[0.5] * 7 + [-0.1], prepared=pr),
             "parameter CL", "-0.1")
 
 
-def test_estimate_guess_unknown_name(ra66_spec, ra66_noisy_fit):
-    pr = ra66_noisy_fit.prepared
+def test_estimate_guess_unknown_name(ra66_spec, ra66_noisy_prepared):
+    pr = ra66_noisy_prepared
     _raises(ModelError, lambda: ri.estimate(ra66_spec, pr.measurements, guess={"CD7": 0.1}, prepared=pr),
             "'CD7'", "did you mean", "CD6")
     _raises(ModelError, lambda: ri.estimate(ra66_spec, pr.measurements, guess={"Cl": 0.1}, prepared=pr), "'Cl'")
@@ -185,8 +185,8 @@ def test_estimate_guess_unknown_name(ra66_spec, ra66_noisy_fit):
 # ---------------------------------------------------------------------------
 
 
-def test_ipopt_failure_is_a_result_not_an_exception(ra66_spec, ra66_noisy_fit):
-    pr = ra66_noisy_fit.prepared
+def test_ipopt_failure_is_a_result_not_an_exception(ra66_spec, ra66_noisy_prepared):
+    pr = ra66_noisy_prepared
     fit = ri.estimate(ra66_spec, pr.measurements, options={"max_iter": 1}, prepared=pr)
     assert fit.success is False
     assert fit.status == -1  # IPOPT: maximum number of iterations exceeded
@@ -197,8 +197,8 @@ def test_ipopt_failure_is_a_result_not_an_exception(ra66_spec, ra66_noisy_fit):
     assert fit.to_dict()["success"] is False
 
 
-def test_unknown_ipopt_option_names_close_matches(ra66_spec, ra66_noisy_fit):
-    pr = ra66_noisy_fit.prepared
+def test_unknown_ipopt_option_names_close_matches(ra66_spec, ra66_noisy_prepared):
+    pr = ra66_noisy_prepared
     _raises(SettingsError, lambda: ri.estimate(ra66_spec, pr.measurements, options={"max_iters": 3}, prepared=pr),
             "'max_iters'", "did you mean", "max_iter")
     _raises(SettingsError, lambda: ri.estimate(ra66_spec, pr.measurements, options={"tol": "small"}, prepared=pr),

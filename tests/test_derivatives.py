@@ -71,11 +71,6 @@ def pendulum_spec() -> ri.ModelSpec:
 
 
 @pytest.fixture(scope="module")
-def ra66_prepared(ra66_spec, ra66_noisy):
-    return ri.prepare(ra66_spec, ra66_noisy)
-
-
-@pytest.fixture(scope="module")
 def pendulum_prepared():
     spec = pendulum_spec()
     data = ri.simulate_measurements(spec, spec.guess, np.arange(1, 401) * 0.01, seed=1)
@@ -108,7 +103,7 @@ def _case(request, name):
     model, kind, seed = name.split("-")
     rng = np.random.default_rng(int(seed))
     if model == "ra66":
-        pr = request.getfixturevalue("ra66_prepared")
+        pr = request.getfixturevalue("ra66_noisy_prepared")
         p_center = ri.ra66_truth(pr.spec)
         scale = dict(rel_p=0.2, rel_s=1e-3, abs_s=1e-3)
     else:

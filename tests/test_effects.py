@@ -20,11 +20,6 @@ REQUIRED = {"back_pressure", "thrust_level", "mass_flow", "transonic_drag", "win
 
 
 @pytest.fixture(scope="module")
-def ra66m_spec():
-    return ra66m()
-
-
-@pytest.fixture(scope="module")
 def ra66_spec():
     return ri.ra66()
 

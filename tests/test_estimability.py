@@ -31,18 +31,13 @@ RA66_NP = {"none": 3, "nominal": 5}
 
 
 @pytest.fixture(scope="module")
-def noisy_prepared(ra66_spec, ra66_noisy):
-    return ri.prepare(ra66_spec, ra66_noisy)
-
-
-@pytest.fixture(scope="module")
-def p0_sensitivity(noisy_prepared):
-    return sensitivity_at(noisy_prepared)
+def p0_sensitivity(ra66_noisy_prepared):
+    return sensitivity_at(ra66_noisy_prepared)
 
 
 @pytest.fixture(scope="module", params=["none", "nominal"])
-def analysis(request, noisy_prepared, p0_sensitivity):
-    return analyze(noisy_prepared, scaling=request.param, sensitivity=p0_sensitivity)
+def analysis(request, ra66_noisy_prepared, p0_sensitivity):
+    return analyze(ra66_noisy_prepared, scaling=request.param, sensitivity=p0_sensitivity)
 
 
 # ---------------------------------------------------------------------------
@@ -132,26 +127,26 @@ def test_select_np():
 
 
 @pytest.mark.parametrize("threshold", [1.0, 0.5, 0.0, -3000.0, float("nan")])
-def test_threshold_must_exceed_one(noisy_prepared, p0_sensitivity, threshold):
+def test_threshold_must_exceed_one(ra66_noisy_prepared, p0_sensitivity, threshold):
     with pytest.raises(SettingsError, match="threshold of the modified E-optimal criterion must exceed 1"):
-        analyze(noisy_prepared, threshold=threshold, sensitivity=p0_sensitivity)
+        analyze(ra66_noisy_prepared, threshold=threshold, sensitivity=p0_sensitivity)
 
 
 @pytest.mark.parametrize("n", [0, 9, -1, 2.5])
-def test_np_must_be_from_one_to_the_parameter_count(noisy_prepared, p0_sensitivity, n):
+def test_np_must_be_from_one_to_the_parameter_count(ra66_noisy_prepared, p0_sensitivity, n):
     with pytest.raises(SettingsError, match="np must be an integer from 1 to 8"):
-        analyze(noisy_prepared, n_estimated=n, sensitivity=p0_sensitivity)
+        analyze(ra66_noisy_prepared, n_estimated=n, sensitivity=p0_sensitivity)
 
 
-def test_forced_np_is_noted(noisy_prepared, p0_sensitivity):
-    est = analyze(noisy_prepared, n_estimated=6, scaling="nominal", sensitivity=p0_sensitivity)
+def test_forced_np_is_noted(ra66_noisy_prepared, p0_sensitivity):
+    est = analyze(ra66_noisy_prepared, n_estimated=6, scaling="nominal", sensitivity=p0_sensitivity)
     assert est.n_estimated == 6
     assert est.notes == ("np = 6 was forced (the criterion with threshold 3000 gives 5)",)
 
 
-def test_unknown_scaling_lists_the_choices(noisy_prepared, p0_sensitivity):
+def test_unknown_scaling_lists_the_choices(ra66_noisy_prepared, p0_sensitivity):
     with pytest.raises(SettingsError, match="unknown scaling 'log'; choose one of none, nominal"):
-        analyze(noisy_prepared, scaling="log", sensitivity=p0_sensitivity)
+        analyze(ra66_noisy_prepared, scaling="log", sensitivity=p0_sensitivity)
 
 
 def decay_with_unused_parameter() -> ri.ModelSpec:
@@ -210,11 +205,11 @@ def prediction_errors(spec, p, clean) -> dict[str, float]:
 
 
 @pytest.fixture(scope="module")
-def index0(noisy_prepared, p0_sensitivity, ra66_spec):
+def index0(ra66_noisy_prepared, p0_sensitivity, ra66_spec):
     """The chapter's 'index 0': q2 fixed at V2^T p0, nominal scaling (np = 5), data seed 0."""
-    est = analyze(noisy_prepared, scaling="nominal", sensitivity=p0_sensitivity)
+    est = analyze(ra66_noisy_prepared, scaling="nominal", sensitivity=p0_sensitivity)
     q2 = est.q2_of(ra66_spec.guess)
-    return est, q2, estimate_q1(noisy_prepared, est, q2)
+    return est, q2, estimate_q1(ra66_noisy_prepared, est, q2)
 
 
 def test_index0_solve_converges_and_predicts_better_than_p0(index0, ra66_spec, ra66_clean):
@@ -236,13 +231,13 @@ def test_index0_solve_converges_and_predicts_better_than_p0(index0, ra66_spec, r
     assert np.all(fit.p >= ra66_spec.lower - 1e-9) and np.all(fit.p <= ra66_spec.upper + 1e-9)
 
 
-def test_warm_started_resolve_after_a_change_of_q2(index0, noisy_prepared, ra66_spec):
+def test_warm_started_resolve_after_a_change_of_q2(index0, ra66_noisy_prepared, ra66_spec):
     est, _, first = index0
     rng = np.random.default_rng(0)
     for _ in range(3):
         q2 = est.q2_of(rng.uniform(ra66_spec.lower, ra66_spec.upper))
-        warm = estimate_q1(noisy_prepared, est, q2, warm_start=first)
-        cold = estimate_q1(noisy_prepared, est, q2)
+        warm = estimate_q1(ra66_noisy_prepared, est, q2, warm_start=first)
+        cold = estimate_q1(ra66_noisy_prepared, est, q2)
         assert warm.success and cold.success
         assert warm.iterations <= 8, warm.iterations
         # no NLP rebuilt: the warm path re-offsets the first solve's NLP, sharing its structure and
@@ -283,13 +278,13 @@ def test_a_bound_of_p_is_an_active_linear_constraint():
     assert np.all(fit.p <= spec.upper * (1 + 2e-8))
 
 
-def test_q2_outside_the_reach_of_the_bounds_does_not_claim_success(noisy_prepared, ra66_spec):
+def test_q2_outside_the_reach_of_the_bounds_does_not_claim_success(ra66_noisy_prepared, ra66_spec):
     """The sampling algorithm draws p_trial inside the bounds, so q2 = V2^T p_trial is always
     reachable; a q2 from outside them (CD0 = 2.5) leaves (7.9) without a feasible point."""
-    est = analyze(noisy_prepared, scaling="nominal", n_estimated=7)    # only the CD0 direction fixed
+    est = analyze(ra66_noisy_prepared, scaling="nominal", n_estimated=7)    # only the CD0 direction fixed
     p_trial = np.array(ri.ra66_truth(ra66_spec))
     p_trial[0] = 2.5
-    fit = estimate_q1(noisy_prepared, est, est.q2_of(p_trial), options={"max_iter": 50})
+    fit = estimate_q1(ra66_noisy_prepared, est, est.q2_of(p_trial), options={"max_iter": 50})
     assert not fit.success
 
 
