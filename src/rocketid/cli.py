@@ -58,6 +58,7 @@ import numpy as np
 from .cases import ra66, ra66_times, ra66_truth
 from .cases.files import load_model_file
 from .data import Measurements, read_csv
+from . import output
 from .errors import ModelError, RocketidError, SettingsError
 from .model import ModelSpec
 
@@ -261,14 +262,9 @@ def make_mesh(spec: ModelSpec, n_elements: int | None = None, K: int = 4):
 
 
 def write_json(path: str | os.PathLike, payload: Mapping) -> Path:
-    """Write ``payload`` as indented JSON, creating parent folders."""
-    path = Path(path)
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(payload, indent=2) + "\n")
-    except OSError as exc:
-        raise SettingsError(f"cannot write {str(path)!r}: {exc.strerror or exc}") from None
-    return path
+    """Write ``payload`` as indented JSON atomically, creating parent folders
+    (:func:`rocketid.output.write_json`: NaN and infinity are refused)."""
+    return output.write_json(path, payload)
 
 
 # ---------------------------------------------------------------------------

@@ -174,10 +174,8 @@ class Estimability:
         }
 
     def to_json(self, path) -> Path:
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(self.to_dict(), indent=2))
-        return path
+        from .output import write_json
+        return write_json(path, self.to_dict())
 
     def plot(self, path=None):
         """Eigenvalue spectrum with the threshold, and the composition of each
@@ -203,7 +201,8 @@ class Estimability:
         fig.colorbar(im, ax=a2)
         fig.tight_layout()
         if path is not None:
-            fig.savefig(path, dpi=120)
+            from .output import save_figure
+            save_figure(fig, path, dpi=120)
         return fig
 
 

@@ -479,9 +479,8 @@ class EstimationResult:
 
     def to_json(self, path) -> None:
         """Write :meth:`to_dict` as JSON."""
-        from pathlib import Path
-        Path(path).parent.mkdir(parents=True, exist_ok=True)
-        Path(path).write_text(json.dumps(self.to_dict(), indent=2))
+        from .output import write_json
+        write_json(path, self.to_dict())
 
 
 def estimate(spec: ModelSpec, data: Measurements, *, guess: Mapping | Sequence[float] | None = None,

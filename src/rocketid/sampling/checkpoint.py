@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..errors import SettingsError
+from ..output import write_json
 from .worker import DrawOutcome
 
 __all__ = ["RunState", "checkpoint_path", "write_checkpoint", "read_checkpoint", "CHECKPOINT_VERSION"]
@@ -153,23 +154,9 @@ def write_checkpoint(directory: str | os.PathLike, state: RunState, *, token: st
                      n_iter: int) -> Path:
     """Write ``state`` atomically (tmp file + ``os.replace``)."""
     path = checkpoint_path(directory, state.seed)
-    path.parent.mkdir(parents=True, exist_ok=True)
     payload = {"version": CHECKPOINT_VERSION, "token": token, "settings": settings_key, "n_iter": n_iter}
     payload.update(state.to_dict())
-    fd, tmp = tempfile.mkstemp(prefix=f".run_{state.seed}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as f:
-            json.dump(payload, f, allow_nan=False)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
-    return path
+    return write_json(path, payload, indent=None)
 
 
 def read_checkpoint(directory: str | os.PathLike, seed: int, *, token: str, settings_key: dict,
