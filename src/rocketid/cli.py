@@ -56,7 +56,7 @@ import click
 import numpy as np
 
 from .cases import ra66, ra66_times, ra66_truth
-from .cases.files import load_model_file
+from .cases.files import call_hook, load_model_file
 from .data import Measurements, read_csv
 from . import output
 from .errors import ModelError, RocketidError, SettingsError
@@ -132,9 +132,19 @@ def load_model(name_or_path: str) -> ModelSource:
     spec, module = load_model_file(key)
     truth = spec.guess
     if callable(getattr(module, "truth", None)):
-        truth = spec.parameter_vector(module.truth(spec))
+        value = call_hook(key, module, "truth", spec)
+        try:
+            truth = spec.parameter_vector(value)
+        except RocketidError as exc:
+            raise ModelError(f"model file {key!r}: truth(spec) returned an unusable value: {exc}") from None
     if callable(getattr(module, "sample_times", None)):
-        times = np.asarray(module.sample_times(), dtype=float).ravel()
+        value = call_hook(key, module, "sample_times")
+        try:
+            times = np.asarray(value, dtype=float).ravel()
+        except (TypeError, ValueError):
+            raise ModelError(f"model file {key!r}: sample_times() must return numbers, got {value!r:.60}") from None
+        if times.size == 0 or not np.all(np.isfinite(times)) or np.any(np.diff(times) <= 0):
+            raise ModelError(f"model file {key!r}: sample_times() must return finite, strictly increasing times")
     else:
         times = np.linspace(spec.t0, spec.tf, 1001)
     return ModelSource(spec, key, truth, times)
@@ -433,7 +443,8 @@ def main():
 @click.option("--out", "out", required=True, type=click.Path(dir_okay=False), metavar="DATA.csv",
               help="CSV file to write (columns t and one per output).")
 @model_option
-@click.option("--seed", default=0, show_default=True, type=int, help="Seed of the measurement noise.")
+@click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0),
+              help="Seed of the measurement noise (a non-negative integer).")
 @click.option("--no-noise", is_flag=True, help="Write the noise-free outputs.")
 @click.option("--param", "params", multiple=True, type=NameValue(float), metavar="NAME=VALUE",
               help="Override a true parameter value (repeatable), e.g. --param CL=0.12.")

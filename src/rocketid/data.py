@@ -22,7 +22,12 @@ import numpy as np
 from .errors import DataError
 from .output import write_csv
 
-__all__ = ["Channel", "Measurements", "read_csv"]
+__all__ = ["Channel", "Measurements", "read_csv", "MAX_VALUE", "SIGMA_RANGE"]
+
+#: Largest magnitude of a measured value: squares of larger values overflow a double.
+MAX_VALUE = 1e150
+#: Noise standard deviations whose weight 1/sigma^2 is a normal, finite double.
+SIGMA_RANGE = (1e-150, 1e150)
 
 
 @dataclass(frozen=True)
@@ -60,6 +65,11 @@ class Channel:
         if bad.size:
             raise DataError(f"channel {self.name!r}: value is NaN or infinite at t = {t[bad[0]]:g} "
                             f"(sample {bad[0]}, {bad.size} in all); remove those rows or fill them")
+        bad = np.flatnonzero(np.abs(y) > MAX_VALUE)
+        if bad.size:
+            raise DataError(f"channel {self.name!r}: value {y[bad[0]]:g} at t = {t[bad[0]]:g} is out of scale "
+                            f"(|value| > {MAX_VALUE:g}: its square overflows in a least-squares fit); check the "
+                            "units of the data")
         dt = np.diff(t)
         if np.any(dt == 0):
             i = int(np.flatnonzero(dt == 0)[0])
@@ -76,6 +86,10 @@ class Channel:
                 raise DataError(f"channel {self.name!r}: sigma must be a number, got {self.sigma!r}") from None
             if not (sigma > 0 and math.isfinite(sigma)):
                 raise DataError(f"channel {self.name!r}: sigma must be positive and finite, got {self.sigma}")
+            if not (SIGMA_RANGE[0] <= sigma <= SIGMA_RANGE[1]):
+                raise DataError(f"channel {self.name!r}: sigma = {sigma:g} is out of scale (the weight 1/sigma^2 "
+                                f"must be a finite positive number: {SIGMA_RANGE[0]:g} <= sigma <= "
+                                f"{SIGMA_RANGE[1]:g}); check its units")
             object.__setattr__(self, "sigma", sigma)
         t.flags.writeable = False
         y.flags.writeable = False
@@ -232,7 +246,10 @@ def read_csv(path: str | os.PathLike, channels: Sequence[str] = ("x", "h", "v"),
                 raise DataError(f"{path}, line {line}, column {wanted[key]!r}: {cell!r} is not a number{hint}") from None
     if not rows:
         raise DataError(f"{path}: no data rows")
-    return Measurements.from_arrays(data[time_column], {c: data[c] for c in channels}, sigma)
+    try:
+        return Measurements.from_arrays(data[time_column], {c: data[c] for c in channels}, sigma)
+    except DataError as exc:
+        raise DataError(f"{path}: {exc}") from None
 
 
 def _decode(path: Path) -> str:

@@ -239,6 +239,8 @@ def simulate_measurements(spec: ModelSpec, p: Sequence[float] | Mapping | None =
     -------
     Measurements
     """
+    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0):
+        raise SettingsError(f"seed must be a non-negative integer or None, got {seed!r}")
     traj = simulate(spec, p, times, rtol=rtol, atol=atol)
     if not traj.success:
         raise RocketidError(f"cannot make measurements: {traj.message}")

@@ -31,6 +31,7 @@ from .data import Measurements
 from .errors import DataError, ModelError, SettingsError, SolverError
 from .model import ModelSpec
 from .nlp import CollocationNLP
+from .output import finite_or_none
 
 __all__ = ["IPOPT_OPTIONS", "check_ipopt_options", "NLPSolution", "solve_nlp", "EstimationResult",
            "estimate", "prepare", "default_mesh", "Prepared"]
@@ -302,6 +303,9 @@ def prepare(spec: ModelSpec, data: Measurements, *, mesh: Mesh | None = None) ->
     if not isinstance(data, Measurements):
         raise DataError(f"expected Measurements (rocketid.data.read_csv or Measurements.from_arrays), got "
                         f"{type(data).__name__}")
+    if mesh is not None and not isinstance(mesh, Mesh):
+        raise SettingsError(f"mesh must be a Mesh (for example rocketid.default_mesh(spec, K=4)), got "
+                            f"{type(mesh).__name__} {mesh!r}")
     t0 = time.perf_counter()
     gen = generate(spec)
     mesh = mesh if mesh is not None else default_mesh(spec)
@@ -408,7 +412,8 @@ class EstimationResult:
     @cached_property
     def rms(self) -> dict[str, float]:
         """Root-mean-square residual per channel."""
-        return {k: float(np.sqrt(np.mean(r ** 2))) for k, r in self.residuals.items()}
+        with np.errstate(over="ignore", invalid="ignore"):
+            return {k: float(np.sqrt(np.mean(r ** 2))) for k, r in self.residuals.items()}
 
     def active_bounds(self, rtol: float = 1e-6) -> list[tuple[sp.Symbol, str]]:
         """Parameters at (or within ``rtol`` of the span of) a bound."""
@@ -459,17 +464,18 @@ class EstimationResult:
         return "\n".join(lines)
 
     def to_dict(self) -> dict:
-        """A JSON-ready dictionary (``success``, ``parameters``, ``objective``, ...)."""
+        """A JSON-ready dictionary (``success``, ``parameters``, ``objective``, ...);
+        a number that is not finite is ``None`` (the notes say why)."""
         return {
             "model": self.spec.name,
             "success": bool(self.success),
             "status": self.status,
             "message": self.message,
-            "parameters": {str(k): float(v) for k, v in self.parameters.items()},
-            "objective": float(self.objective),
-            "chi2_per_dof": float(self.chi2_per_dof),
+            "parameters": {str(k): finite_or_none(v) for k, v in self.parameters.items()},
+            "objective": finite_or_none(self.objective),
+            "chi2_per_dof": finite_or_none(self.chi2_per_dof),
             "iterations": int(self.iterations),
-            "rms": self.rms,
+            "rms": {k: finite_or_none(v) for k, v in self.rms.items()},
             "n_data": int(self.n_data),
             "mesh": {"n_elements": int(self.prepared.transcription.mesh.n_elements),
                      "K": int(self.prepared.transcription.mesh.K)},
@@ -509,6 +515,7 @@ def estimate(spec: ModelSpec, data: Measurements, *, guess: Mapping | Sequence[f
         ``success`` is False (with a note) when IPOPT fails; never raises for
         a non-converged solve.
     """
+    check_determined(spec, data)
     if prepared is None:
         prepared = prepare(spec, data, mesh=mesh)
     nlp = prepared.nlp
@@ -533,9 +540,37 @@ def estimate(spec: ModelSpec, data: Measurements, *, guess: Mapping | Sequence[f
         x0 = nlp.initial_x(S, p0)
     sol = solve_nlp(nlp, x0, options=options, warm=warm)
     p = spec.parameter_vector(nlp.transform.P @ sol.x[nlp.n_states_vars:] + nlp.transform.c)
-    if not np.all(np.isfinite(sol.x)):
+    finite = bool(np.all(np.isfinite(sol.x)))
+    objective = sol.objective
+    if not finite:
         notes.append("the solver returned non-finite values")
+    else:
+        with np.errstate(over="ignore", invalid="ignore"):
+            objective = float(nlp.objective(sol.x))  # IPOPT reports 0 when it met an invalid number
+        if not math.isfinite(objective):
+            finite = False
+            notes.append("the objective is not finite at the returned point: the data are far out of scale for the "
+                         "model and sigma (check the units of the data and of --sigma)")
     return EstimationResult(
-        success=sol.success and bool(np.all(np.isfinite(sol.x))), status=sol.status, message=sol.message, p=p,
-        objective=sol.objective, iterations=sol.iterations, x=sol.x, solution=sol, prepared=prepared,
+        success=sol.success and finite, status=sol.status, message=sol.message, p=p,
+        objective=objective, iterations=sol.iterations, x=sol.x, solution=sol, prepared=prepared,
         timings={"setup_s": prepared.setup_s, "solve_s": sol.solve_s}, notes=tuple(notes))
+
+
+def check_determined(spec: ModelSpec, data: Measurements) -> None:
+    """Refuse a fit with no more measured values than estimated parameters.
+
+    Raises
+    ------
+    DataError
+        The data's values of the model's outputs are at most the number of
+        parameters (the fit would pass through them, and chi2/dof is undefined).
+    """
+    if not isinstance(data, Measurements) or not isinstance(spec, ModelSpec):
+        return  # prepare() names the wrong type
+    n = sum(c.times.size for c in data.channels if c.name in spec.output_names)
+    n_p = len(spec.parameters)
+    if n <= n_p:
+        raise DataError(f"the data have {n} values of {', '.join(spec.output_names)} but model {spec.name!r} "
+                        f"estimates {n_p} parameters; a fit needs more values than parameters (give more samples "
+                        "or fewer parameters)")
