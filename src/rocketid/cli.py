@@ -46,8 +46,11 @@ import json
 import math
 import os
 import pkgutil
+import signal
 import sys
+import threading
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterable, Mapping, Sequence
@@ -57,6 +60,7 @@ import numpy as np
 
 from .cases import ra66, ra66_times, ra66_truth
 from .cases.files import call_hook, load_model_file
+from .collocation.radau import MAX_DEGREE
 from .data import Measurements, read_csv
 from . import output
 from .errors import ModelError, RocketidError, SettingsError
@@ -71,6 +75,8 @@ __all__ = [
 
 EXIT_OK, EXIT_NOT_CONVERGED, EXIT_BAD_INPUT = 0, 1, 2
 _VERBOSE = "rocketid.verbose"
+_COMMAND = "rocketid.command"
+EXIT_INTERRUPTED = 130  # 128 + SIGINT; SIGTERM gives 143
 
 
 # ---------------------------------------------------------------------------
@@ -333,8 +339,8 @@ def data_options(f):
                      help="Noise standard deviation of an output (repeatable; default: the model's)."),
         click.option("--elements", "n_elements", type=click.IntRange(min=1), default=None, metavar="N",
                      help="About N finite elements (default: elements of about 1 s)."),
-        click.option("--K", "K", type=click.IntRange(min=1), default=4, show_default=True, metavar="K",
-                     help="Radau collocation points per element."),
+        click.option("--K", "K", type=click.IntRange(1, MAX_DEGREE), default=4, show_default=True, metavar="K",
+                     help=f"Radau collocation points per element (1-{MAX_DEGREE})."),
     ]):
         f = opt(f)
     return f
@@ -374,6 +380,29 @@ def _one_line(text: str) -> str:
     return " ".join(str(text).split())
 
 
+class Interrupted(KeyboardInterrupt):
+    """SIGTERM, raised like Ctrl-C so that the same clean-up runs (exit code 128 + 15)."""
+
+    signum = signal.SIGTERM
+
+
+@contextmanager
+def _terminate_as_interrupt():
+    """While a command runs, SIGTERM raises :class:`Interrupted` in the main thread:
+    worker pools are shut down and temporary files removed as on Ctrl-C."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum, frame):
+        raise Interrupted()
+    previous = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
 class RocketidGroup(click.Group):
     """A click group that loads commands lazily and turns errors into one line."""
 
@@ -401,9 +430,22 @@ class RocketidGroup(click.Group):
             raise click.ClickException(f"{module_name} does not define a click command {attr or 'command'!r}")
         return cmd
 
+    def resolve_command(self, ctx, args):
+        name, cmd, rest = super().resolve_command(ctx, args)
+        ctx.meta[_COMMAND] = cmd
+        return name, cmd, rest
+
     def invoke(self, ctx):
         try:
-            return super().invoke(ctx)
+            with _terminate_as_interrupt():
+                return super().invoke(ctx)
+        except KeyboardInterrupt as exc:
+            signum = getattr(exc, "signum", signal.SIGINT)
+            cmd = ctx.meta.get(_COMMAND)
+            resumable = cmd is not None and any(p.name == "resume" for p in cmd.params)
+            click.echo("\nError: interrupted" + ("; continue with --resume" if resumable else
+                                                 "; nothing was written in part"), err=True)
+            ctx.exit(128 + int(signum))
         except RocketidError as exc:
             if _verbose(ctx):
                 raise
@@ -457,6 +499,7 @@ def simulate_command(out, model, seed, no_noise, params):
     """
     from .simulate import simulate_measurements
 
+    output.check_file(out, "--out")
     src = load_model(model)
     spec = src.spec
     overrides = assignments(params, "--param")
@@ -464,10 +507,7 @@ def simulate_command(out, model, seed, no_noise, params):
     t0 = time.perf_counter()
     data = simulate_measurements(spec, p, src.times, seed=seed, noise=not no_noise)
     status(f"simulated {spec.name} in {time.perf_counter() - t0:.2f} s")
-    try:
-        path = data.to_csv(out)
-    except OSError as exc:
-        raise SettingsError(f"cannot write {out!r}: {exc.strerror or exc}") from None
+    path = data.to_csv(out)  # atomic: an interrupted write leaves the previous file or none
     noise = "noise-free" if no_noise else f"noise seed {seed}"
     click.echo(f"wrote {data.channels[0].times.size} samples of {', '.join(data.names)} ({noise}) to {path}")
 
@@ -498,6 +538,8 @@ def estimate_command(data_file, model, columns, time_column, sigmas, n_elements,
     from .solve import estimate
 
     options = ipopt_options(ipopt)
+    if out is not None:
+        output.check_file(out, "--out")
     src = load_model(model)
     spec = src.spec
     guess, mesh, data = fit_inputs(spec, data_file, guesses=guesses, columns=columns, time_column=time_column,

@@ -24,6 +24,7 @@ import click
 from ..cli import (EXIT_NOT_CONVERGED, BUILTIN_MODELS, ModelSource, NameValue, data_options, fit_inputs,
                    ipopt_options, load_model, status, verbose_option, write_json)
 from ..errors import SettingsError
+from ..output import check_file
 
 __all__ = ["command", "model_source"]
 
@@ -76,6 +77,9 @@ def command(data_file, model, scaling, threshold, n_estimated, at, guesses, colu
     except SettingsError as exc:
         raise SettingsError(f"--threshold: {exc}") from None
     options = ipopt_options(ipopt)
+    check_file(out, "--out")
+    if plot is not None:
+        check_file(plot, "--plot")
     src = model_source(model)
     spec = src.spec
     n_p = len(spec.parameters)
