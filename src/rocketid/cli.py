@@ -42,7 +42,6 @@ from __future__ import annotations
 
 import difflib
 import importlib
-import json
 import math
 import os
 import pkgutil
@@ -346,6 +345,49 @@ def data_options(f):
     return f
 
 
+#: Memory of the built NLP per finite element at K = 4 (MB), and the process's base (MB): measured on
+#: RA-66 with ``benchmarks``-style runs of prepare() (272 MB at 5000 elements, 613 MB at 20000).
+NLP_MB_PER_ELEMENT, BASE_MB = 0.025, 120.0
+
+
+def expected_memory_mb(mesh) -> float:
+    """Rough memory (MB) of the process once the NLP is built on ``mesh`` (IPOPT needs more)."""
+    return BASE_MB + NLP_MB_PER_ELEMENT * mesh.n_elements * (mesh.K + 1) / 5
+
+
+def mesh_size_warning(spec: ModelSpec, mesh, data: Measurements) -> str | None:
+    """A warning when ``mesh`` is far finer than the data resolve: more collocation points
+    than distinct sample times and over ten times the default mesh's elements."""
+    from .solve import default_mesh
+
+    points = mesh.n_elements * mesh.K
+    n_times = np.unique(np.concatenate([c.times for c in data.channels])).size
+    default = default_mesh(spec, K=mesh.K).n_elements
+    if points <= n_times or mesh.n_elements <= 10 * default:
+        return None
+    return (f"Warning: {mesh.n_elements} elements x K = {mesh.K} give {points} collocation points for {n_times} "
+            f"sample times, far finer than the data resolve (the default mesh has {default} elements). Expect "
+            f"about {expected_memory_mb(mesh):.0f} MB to build the NLP, several times that while IPOPT factorizes, "
+            "and a long solve; use fewer --elements")
+
+
+def prepare_verbosely(spec: ModelSpec, data: Measurements, mesh):
+    """:func:`rocketid.solve.prepare` with progress lines (code generation, NLP size) and
+    :func:`mesh_size_warning` (always shown) before the work."""
+    from .solve import prepare
+
+    warning = mesh_size_warning(spec, mesh, data)
+    if warning:
+        click.echo(warning, err=True)
+    status(f"building the NLP on {mesh.describe()} (about {expected_memory_mb(mesh):.0f} MB; the model's code is "
+           "generated on first use and cached)")
+    t0 = time.perf_counter()
+    prepared = prepare(spec, data, mesh=mesh)
+    status(f"built the NLP in {time.perf_counter() - t0:.2f} s ({prepared.nlp.n} variables, code "
+           f"{'from the cache' if prepared.codegen_cached else 'generated'})")
+    return prepared
+
+
 def fit_inputs(spec: ModelSpec, data_file, *, guesses, columns, time_column, sigmas, n_elements, K):
     """``(guess, mesh, data)`` from the options of a command that fits ``spec`` to DATA.csv
     (``--guess`` checked against the bounds, :func:`data_options`)."""
@@ -535,7 +577,7 @@ def estimate_command(data_file, model, columns, time_column, sigmas, n_elements,
     objective, iterations, timings, ...). Exit code 1 when IPOPT did not
     converge (the JSON is still written).
     """
-    from .solve import estimate
+    from .solve import check_determined, estimate
 
     options = ipopt_options(ipopt)
     if out is not None:
@@ -544,9 +586,11 @@ def estimate_command(data_file, model, columns, time_column, sigmas, n_elements,
     spec = src.spec
     guess, mesh, data = fit_inputs(spec, data_file, guesses=guesses, columns=columns, time_column=time_column,
                                    sigmas=sigmas, n_elements=n_elements, K=K)
-    status(f"read {data.n_samples} values of {', '.join(data.names)} from {data_file}; "
-           f"building and solving the NLP on {mesh.describe()}")
-    result = estimate(spec, data, guess=guess, mesh=mesh, options=options)
+    status(f"read {data.n_samples} values of {', '.join(data.names)} from {data_file}")
+    check_determined(spec, data)
+    prepared = prepare_verbosely(spec, data, mesh)
+    status("solving with IPOPT")
+    result = estimate(spec, data, guess=guess, prepared=prepared, options=options)
     click.echo(result.summary())
     if out is not None:
         path = write_json(out, result.to_dict())

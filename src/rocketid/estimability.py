@@ -19,7 +19,6 @@ carry no statistical uncertainty, only the bias of their fixed values).
 from __future__ import annotations
 
 import enum
-import json
 import math
 import time
 from dataclasses import dataclass

@@ -14,7 +14,6 @@ initialize the states from a simulation at the initial guess, solve.
 from __future__ import annotations
 
 import difflib
-import json
 import math
 import time
 import warnings

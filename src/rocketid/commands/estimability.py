@@ -22,7 +22,7 @@ from dataclasses import replace
 import click
 
 from ..cli import (EXIT_NOT_CONVERGED, BUILTIN_MODELS, ModelSource, NameValue, data_options, fit_inputs,
-                   ipopt_options, load_model, status, verbose_option, write_json)
+                   ipopt_options, load_model, prepare_verbosely, status, verbose_option, write_json)
 from ..errors import SettingsError
 from ..output import check_file
 
@@ -69,7 +69,7 @@ def command(data_file, model, scaling, threshold, n_estimated, at, guesses, colu
     """
     from ..estimability import analyze, select_np
     from ..sensitivity import sensitivity_at, sensitivity_of
-    from ..solve import estimate, prepare
+    from ..solve import estimate
 
     # every setting is checked before any work is done
     try:
@@ -91,7 +91,7 @@ def command(data_file, model, scaling, threshold, n_estimated, at, guesses, colu
     status(f"read {data.n_samples} values of {', '.join(data.names)} from {data_file}; collocating on "
            f"{mesh.describe()}")
     t0 = time.perf_counter()
-    prepared = prepare(spec, data, mesh=mesh)
+    prepared = prepare_verbosely(spec, data, mesh)
     extra_notes = []
     fit_info = None
     if at == "fit":

@@ -14,7 +14,6 @@ the Ljung-Box p-value of the worst channel beside it.
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
