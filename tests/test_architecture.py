@@ -23,6 +23,7 @@ SRC = Path(__file__).resolve().parents[1] / "src" / PACKAGE
 LAYERS: list[tuple[str, ...]] = [
     ("errors",),
     ("output",),         # atomic writes and output locations: every file rocketid writes
+    ("summary",),        # the Summary value every stage's results render (text, HTML)
     ("data",),
     ("model",),
     ("simulate",),

@@ -17,9 +17,9 @@ import difflib
 import math
 import time
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
-from typing import Any, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 import sympy as sp
@@ -28,9 +28,10 @@ from .codegen import generate
 from .collocation.transcription import Mesh, Transcription, transcribe
 from .data import Measurements
 from .errors import DataError, ModelError, SettingsError, SolverError
-from .model import ModelSpec
-from .nlp import CollocationNLP
+from .model import ModelSpec, check_guess
+from .nlp import CollocationNLP, build_nlp
 from .output import finite_or_none
+from .summary import Section, Summary, Table
 
 __all__ = ["IPOPT_OPTIONS", "check_ipopt_options", "NLPSolution", "solve_nlp", "EstimationResult",
            "estimate", "prepare", "default_mesh", "Prepared"]
@@ -251,13 +252,7 @@ def default_mesh(spec: ModelSpec, K: int = 4, element_length: float | None = Non
     for a, b in zip(fam_bps[:-1], fam_bps[1:]):
         n = max(1, int(math.ceil((b - a) / h - 1e-9)))
         bounds.extend(np.linspace(a, b, n + 1)[1:])
-    bounds = np.array(bounds)
-    if refine_first > 0:
-        h0 = bounds[1] - bounds[0]
-        w = 4.0 ** np.arange(refine_first + 1, dtype=float)
-        cuts = bounds[0] + h0 * np.cumsum(w)[:-1] / w.sum()
-        bounds = np.concatenate([[bounds[0]], cuts, bounds[1:]])
-    return Mesh(bounds, K)
+    return Mesh(np.array(bounds), K).refine_first(refine_first)
 
 
 @dataclass(frozen=True)
@@ -309,7 +304,7 @@ def prepare(spec: ModelSpec, data: Measurements, *, mesh: Mesh | None = None) ->
     gen = generate(spec)
     mesh = mesh if mesh is not None else default_mesh(spec)
     tr = transcribe(spec, data, mesh)
-    nlp = CollocationNLP(tr, gen, data)
+    nlp = build_nlp(tr, gen, data)
     return Prepared(spec, data, tr, nlp, time.perf_counter() - t0, gen.cached)
 
 
@@ -335,6 +330,8 @@ class EstimationResult:
     timings : dict
         ``setup_s`` (model to ready NLP) and ``solve_s`` (the IPOPT call alone).
     notes : tuple of str
+    retried : bool
+        A warm-started solve failed and this is the cold solve that repeated it.
     """
 
     success: bool
@@ -348,6 +345,7 @@ class EstimationResult:
     prepared: Prepared
     timings: dict
     notes: tuple = ()
+    retried: bool = False
 
     @property
     def spec(self) -> ModelSpec:
@@ -425,29 +423,27 @@ class EstimationResult:
                 out.append((s, "upper"))
         return out
 
-    def summary(self) -> str:
+    def summary(self) -> Summary:
         """Fixed sections: problem, solver, parameters, fit; then numbered notes."""
         tr = self.prepared.transcription
-        lines = [f"rocketid estimation: {self.spec.name}",
-                 "=" * 60,
-                 "Problem",
-                 f"  mesh          : {tr.mesh.describe()}",
-                 f"  NLP           : {self.nlp.n} variables, {self.nlp.m} constraints, "
-                 f"{len(self.nlp.jacobianstructure()[0])} Jacobian and {len(self.nlp.hessianstructure()[0])} Hessian non-zeros",
-                 f"  data          : {self.n_data} values in {len(self.nlp.channel_names)} channels "
-                 f"({', '.join(self.nlp.channel_names)})",
-                 "Solver",
-                 f"  status        : {'converged' if self.success else 'FAILED'} ({self.status}: {self.message})",
-                 f"  iterations    : {self.iterations}",
-                 f"  time          : setup {self.timings['setup_s']:.3f} s, IPOPT {self.timings['solve_s']:.3f} s",
-                 "Parameters",
-                 f"  {'name':<10}{'estimate':>14}{'guess':>12}{'lower':>10}{'upper':>10}"]
-        for ps, v in zip(self.spec.parameters, self.p):
-            lines.append(f"  {str(ps.symbol):<10}{v:>14.6g}{ps.guess:>12.4g}{ps.lower:>10.3g}{ps.upper:>10.3g}")
-        lines += ["Fit",
-                  f"  objective J   : {self.objective:.6g}",
-                  f"  chi2 / dof    : {self.chi2_per_dof:.4f}  (2J / ({self.n_data} - {self.n_estimated}))",
-                  "  RMS residual  : " + ", ".join(f"{k} {v:.4g}" for k, v in self.rms.items())]
+        nlp = self.nlp
+        problem = Section("Problem", (
+            ("mesh", tr.mesh.describe()),
+            ("NLP", f"{nlp.n} variables, {nlp.m} constraints, {len(nlp.jacobianstructure()[0])} Jacobian and "
+                    f"{len(nlp.hessianstructure()[0])} Hessian non-zeros"),
+            ("data", f"{self.n_data} values in {len(nlp.channel_names)} channels ({', '.join(nlp.channel_names)})")))
+        solver = Section("Solver", (
+            ("status", f"{'converged' if self.success else 'FAILED'} ({self.status}: {self.message})"),
+            ("iterations", str(self.iterations)),
+            ("time", f"setup {self.timings['setup_s']:.3f} s, IPOPT {self.timings['solve_s']:.3f} s")))
+        parameters = Section("Parameters", (Table(
+            ("name", "estimate", "guess", "lower", "upper"),
+            [(str(ps.symbol), float(v), ps.guess, ps.lower, ps.upper) for ps, v in zip(self.spec.parameters, self.p)],
+            (None, ".6g", ".4g", ".3g", ".3g")),))
+        fit = Section("Fit", (
+            ("objective J", f"{self.objective:.6g}"),
+            ("chi2 / dof", f"{self.chi2_per_dof:.4f}  (2J / ({self.n_data} - {self.n_estimated}))"),
+            ("RMS residual", ", ".join(f"{k} {v:.4g}" for k, v in self.rms.items()))))
         notes = list(self.notes)
         if not self.success:
             notes.insert(0, f"IPOPT did not converge: {self.message.rstrip('.')}. The estimates are the last iterate, "
@@ -457,10 +453,7 @@ class EstimationResult:
         if self.success and self.chi2_per_dof > 1.5:
             notes.append(f"chi2/dof = {self.chi2_per_dof:.3g} is well above 1: the model does not fit to the noise "
                          "level (a missing effect or wrong sigma); see `rocketid diagnose`.")
-        if notes:
-            lines.append("Notes")
-            lines += [f"  [{i}] {n}" for i, n in enumerate(notes, 1)]
-        return "\n".join(lines)
+        return Summary(f"rocketid estimation: {self.spec.name}", (problem, solver, parameters, fit), notes)
 
     def to_dict(self) -> dict:
         """A JSON-ready dictionary (``success``, ``parameters``, ``objective``, ...);
@@ -520,40 +513,85 @@ def estimate(spec: ModelSpec, data: Measurements, *, guess: Mapping | Sequence[f
     nlp = prepared.nlp
     notes = []
     p0 = spec.parameter_vector(guess)
-    lo, hi = spec.lower, spec.upper
-    bad = [(str(s), v, a, b) for s, v, a, b in zip(spec.parameter_symbols, p0, lo, hi) if not a <= v <= b]
-    if bad:
-        s, v, a, b = bad[0]
-        raise ModelError(f"the guess {v:g} of parameter {s} lies outside its bounds [{a:g}, {b:g}]; "
-                         "move the guess inside or widen the bounds")
+    check_guess(spec, p0)
     warm = None
     if warm_start is not None:
         x0 = warm_start.x.copy()
         warm = warm_start.solution
         if guess is not None:
-            x0[nlp.n_states_vars:] = p0
+            x0 = nlp.layout.with_reduced(x0, p0)  # (7.5): the reduced parameters are p
     else:
         S, note = prepared.initial_states(p0)
         if note:
             notes.append(note)
         x0 = nlp.initial_x(S, p0)
+    return fit_nlp(prepared, nlp, x0, options=options, warm=warm, setup_s=prepared.setup_s, notes=notes)
+
+
+def fit_nlp(prepared: Prepared, nlp: CollocationNLP, x0: np.ndarray, *, options: Mapping[str, Any] | None = None,
+            warm: NLPSolution | None = None, cold_start: Callable[[], np.ndarray] | None = None,
+            setup_s: float = 0.0, notes: Sequence[str] = ()) -> EstimationResult:
+    """The one fitting path: solve ``nlp`` from ``x0`` and make the :class:`EstimationResult`.
+
+    Parameters
+    ----------
+    prepared : Prepared
+        The model collocated against the data; the result holds it with ``nlp``.
+    nlp : CollocationNLP
+        The problem: ``prepared.nlp`` (7.5) or a transformed one (7.9).
+    x0 : ndarray, shape (nlp.n,)
+    options : mapping, optional
+        IPOPT options.
+    warm : NLPSolution, optional
+        Multipliers to warm-start IPOPT.
+    cold_start : callable, optional
+        ``cold_start() -> x0``: a warm-started solve that fails is repeated once from
+        this start without multipliers (the result's ``retried`` is then True).
+    setup_s : float
+        The set-up time to report.
+    notes : sequence of str
+        Notes gathered before the solve.
+
+    Returns
+    -------
+    EstimationResult
+        ``success`` is False when IPOPT fails or returns non-finite values.
+    """
+    notes = list(notes)
     sol = solve_nlp(nlp, x0, options=options, warm=warm)
-    p = spec.parameter_vector(nlp.transform.P @ sol.x[nlp.n_states_vars:] + nlp.transform.c)
+    retried = False
+    if warm is not None and cold_start is not None and not sol.success:
+        sol = solve_nlp(nlp, cold_start(), options=options)
+        retried = True
+        notes.append("the warm-started solve failed and was repeated from a simulation")
+    return result_of(prepared, nlp, sol, setup_s=setup_s, notes=notes, retried=retried)
+
+
+def result_of(prepared: Prepared, nlp: CollocationNLP, sol: NLPSolution, *, setup_s: float = 0.0,
+              notes: Sequence[str] = (), retried: bool = False) -> EstimationResult:
+    """The :class:`EstimationResult` of a solution ``sol`` of ``nlp`` (no solve)."""
+    notes = list(notes)
     finite = bool(np.all(np.isfinite(sol.x)))
     objective = sol.objective
     if not finite:
         notes.append("the solver returned non-finite values")
-    else:
+    elif sol.status == INVALID_NUMBER or not math.isfinite(objective):
         with np.errstate(over="ignore", invalid="ignore"):
             objective = float(nlp.objective(sol.x))  # IPOPT reports 0 when it met an invalid number
         if not math.isfinite(objective):
             finite = False
             notes.append("the objective is not finite at the returned point: the data are far out of scale for the "
                          "model and sigma (check the units of the data and of --sigma)")
+    if prepared.nlp is not nlp:
+        prepared = replace(prepared, nlp=nlp)
     return EstimationResult(
-        success=sol.success and finite, status=sol.status, message=sol.message, p=p,
+        success=sol.success and finite, status=sol.status, message=sol.message, p=nlp.layout.parameters(sol.x),
         objective=objective, iterations=sol.iterations, x=sol.x, solution=sol, prepared=prepared,
-        timings={"setup_s": prepared.setup_s, "solve_s": sol.solve_s}, notes=tuple(notes))
+        timings={"setup_s": setup_s, "solve_s": sol.solve_s}, notes=tuple(notes), retried=retried)
+
+
+#: IPOPT's status "Invalid_Number_Detected" (NaN or infinity from the NLP's functions).
+INVALID_NUMBER = -13
 
 
 def check_determined(spec: ModelSpec, data: Measurements) -> None:
