@@ -133,7 +133,7 @@ def test_eta_fallback_without_the_sampling_stage(monkeypatch):
     ref, _ = cmp.criterion_terms(res, sig)
     monkeypatch.setattr(builtins, "__import__", fake)
     got, source = cmp.criterion_terms(res, sig)
-    assert "METHOD.md section 5" in source and "not found" in source
+    assert "eta (7.10)" in source and "not found" in source
     for k in ("eta", "|s1|", "|k1-3|", "|s1-s2|", "|k1-k2|"):
         assert got[k] == pytest.approx(ref[k], rel=1e-10)
 

@@ -7,7 +7,10 @@
 
 Exit codes: 0 success; 1 the command ran but its result is not valid (IPOPT
 did not converge: the JSON is still written); 2 bad input (a missing file or
-column, a malformed ``NAME=VALUE``, an unknown option). Every
+column, a malformed ``NAME=VALUE``, an unknown option, an output location
+that cannot be written: checked before any work); 130 interrupted (Ctrl-C;
+"continue with --resume" where a command resumes), 143 terminated (SIGTERM).
+Every file is written atomically (:mod:`rocketid.output`). Every
 :class:`~rocketid.errors.RocketidError` and every usage error is reported as
 one ``Error: ...`` line on stderr; ``--verbose`` shows the traceback instead.
 
@@ -435,7 +438,8 @@ def main():
     """rocketid: aerodynamic coefficients of launch vehicles from trajectory data.
 
     Run `rocketid COMMAND --help` for a command's options. Exit codes: 0 success,
-    1 the solver did not converge (results still written), 2 bad input.
+    1 the solver did not converge (results still written), 2 bad input,
+    130 interrupted (Ctrl-C), 143 terminated (SIGTERM).
     """
 
 

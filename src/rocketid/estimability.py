@@ -6,7 +6,7 @@ scaled reduced Hessian ``D H_r D = V diag(lambda_1 >= ... >= lambda_n) V^T``
 is decomposed; the transformed parameters are ``q = V^T D^-1 p`` and
 ``p = D V q = D V1 q1 + D V2 q2`` (7.8). The modified E-optimal criterion
 keeps ``np`` = the largest ``k`` with ``lambda_1 / lambda_k <= threshold``
-(METHOD.md section 4); ``q1`` (the first ``np`` directions) is estimated and
+(docs/estimability.md); ``q1`` (the first ``np`` directions) is estimated and
 ``q2`` fixed (7.9). The bounds on ``p`` become linear inequalities on ``q1``,
 handled exactly by IPOPT.
 

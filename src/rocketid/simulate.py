@@ -4,7 +4,7 @@ This is the source of truth data. It shares nothing with the collocation
 code used to estimate: it integrates the model's equations, solved for the
 derivatives, with ``scipy.integrate.solve_ivp``.
 
-Two details make tight tolerances meaningful on ascent models (METHOD.md
+Two details make tight tolerances meaningful on ascent models (docs/design.md
 section 1):
 
 * the integrator works on deviations from the initial state, ``s - s(t0)``,

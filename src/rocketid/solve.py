@@ -241,7 +241,7 @@ def default_mesh(spec: ModelSpec, K: int = 4, element_length: float | None = Non
     Radau points; ``refine_first`` splits the first element geometrically.
 
     RA-66 gets 66 elements of 1 s with K = 4: the collocation error at the true
-    parameters is 1.6e-3 m, within METHOD.md's 0.01 m (K = 3 gives 0.045 m,
+    parameters is 1.6e-3 m, within the required 0.01 m (K = 3 gives 0.045 m,
     and grading the first element does not bring K = 3 under 0.01 m; see
     docs/accuracy.md).
     """

@@ -43,7 +43,7 @@ from .summary import Table as SummaryTable
 
 __all__ = ["StudySettings", "StudyResult", "Table", "reproduce", "CHAPTER", "run_seeds"]
 
-#: The chapter's published figures (METHOD.md section 6).
+#: The chapter's published figures (section 7.3; docs/reproduction.md).
 CHAPTER = {
     "np": 5,
     "mean_estimates": {"CD0": 0.0184218, "CD1": 0.625591, "CD2": 0.463646, "CD3": 0.493976, "CD4": 0.508575,

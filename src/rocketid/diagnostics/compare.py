@@ -221,7 +221,7 @@ def criterion_terms(residuals: Mapping[str, np.ndarray], sigma: Mapping[str, flo
     """eta (7.10) and its terms over all channels, each divided by its sigma.
 
     Uses :func:`rocketid.sampling.criterion.statistic_criterion` when that
-    module is installed; otherwise the same formula (METHOD.md section 5) is
+    module is installed; otherwise the same formula (docs/sampling.md, eta (7.10)) is
     computed here. Returns ``({"eta", "|s1|", "|k1-3|", "|s1-s2|", "|k1-k2|",
     "s1", "k1", "s2", "k2"}, source)``.
     """
@@ -238,7 +238,7 @@ def criterion_terms(residuals: Mapping[str, np.ndarray], sigma: Mapping[str, flo
     s2, k2 = z3 / z2 ** 1.5, z4 / z2 ** 2
     terms = {"|s1|": abs(s1), "|k1-3|": abs(k1 - 3), "|s1-s2|": abs(s1 - s2), "|k1-k2|": abs(k1 - k2)}
     return {"eta": sum(terms.values()), **terms, "s1": s1, "k1": k1, "s2": s2, "k2": k2}, \
-        "rocketid.diagnostics.compare (METHOD.md section 5; rocketid.sampling.criterion not found)"
+        "rocketid.diagnostics.compare (eta (7.10); rocketid.sampling.criterion not found)"
 
 
 # ---------------------------------------------------------------------------

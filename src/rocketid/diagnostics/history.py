@@ -7,7 +7,7 @@ of freedom, the statistic criterion eta (7.10), the RMS residual per channel
 and, against the previous revision on the same data, the likelihood-ratio
 test (when the new model nests the previous one) and the change of BIC.
 
-eta comes from :func:`rocketid.sampling.criterion.criterion_of` (METHOD.md
+eta comes from :func:`rocketid.sampling.criterion.criterion_of` (docs/sampling.md
 section 5). eta tests skewness and kurtosis, not whiteness: the table shows
 the Ljung-Box p-value of the worst channel beside it.
 """

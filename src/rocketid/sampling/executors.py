@@ -178,22 +178,35 @@ class DaskExecutor:
             raise SettingsError("the dask cluster has no workers")
         self.workers = n
         self.recipe = client.scatter(recipe, broadcast=True, hash=False)
+        self._outstanding: set = set()
 
     def submit(self, seed: int, k0: int, k1: int):
-        return self.client.submit(evaluate_batch, self.recipe, seed, k0, k1, pure=False)
+        future = self.client.submit(evaluate_batch, self.recipe, seed, k0, k1, pure=False)
+        self._outstanding.add(future)
+        return future
 
     def wait(self, handles) -> list:
         done, _ = self._distributed.wait(list(handles), return_when="FIRST_COMPLETED")
         return list(done)
 
     def result(self, handle) -> BatchResult:
+        self._outstanding.discard(handle)
         return handle.result()
 
     def cancel(self, handle) -> bool:
-        handle.cancel()
-        return True
+        """False: a dask task may already run on a worker, and a cancel request does not
+        stop it. The coordinator then waits for its result and counts it as waste, so that
+        no task still runs when :func:`~rocketid.sampling.sample` returns (a task still
+        running while its cluster shut down made that shutdown fail now and then)."""
+        return False
 
     def close(self, cancel: bool = False) -> None:
+        if cancel and self._outstanding:
+            try:
+                self.client.cancel(list(self._outstanding), force=True)
+            except Exception:  # pragma: no cover - a closed or lost client
+                pass
+        self._outstanding.clear()
         try:
             self.recipe.release()  # the scattered recipe leaves the workers' memory
         except Exception:  # pragma: no cover - a closed or lost client
