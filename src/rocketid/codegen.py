@@ -268,11 +268,7 @@ class GeneratedModel:
 
     def write(self, folder: str | os.PathLike) -> Path:
         """Write the generated source into ``folder``; returns the file path."""
-        folder = Path(folder)
-        folder.mkdir(parents=True, exist_ok=True)
-        target = folder / self.path.name
-        target.write_text(self.source)
-        return target
+        return write_text(Path(folder) / self.path.name, self.source)
 
     def print(self) -> None:
         """Print the generated source."""

@@ -273,8 +273,16 @@ def evaluate_draw(ctx: WorkerContext, seed: int, draw: int) -> DrawOutcome:
     try:
         fit = estimate_q1(ctx.prepared, est, q2, warm_start=ctx.reference, options=recipe.settings.ipopt_options)
     except _FAILURE_EXCEPTIONS as exc:
-        fit, message = None, f"{type(exc).__name__}: {exc}"
-    eta, moments = math.nan, (math.nan,) * 4
+        return draw_outcome(seed, draw, None, q2, p_trial, time.perf_counter() - t0,
+                            error=f"{type(exc).__name__}: {exc}")
+    return draw_outcome(seed, draw, fit, q2, p_trial, time.perf_counter() - t0)
+
+
+def draw_outcome(seed: int, draw: int, fit: EstimationResult | None, q2, p_trial, solve_s: float, *,
+                 error: str = "") -> DrawOutcome:
+    """The :class:`DrawOutcome` of a (7.9) fit (steps 6-7: eta of its residuals), or of a
+    solve that raised (``fit`` None, ``error`` the reason)."""
+    eta, moments, message = math.nan, (math.nan,) * 4, error
     if fit is not None:
         message = fit.message
         if fit.success:
@@ -283,11 +291,12 @@ def evaluate_draw(ctx: WorkerContext, seed: int, draw: int) -> DrawOutcome:
             if not math.isfinite(eta):
                 message = f"eta is not finite ({fit.message})"
     ok = fit is not None and fit.success and math.isfinite(eta)
+    n_p = len(p_trial)
     return DrawOutcome(int(seed), int(draw), bool(ok), None if fit is None else int(fit.status), message, float(eta),
                        tuple(map(float, moments)), math.nan if fit is None else float(fit.objective),
                        0 if fit is None else int(fit.iterations),
-                       (math.nan,) * p_trial.size if fit is None else tuple(map(float, fit.p)),
-                       tuple(map(float, q2)), tuple(map(float, p_trial)), time.perf_counter() - t0,
+                       (math.nan,) * n_p if fit is None else tuple(map(float, fit.p)),
+                       tuple(map(float, q2)), tuple(map(float, p_trial)), float(solve_s),
                        fit is not None and fit.retried)
 
 
