@@ -40,6 +40,7 @@ import sympy as sp
 from sympy.printing.numpy import NumPyPrinter
 
 from .model import ModelSpec
+from .output import write_text
 from .symbolic import SymbolicModel, derive
 
 __all__ = ["GeneratedModel", "OutputFunction", "generate", "generate_source", "cache_dir"]
@@ -280,11 +281,7 @@ class GeneratedModel:
 
     def write(self, folder: str | os.PathLike) -> Path:
         """Write the generated source into ``folder``; returns the file path."""
-        folder = Path(folder)
-        folder.mkdir(parents=True, exist_ok=True)
-        target = folder / self.path.name
-        target.write_text(self.source)
-        return target
+        return write_text(Path(folder) / self.path.name, self.source)
 
     def print(self) -> None:
         """Print the generated source."""
@@ -328,9 +325,6 @@ def generate(spec: ModelSpec, *, use_cache: bool = True) -> GeneratedModel:
         folder = Path(tempfile.mkdtemp(prefix="rocketid_gen_"))
         modname = f"{modname}_{folder.name}"
         path = folder / f"{modname}.py"
-    folder.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(f".tmp{os.getpid()}")
-    tmp.write_text(source)
-    os.replace(tmp, path)  # atomic: concurrent processes never read half a file
+    write_text(path, source)  # atomic: concurrent processes never read half a file
     module = _load(path, modname)
     return GeneratedModel(source, path, module, False)
