@@ -1,0 +1,177 @@
+"""Run a study case: its data (generated once, cached as CSV), the diagnosis, the score.
+
+The diagnosis is run the way a user runs it: ``rocketid.diagnostics.diagnose(csv, model)`` with
+the model a built-in name or the vehicle's model file. What it concluded is read from its final
+model (``report.final``: effects in the order added, parameters with value and std, chi2/dof,
+fits-to-noise, verdict) and scored against the truth:
+
+``holds_truth``   every true effect's catalogue name is among the final effects
+``wrong``         final effects that are not in the truth
+``noise``         the final chi2/dof is below :data:`NOISE_LIMIT`
+``sizes``         each scalar effect's estimate against its true value
+``passed``        clean data: no effect added; otherwise holds_truth, no wrong effect, the noise
+                  reached, verdict "explained" and the scalar sizes within :data:`SIZE_TOL`
+``wrong_explained``  the cardinal sin: verdict "explained" with a wrong effect in the final model
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import time
+import warnings
+from dataclasses import asdict
+from pathlib import Path
+
+import rocketid as ri
+from rocketid.data import read_csv
+
+from . import truth as T
+from .cases import Case
+from .paths import STAGE30, cache_dir
+
+#: chi2/dof at the noise: 19 800 samples give sd(chi2/dof) = 0.010; 4 sd plus a 1 % allowance for
+#: the collocation's discretization error on these meshes (clean fits: 0.98-1.01)
+NOISE_LIMIT = 1.05
+#: a scalar effect's estimate agrees with the truth within this fraction (or 3 std)
+SIZE_TOL = 0.25
+VERDICTS = ("nothing missing", "explained", "partly explained", "not explained by the catalogue")
+
+
+def _data_key(case: Case) -> str:
+    src = (Path(T.__file__).read_bytes() + STAGE30.read_bytes()
+           + json.dumps({"vehicle": case.vehicle, "effects": case.effects, "seed": case.seed},
+                        sort_keys=True).encode())
+    return hashlib.sha256(src).hexdigest()[:16]
+
+
+def case_data(case: Case) -> Path:
+    """The case's measurements as a CSV file (t, x, h, v), made once and cached by content."""
+    path = cache_dir() / f"{case.id}-{_data_key(case)}.csv"
+    if not path.is_file():
+        meas = T.measure(T.VEHICLES[case.vehicle](), case.effects, case.seed)
+        tmp = path.with_suffix(".tmp.csv")
+        meas.to_csv(tmp)
+        tmp.replace(path)
+    return path
+
+
+def model_of(case: Case) -> str:
+    """What the user passes as the model: a built-in name or the model file's path."""
+    return str(STAGE30) if case.vehicle == "stage30" else case.vehicle
+
+
+def small_mesh(case: Case):
+    """The coarsest mesh the study uses (2 s elements, graded first element)."""
+    from rocketid.diagnostics.api import resolve_model
+    spec, _ = resolve_model(model_of(case))
+    return ri.default_mesh(spec, element_length=2.0, refine_first=3)
+
+
+# -------------------------------------------------------------------------------------------------
+# what the diagnosis concluded
+# -------------------------------------------------------------------------------------------------
+
+
+def _as_dict(final) -> dict:
+    if isinstance(final, dict):
+        return final
+    if hasattr(final, "to_dict"):
+        return final.to_dict()
+    return {k: getattr(final, k) for k in ("effects", "parameters", "chi2_per_dof", "fits_to_noise", "verdict")}
+
+
+def final_of(report) -> dict:
+    """``{"effects", "parameters": {name: {"value", "std"}}, "chi2_per_dof", "fits_to_noise",
+    "verdict", "api"}`` of a diagnosis.
+
+    ``report.final`` when the diagnosis has one; otherwise (the diagnosis before issue 8) it is
+    read from the best refit: "explained" when that refit was "confirmed", "nothing missing" when
+    the base fit passed every check and no candidate was significant.
+    """
+    final = getattr(report, "final", None)
+    if final is not None:
+        d = _as_dict(final)
+        params = {}
+        for k, v in dict(d.get("parameters", {})).items():
+            if isinstance(v, dict):
+                params[str(k)] = {"value": float(v["value"]), "std": float(v.get("std", math.nan))}
+            else:
+                params[str(k)] = {"value": float(getattr(v, "value", v)), "std": float(getattr(v, "std", math.nan))}
+        return {"effects": [str(e) for e in d["effects"]], "parameters": params,
+                "chi2_per_dof": float(d["chi2_per_dof"]), "fits_to_noise": bool(d["fits_to_noise"]),
+                "verdict": str(d["verdict"]), "api": "final"}
+    best = report.best
+    sig = [c.name for c in getattr(report.ranking, "candidates", []) if getattr(c, "significant", False)]
+    if best is not None and best.confirmed:
+        params = {k: {"value": float(v[0]), "std": float(v[1])} for k, v in best.effect_estimates.items()}
+        fits = bool(report.after.fits_to_noise) if report.after is not None else False
+        return {"effects": [report.effect_name(best)], "parameters": params, "chi2_per_dof": best.fit.chi2_per_dof,
+                "fits_to_noise": fits, "verdict": "explained", "api": "legacy (best confirmed refit)"}
+    verdict = "nothing missing" if (not report.fails and not sig) else "not explained by the catalogue"
+    return {"effects": [], "parameters": {}, "chi2_per_dof": report.fit.chi2_per_dof,
+            "fits_to_noise": bool(report.comparison.fits_to_noise), "verdict": verdict,
+            "api": "legacy (no confirmed refit)"}
+
+
+def _matches(found: str, true: str) -> bool:
+    """A final effect stands for a true one: the same catalogue name, or a refined variant of it
+    (``wind_refined``, ``wind (6 knots)``, ``thrust_level[t]`` ...)."""
+    f = found.strip()
+    return f == true or f.startswith(true + "_") or f.startswith(true + " ") or f.startswith(true + "[") \
+        or f.startswith(true + "(")
+
+
+def score(case: Case, final: dict) -> dict:
+    """Score a final model against the case's truth (see the module docstring)."""
+    effects = final["effects"]
+    true = case.true_names
+    holds = all(any(_matches(f, t) for f in effects) for t in true)
+    wrong = [f for f in effects if not any(_matches(f, t) for t in true)]
+    noise = final["chi2_per_dof"] < NOISE_LIMIT
+    sizes = {}
+    for par, value in case.expect.items():
+        est = final["parameters"].get(par)
+        if est is None:
+            sizes[par] = {"truth": value, "estimate": None, "std": None, "ok": False}
+            continue
+        v, s = est["value"], est["std"]
+        ok = abs(v - value) <= SIZE_TOL * abs(value) or (math.isfinite(s) and abs(v - value) <= 3 * s)
+        sizes[par] = {"truth": value, "estimate": v, "std": s, "ok": bool(ok)}
+    if case.clean:
+        passed = not effects
+    else:
+        passed = (holds and not wrong and noise and final["verdict"] == "explained"
+                  and all(s["ok"] for s in sizes.values()))
+    return {"holds_truth": holds, "wrong": wrong, "noise": noise, "sizes": sizes, "passed": bool(passed),
+            "wrong_explained": bool(wrong) and final["verdict"] == "explained"}
+
+
+def run_case(case: Case, *, mesh=None, **kwargs) -> dict:
+    """Make the data, diagnose, score. Returns a JSON-able record of the case."""
+    from rocketid.diagnostics import diagnose
+    path = case_data(case)
+    model = model_of(case)
+    t0 = time.perf_counter()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        report = diagnose(path, model, mesh=mesh, **kwargs)
+    seconds = time.perf_counter() - t0
+    final = final_of(report)
+    # the data as a user's CSV, read back: the base fit's chi2/dof on it
+    base = {"chi2_per_dof": float(report.fit.chi2_per_dof), "success": bool(report.fit.success)}
+    rec = {"case": case.id, "vehicle": case.vehicle, "truth": case.truth_text(), "true_effects": list(case.true_names),
+           "profile": case.profile, "seed": case.seed, "base": base, "final": final,
+           "score": score(case, final), "seconds": seconds,
+           "verdict_text": list(report.verdict()) if hasattr(report, "verdict") else []}
+    return rec
+
+
+def read_case_csv(case: Case):
+    """The cached measurements of a case, read as a user reads them."""
+    return read_csv(case_data(case), ("x", "h", "v"))
+
+
+def record_json(records: list[dict]) -> str:
+    return json.dumps(records, indent=1, default=lambda o: asdict(o) if hasattr(o, "__dataclass_fields__") else str(o))
