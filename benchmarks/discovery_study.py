@@ -50,7 +50,11 @@ def sizes_text(rec: dict) -> str:
     for par, v in rec["score"]["sizes"].items():
         est = "not estimated" if v["estimate"] is None else f"{_fmt(v['estimate'])} +- {_fmt(v['std'], 2)}"
         out.append(f"{par} {est} (truth {_fmt(v['truth'])})")
-    known = set(rec["score"]["sizes"])
+    known = set(rec["score"]["sizes"]) | set(rec["score"].get("coefficients", {}))
+    bad = [f"{k} {_fmt(c['estimate'])} (truth {_fmt(c['truth'])})"
+           for k, c in rec["score"].get("coefficients", {}).items() if not c["ok"]]
+    if bad:
+        out.append("coefficients off: " + ", ".join(bad))
     extra = [f"{k} {_fmt(p['value'])}" for k, p in rec["final"]["parameters"].items() if k not in known]
     if extra:
         out.append(("estimated " if out else "") + ", ".join(extra[:8]) + (" ..." if len(extra) > 8 else ""))
@@ -76,7 +80,8 @@ def summary(records: list[dict]) -> str:
     eff = [r for r in records if r["true_effects"]]
     clean = [r for r in records if not r["true_effects"]]
     lines = [f"- cases with hidden effects: {sum(r['score']['passed'] for r in eff)} of {len(eff)} pass "
-             "(true effects held, chi2/dof < 1.05, verdict explained, sizes within 25 % or 3 std)",
+             "(true effects held and nothing else, chi2/dof < 1.05, verdict explained, scalar sizes within 25 % or 3 std, "
+             "CD and CL within 10 % or 3 std of the truth)",
              f"- wrong effect reported as explained: {sum(r['score']['wrong_explained'] for r in records)}"]
     if clean:
         lines.append(f"- clean data: {sum(bool(r['final']['effects']) for r in clean)} of {len(clean)} add an effect")

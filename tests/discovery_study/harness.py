@@ -9,8 +9,10 @@ fits-to-noise, verdict) and scored against the truth:
 ``wrong``         final effects that are not in the truth
 ``noise``         the final chi2/dof is below :data:`NOISE_LIMIT`
 ``sizes``         each scalar effect's estimate against its true value
+``coefficients``  the final model's CD and CL (or CL_alpha) against the truth (:data:`COEF_TOL`)
 ``passed``        clean data: no effect added; otherwise holds_truth, no wrong effect, the noise
-                  reached, verdict "explained" and the scalar sizes within :data:`SIZE_TOL`
+                  reached, verdict "explained", the scalar sizes within :data:`SIZE_TOL` and the
+                  coefficients within :data:`COEF_TOL`
 ``wrong_explained``  the cardinal sin: verdict "explained" with a wrong effect in the final model
 """
 
@@ -36,6 +38,27 @@ from .paths import STAGE30, cache_dir
 NOISE_LIMIT = 1.05
 #: a scalar effect's estimate agrees with the truth within this fraction (or 3 std)
 SIZE_TOL = 0.25
+#: the final model's aerodynamic coefficients agree with the truth within this fraction (or 3 std):
+#: an effect that "explains" the data by distorting CD is not the explanation
+COEF_TOL = 0.10
+
+
+def true_coefficients(vehicle: str) -> dict[str, float]:
+    """The vehicle's true aerodynamic coefficients, by the estimation model's parameter names."""
+    if vehicle == "stage30":
+        from .paths import load_stage30
+        s30 = load_stage30()
+        out = {f"CD_{j}": v for j, v in enumerate(s30.CD_TRUTH)}
+        out["CL_alpha"] = s30.CL_ALPHA_TRUTH
+        return out
+    if vehicle == "ra66m":
+        from rocketid.cases.ra66m import RA66M_CD_TRUTH, RA66M_CL_ALPHA_TRUTH
+        out = {f"CD_M_{j}": v for j, v in enumerate(RA66M_CD_TRUTH)}
+        out["CL_alpha"] = RA66M_CL_ALPHA_TRUTH
+        return out
+    out = {f"CD{j}": 0.5 for j in range(7)}
+    out["CL"] = 0.1
+    return out
 VERDICTS = ("nothing missing", "explained", "partly explained", "not explained by the catalogue")
 
 
@@ -159,12 +182,22 @@ def score(case: Case, final: dict) -> dict:
         v, s = est["value"], est["std"]
         ok = abs(v - value) <= SIZE_TOL * abs(value) or (math.isfinite(s) and abs(v - value) <= 3 * s)
         sizes[par] = {"truth": value, "estimate": v, "std": s, "ok": bool(ok)}
+    coefs = {}
+    for par, value in true_coefficients(case.vehicle).items():
+        est = final["parameters"].get(par)
+        if est is None:
+            continue
+        v, sd = est["value"], est["std"]
+        ok = abs(v - value) <= COEF_TOL * abs(value) or (math.isfinite(sd) and abs(v - value) <= 3 * sd)
+        coefs[par] = {"truth": value, "estimate": v, "std": sd, "ok": bool(ok)}
+    coef_ok = all(c["ok"] for c in coefs.values())
     if case.clean:
         passed = not effects
     else:
         passed = (holds and not wrong and noise and final["verdict"] == "explained"
-                  and all(s["ok"] for s in sizes.values()))
-    return {"holds_truth": holds, "wrong": wrong, "noise": noise, "sizes": sizes, "passed": bool(passed),
+                  and all(s["ok"] for s in sizes.values()) and coef_ok)
+    return {"holds_truth": holds, "wrong": wrong, "noise": noise, "sizes": sizes, "coefficients": coefs,
+            "coefficients_ok": coef_ok, "passed": bool(passed),
             "wrong_explained": bool(wrong) and final["verdict"] == "explained"}
 
 
