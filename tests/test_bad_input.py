@@ -190,7 +190,7 @@ def test_ipopt_failure_is_a_result_not_an_exception(ra66_spec, ra66_noisy_fit):
     fit = ri.estimate(ra66_spec, pr.measurements, options={"max_iter": 1}, prepared=pr)
     assert fit.success is False
     assert fit.status == -1  # IPOPT: maximum number of iterations exceeded
-    text = fit.summary()
+    text = fit.summary().text()
     assert "FAILED" in text
     notes = text.split("\nNotes\n", 1)[1]
     assert "[1] IPOPT did not converge" in notes and "Maximum number of iterations" in notes

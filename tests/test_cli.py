@@ -332,3 +332,26 @@ def test_name_value_parsing():
         with pytest.raises(click.BadParameter):
             nv.convert(bad, None, None)
     assert cli.NameValue(str).convert("h=alt=1", None, None) == ("h", "alt=1")
+
+
+def test_every_command_knows_the_same_builtin_models(tmp_path):
+    """One registry (rocketid.cases.BUILTIN_MODELS) serves simulate, estimate, estimability
+    and diagnose: ``estimate --model ra66m`` was refused while ``diagnose --model ra66m`` worked."""
+    from rocketid.cases import BUILTIN_MODELS, ra66m, ra66m_truth, resolve_model
+    from rocketid.diagnostics.api import resolve_model as diagnose_resolve
+
+    assert set(BUILTIN_MODELS) >= {"ra66", "ra66m"}
+    assert diagnose_resolve is resolve_model
+    for name in BUILTIN_MODELS:
+        assert cli.load_model(name).spec.fingerprint() == resolve_model(name)[0].fingerprint()
+    src = cli.load_model("ra66m")
+    assert src.spec.name == "RA-66M" and list(src.truth) == list(ra66m_truth(ra66m()))
+    for command in ("simulate", "estimate", "estimability", "diagnose"):
+        text = invoke(command, "--help").output
+        assert "ra66|ra66m|PATH.py" in " ".join(text.split()), (command, text)
+    data = tmp_path / "m.csv"
+    assert invoke("simulate", "--model", "ra66m", "--out", data).exit_code == 0
+    result = invoke("estimate", data, "--model", "ra66m", "--out", tmp_path / "fit.json")
+    assert result.exit_code == 0, result.stderr
+    fit = json.loads((tmp_path / "fit.json").read_text())
+    assert fit["model"] == "RA-66M" and abs(fit["parameters"]["CL_alpha"] - 2.5) < 0.05, fit["parameters"]

@@ -139,7 +139,7 @@ def test_result_dictionary_and_summary(ra66_noisy_fit):
     assert set(d["timings"]) >= {"setup_s", "solve_s"}
     assert all(isinstance(v, float) and v >= 0 for v in d["timings"].values())
     json.dumps(d)  # JSON-ready
-    text = ra66_noisy_fit.summary()
+    text = ra66_noisy_fit.summary().text()
     for section in ("Problem", "Solver", "Parameters", "Fit"):
         assert f"\n{section}\n" in text
     assert "converged" in text and "CL" in text

@@ -262,7 +262,7 @@ def test_fingerprint_is_stable_and_tracks_what_code_depends_on():
 
 
 def test_spec_summary_lists_components():
-    text = pendulum_builder().freeze().summary()
+    text = pendulum_builder().freeze().summary().text()
     assert "states     : th, om" in text
     assert "parameters : th_0, w2, c0, c1, c3, k" in text
     assert "family c: breakpoints [0.0, 1.0, 2.0, 4.0] -> knots c0, c1, c1, c3" in text

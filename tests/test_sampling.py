@@ -71,7 +71,7 @@ def test_eta_terms_match_scipy_and_pool_channels_by_sigma():
     assert crit.eta == pytest.approx(sum(terms), rel=1e-12)
     d = crit.as_dict()
     assert [d[k] for k in TERM_NAMES] == pytest.approx(terms, rel=1e-12) and d["eta"] == crit.eta
-    assert crit.n == e.size and "eta" in crit.summary()
+    assert crit.n == e.size and "eta" in crit.summary().text()
 
 
 def test_eta_bad_input():
@@ -179,7 +179,7 @@ def test_serial_loop_follows_the_rule(serial, problem):
         assert r.best.eta == finite.min() and r.best.draw == int(np.argmin(finite)) + 1
         assert r.best.eta < problem.reference_outcome.eta
     assert serial.n_evaluated == serial.n_draws
-    text = serial.summary()
+    text = serial.summary().text()
     assert "scaling       : nominal" in text and "Runs" in text
 
 
@@ -226,7 +226,7 @@ def test_failures_are_recorded_counted_and_never_win(problem, serial, monkeypatc
     assert math.isnan(r.history[0]) and math.isnan(r.history[win - 1])
     # failures count as "no improvement": the run ends n_iter draws after its last improvement
     assert r.n_draws == r.improvements[-1] + N_ITER
-    assert res.n_failures == 2 and "failed" in res.summary()
+    assert res.n_failures == 2 and "failed" in res.summary().text()
 
 
 # ---------------------------------------------------------------------------

@@ -69,7 +69,7 @@ def test_reference_row_is_q2_fixed_at_p0(study):
 
 def test_summary_and_notes(study):
     _, res = study
-    text = res.summary()
+    text = res.summary().text()
     for part in ("Table 7.1", "Table 7.2", "Table 7.3", "Beside the chapter", "shortened", "np = 5"):
         assert part in text
 

@@ -169,7 +169,7 @@ def test_full_covariance_is_the_inverse_reduced_hessian(ra66_noisy_fit):
     assert 1e6 < u.condition_number < 1e9
     # 0.9 < chi2/dof < 1.1 for this fit, no bound active: nothing to note
     assert u.notes == ()
-    text = u.summary()
+    text = u.summary().text()
     assert "95% interval" in text and "CD0" in text and "condition number" in text
 
 
@@ -178,7 +178,7 @@ def test_index0_notes_that_sigma_does_not_match(ra66_noisy_fit, ra66_spec):
     est = analyze(prepared, scaling="nominal")
     fit = estimate_q1(prepared, est, est.q2_of(ra66_spec.guess))
     u = uncertainty(fit)
-    print("\n" + u.summary())
+    print("\n" + u.summary().text())
     assert u.names == ("q1", "q2", "q3", "q4", "q5")
     assert np.linalg.matrix_rank(u.parameter_covariance, tol=1e-12 * u.parameter_covariance.max()) == 5
     assert any(n.startswith("chi2/dof = 37") for n in u.notes)

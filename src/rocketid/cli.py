@@ -48,18 +48,16 @@ import os
 import pkgutil
 import sys
 import time
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import click
 import numpy as np
 
-from .cases import ra66, ra66_times, ra66_truth
-from .cases.files import load_model_file
+from .cases.registry import BUILTIN_MODELS, ModelSource, load_model
 from .data import Measurements, read_csv
-from .errors import ModelError, RocketidError, SettingsError
-from .model import ModelSpec
+from .errors import RocketidError, SettingsError
+from .model import ModelSpec, check_guess
 
 __all__ = [
     "main", "simulate_command", "estimate_command",
@@ -70,73 +68,6 @@ __all__ = [
 
 EXIT_OK, EXIT_NOT_CONVERGED, EXIT_BAD_INPUT = 0, 1, 2
 _VERBOSE = "rocketid.verbose"
-
-
-# ---------------------------------------------------------------------------
-# Models: a built-in name or a user file
-# ---------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class ModelSource:
-    """A model as the command line knows it.
-
-    Attributes
-    ----------
-    spec : ModelSpec
-    label : str
-        What the user passed (``ra66`` or the file path).
-    truth : ndarray, shape (n_p,)
-        Parameters that ``rocketid simulate`` uses (RA-66: the truth; a model
-        file: its ``truth(spec)`` if defined, else the guesses p0).
-    times : ndarray, shape (n,)
-        Sample times of ``rocketid simulate`` (RA-66: 0.01 k s, k = 1..6600; a
-        model file: its ``sample_times()`` if defined, else 1001 points over
-        the horizon).
-    """
-
-    spec: ModelSpec
-    label: str
-    truth: np.ndarray
-    times: np.ndarray
-
-
-def _ra66_source() -> ModelSource:
-    spec = ra66()
-    return ModelSource(spec, "ra66", ra66_truth(spec), ra66_times())
-
-
-BUILTIN_MODELS: dict[str, Callable[[], ModelSource]] = {"ra66": _ra66_source}
-
-
-def load_model(name_or_path: str) -> ModelSource:
-    """Resolve ``--model``: a built-in name (``ra66``) or a Python file.
-
-    A model file defines ``build_model()`` returning a :class:`ModelSpec`
-    (a :class:`Model` is frozen for you). It may also define ``truth(spec)``
-    (a parameter vector or ``{name: value}`` mapping for ``simulate``) and
-    ``sample_times()`` (the times ``simulate`` samples at).
-
-    Raises
-    ------
-    ModelError
-        Unknown name, missing file, no ``build_model``, or a file that fails.
-    """
-    key = str(name_or_path)
-    if key in BUILTIN_MODELS:
-        return BUILTIN_MODELS[key]()
-    if Path(key).suffix != ".py":
-        raise ModelError(f"unknown model {key!r}: use one of {', '.join(sorted(BUILTIN_MODELS))} or the path of a "
-                         "Python file (.py) that defines build_model()")
-    spec, module = load_model_file(key)
-    truth = spec.guess
-    if callable(getattr(module, "truth", None)):
-        truth = spec.parameter_vector(module.truth(spec))
-    if callable(getattr(module, "sample_times", None)):
-        times = np.asarray(module.sample_times(), dtype=float).ravel()
-    else:
-        times = np.linspace(spec.t0, spec.tf, 1001)
-    return ModelSource(spec, key, truth, times)
 
 
 # ---------------------------------------------------------------------------
@@ -338,9 +269,7 @@ def fit_inputs(spec: ModelSpec, data_file, *, guesses, columns, time_column, sig
     """``(guess, mesh, data)`` from the options of a command that fits ``spec`` to DATA.csv
     (``--guess`` checked against the bounds, :func:`data_options`)."""
     guess = parameter_values(spec, assignments(guesses, "--guess"), "--guess")
-    for s, v, lo, hi in zip(spec.parameter_names, guess, spec.lower, spec.upper):
-        if not lo <= v <= hi:
-            raise SettingsError(f"--guess {s}={v:g} lies outside the bounds [{lo:g}, {hi:g}] of {s}")
+    check_guess(spec, guess, where="--guess", error=SettingsError)
     mesh = make_mesh(spec, n_elements, K)
     data = read_data(data_file, spec, time_column=time_column, columns=assignments(columns, "--column"),
                      sigma=assignments(sigmas, "--sigma"))
@@ -348,9 +277,11 @@ def fit_inputs(spec: ModelSpec, data_file, *, guesses, columns, time_column, sig
 
 
 def model_option(f):
-    """``--model ra66|PATH.py`` (passed to the command as the string ``model``)."""
-    return click.option("--model", "model", default="ra66", show_default=True, metavar="ra66|PATH.py",
-                        help="A built-in model or a Python file defining build_model().")(f)
+    """``--model ra66|ra66m|PATH.py`` (passed to the command as the string ``model``)."""
+    return click.option("--model", "model", default="ra66", show_default=True,
+                        metavar="|".join(sorted(BUILTIN_MODELS)) + "|PATH.py",
+                        help="; ".join(f"{b.name}: {b.description}" for b in BUILTIN_MODELS.values())
+                        + "; or a Python file defining build_model().")(f)
 
 
 # ---------------------------------------------------------------------------
@@ -498,7 +429,7 @@ def estimate_command(data_file, model, columns, time_column, sigmas, n_elements,
     status(f"read {data.n_samples} values of {', '.join(data.names)} from {data_file}; "
            f"building and solving the NLP on {mesh.describe()}")
     result = estimate(spec, data, guess=guess, mesh=mesh, options=options)
-    click.echo(result.summary())
+    click.echo(result.summary().text())
     if out is not None:
         path = write_json(out, result.to_dict())
         status(f"wrote {path}")

@@ -32,6 +32,7 @@ from .errors import SensitivityError, SettingsError
 from .nlp import ParameterTransform
 from .sensitivity import Sensitivity, sensitivity_at, sensitivity_of
 from .solve import EstimationResult, Prepared, solve_nlp
+from .summary import Section, Summary, Table, Text
 
 __all__ = ["Scaling", "Estimability", "analyze", "estimate_q1", "Uncertainty", "uncertainty",
            "DEFAULT_THRESHOLD"]
@@ -130,32 +131,33 @@ class Estimability:
 
     # ---- reports
     def table(self) -> str:
-        """Eigenvalues, ratios, and each direction's main parameters."""
+        """Eigenvalues, ratios, and each direction's main parameters (text of :meth:`directions_table`)."""
+        return "\n".join(self.directions_table().text_lines())
+
+    def directions_table(self) -> Table:
+        """Eigenvalues, ratios, and each direction's main parameters, as a :class:`~rocketid.summary.Table`."""
         comp = self.composition()
-        lines = [f"{'dir':<5}{'eigenvalue':>13}{'ratio':>12}  {'':<9} composition (share of each parameter)"]
+        rows = []
         for k, (lam, r) in enumerate(zip(self.eigenvalues, self.ratios)):
             order = np.argsort(comp[:, k])[::-1]
             parts = [f"{self.parameter_names[i]} {100 * comp[i, k]:.0f}%{'-' if self.V[i, k] < 0 else '+'}"
                      for i in order if comp[i, k] >= 0.05][:4]
-            tag = "estimated" if k < self.n_estimated else "fixed"
-            lines.append(f"q{k + 1:<4}{lam:>13.4g}{r:>12.4g}  {tag:<9} " + ", ".join(parts))
-        return "\n".join(lines)
+            rows.append((f"q{k + 1}", float(lam), float(r), "estimated" if k < self.n_estimated else "fixed",
+                         ", ".join(parts)))
+        return Table(("dir", "eigenvalue", "ratio", "", "composition (share of each parameter)"), rows,
+                     (None, ".4g", ".4g"))
 
-    def summary(self) -> str:
+    def summary(self) -> Summary:
         """Setting, np, table, numbered notes."""
-        lines = ["rocketid estimability (reduced Hessian, modified E-optimal criterion)",
-                 "=" * 60,
-                 f"  scaling       : {self.scaling.value}"
-                 + (" (p divided by its nominal value)" if self.scaling is Scaling.NOMINAL else " (physical units)"),
-                 f"  threshold     : {self.threshold:g} (np = largest k with lambda_1/lambda_k <= threshold)",
-                 f"  np            : {self.n_estimated} of {self.eigenvalues.size} directions estimated",
-                 "  evaluated at  : " + ", ".join(f"{n}={v:.4g}" for n, v in zip(self.parameter_names, self.evaluated_at)),
-                 f"  H_r formed in : {self.sensitivity.formed_s:.3f} s",
-                 "", self.table()]
-        if self.notes:
-            lines.append("Notes")
-            lines += [f"  [{i}] {n}" for i, n in enumerate(self.notes, 1)]
-        return "\n".join(lines)
+        setting = Section("", (
+            ("scaling", self.scaling.value + (" (p divided by its nominal value)" if self.scaling is Scaling.NOMINAL
+                                              else " (physical units)")),
+            ("threshold", f"{self.threshold:g} (np = largest k with lambda_1/lambda_k <= threshold)"),
+            ("np", f"{self.n_estimated} of {self.eigenvalues.size} directions estimated"),
+            ("evaluated at", ", ".join(f"{n}={v:.4g}" for n, v in zip(self.parameter_names, self.evaluated_at))),
+            ("H_r formed in", f"{self.sensitivity.formed_s:.3f} s")))
+        return Summary("rocketid estimability (reduced Hessian, modified E-optimal criterion)",
+                       (setting, Section("Directions", (self.directions_table(),))), self.notes)
 
     def to_dict(self) -> dict:
         return {
@@ -370,16 +372,15 @@ class Uncertainty:
         z = norm.ppf(0.5 + level / 2)
         return np.stack([self.estimates - z * self.standard_errors, self.estimates + z * self.standard_errors], 1)
 
-    def summary(self) -> str:
-        lines = ["Uncertainty (from the reduced Hessian at the estimate)",
-                 f"  {'name':<10}{'estimate':>14}{'std err':>12}{'95% interval':>28}"]
-        for n, v, s, (a, b) in zip(self.parameter_names, self.estimates, self.standard_errors, self.interval()):
-            lines.append(f"  {n:<10}{v:>14.6g}{s:>12.3g}   [{a:>11.5g}, {b:>11.5g}]")
-        lines.append(f"  condition number of the restricted H_r: {self.condition_number:.3g}")
-        if self.notes:
-            lines.append("Notes")
-            lines += [f"  [{i}] {n}" for i, n in enumerate(self.notes, 1)]
-        return "\n".join(lines)
+    def summary(self) -> Summary:
+        """The estimates with standard errors and 95 % intervals; numbered notes."""
+        table = Table(("name", "estimate", "std err", "95% interval"),
+                      [(n, float(v), float(s), f"[{a:.5g}, {b:.5g}]") for n, v, s, (a, b) in
+                       zip(self.parameter_names, self.estimates, self.standard_errors, self.interval())],
+                      (None, ".6g", ".3g"))
+        return Summary("Uncertainty (from the reduced Hessian at the estimate)",
+                       (Section("", (table, Text(f"condition number of the restricted H_r: "
+                                                 f"{self.condition_number:.3g}"))),), self.notes, rule=False)
 
 
 def uncertainty(fit: EstimationResult, *, sensitivity: Sensitivity | None = None,

@@ -49,6 +49,7 @@ import numpy as np
 import sympy as sp
 
 from .errors import ModelError
+from .summary import Section, Summary, Text
 
 __all__ = [
     "Model",
@@ -422,20 +423,19 @@ class ModelSpec:
             builder = self._builder.copy()
             builder._parameters = list(params)
         new = replace(self, parameters=params, _builder=builder)
-        _check_guesses(new)
+        check_guess(new)
         return new
 
-    def summary(self) -> str:
-        """A short description of the model."""
-        lines = [f"Model {self.name!r}: t in [{self.t0:g}, {self.tf:g}]",
-                 f"  states     : {', '.join(map(str, self.state_symbols))}",
-                 f"  inputs     : {', '.join(map(str, self.input_symbols)) or '-'}",
-                 f"  parameters : {', '.join(self.parameter_names)}",
-                 f"  outputs    : {', '.join(f'{o.name} (sigma {o.sigma:g})' for o in self.outputs)}"]
-        for f in self.families:
-            lines.append(f"  family {f.symbol}: breakpoints {list(f.breakpoints)} -> knots "
-                         f"{', '.join(map(str, f.knots))}")
-        return "\n".join(lines)
+    def summary(self) -> Summary:
+        """A short description of the model: its components and coefficient families."""
+        rows = [("states", ", ".join(map(str, self.state_symbols))),
+                ("inputs", ", ".join(map(str, self.input_symbols)) or "-"),
+                ("parameters", ", ".join(self.parameter_names)),
+                ("outputs", ", ".join(f"{o.name} (sigma {o.sigma:g})" for o in self.outputs))]
+        rows += [Text(f"family {f.symbol}: breakpoints {list(f.breakpoints)} -> knots {', '.join(map(str, f.knots))}")
+                 for f in self.families]
+        return Summary(f"Model {self.name!r}: t in [{self.t0:g}, {self.tf:g}]", (Section("", rows),), rule=False,
+                       key_width=11)
 
 
 # ---------------------------------------------------------------------------
@@ -845,7 +845,7 @@ class Model:
             outputs=tuple(self._outputs), description=self.description, _builder=self.copy(),
         )
         _check_symbols(spec)
-        _check_guesses(spec)
+        check_guess(spec)
         return spec
 
 
@@ -874,8 +874,22 @@ def _unknown_msg(spec: ModelSpec, where: str, extra: set) -> str:
             "with m.state, m.input, m.constant, m.parameter, m.piecewise_linear or m.define")
 
 
-def _check_guesses(spec: ModelSpec) -> None:
-    for p in spec.parameters:
-        if not (p.lower <= p.guess <= p.upper):
-            raise ModelError(f"the guess {p.guess:g} of parameter {p.symbol} lies outside its bounds "
-                             f"[{p.lower:g}, {p.upper:g}]; move the guess inside or widen the bounds")
+def check_guess(spec: ModelSpec, values: Sequence[float] | None = None, *, where: str = "",
+                error: type[Exception] = ModelError) -> None:
+    """Refuse a guess outside the parameters' bounds (the one bounds check of a guess).
+
+    Parameters
+    ----------
+    spec : ModelSpec
+    values : sequence of float, optional
+        A full parameter vector (default: the spec's own guesses).
+    where : str
+        Prefix of the message naming the input (``"--guess CL=2"``).
+    error : exception type
+        Raised with a message that names the parameter, its bounds and the fix.
+    """
+    p = spec.guess if values is None else np.asarray(values, dtype=float)
+    for ps, v in zip(spec.parameters, p):
+        if not (ps.lower <= v <= ps.upper):
+            raise error((f"{where}: " if where else "") + f"the guess {v:g} of parameter {ps.symbol} lies outside "
+                        f"its bounds [{ps.lower:g}, {ps.upper:g}]; move the guess inside or widen the bounds")

@@ -29,8 +29,9 @@ from .codegen import generate
 from .collocation.transcription import Mesh, Transcription, transcribe
 from .data import Measurements
 from .errors import DataError, ModelError, SettingsError, SolverError
-from .model import ModelSpec
+from .model import ModelSpec, check_guess
 from .nlp import CollocationNLP
+from .summary import Section, Summary, Table
 
 __all__ = ["IPOPT_OPTIONS", "check_ipopt_options", "NLPSolution", "solve_nlp", "EstimationResult",
            "estimate", "prepare", "default_mesh", "Prepared"]
@@ -251,13 +252,7 @@ def default_mesh(spec: ModelSpec, K: int = 4, element_length: float | None = Non
     for a, b in zip(fam_bps[:-1], fam_bps[1:]):
         n = max(1, int(math.ceil((b - a) / h - 1e-9)))
         bounds.extend(np.linspace(a, b, n + 1)[1:])
-    bounds = np.array(bounds)
-    if refine_first > 0:
-        h0 = bounds[1] - bounds[0]
-        w = 4.0 ** np.arange(refine_first + 1, dtype=float)
-        cuts = bounds[0] + h0 * np.cumsum(w)[:-1] / w.sum()
-        bounds = np.concatenate([[bounds[0]], cuts, bounds[1:]])
-    return Mesh(bounds, K)
+    return Mesh(np.array(bounds), K).refine_first(refine_first)
 
 
 @dataclass(frozen=True)
@@ -421,29 +416,27 @@ class EstimationResult:
                 out.append((s, "upper"))
         return out
 
-    def summary(self) -> str:
+    def summary(self) -> Summary:
         """Fixed sections: problem, solver, parameters, fit; then numbered notes."""
         tr = self.prepared.transcription
-        lines = [f"rocketid estimation: {self.spec.name}",
-                 "=" * 60,
-                 "Problem",
-                 f"  mesh          : {tr.mesh.describe()}",
-                 f"  NLP           : {self.nlp.n} variables, {self.nlp.m} constraints, "
-                 f"{len(self.nlp.jacobianstructure()[0])} Jacobian and {len(self.nlp.hessianstructure()[0])} Hessian non-zeros",
-                 f"  data          : {self.n_data} values in {len(self.nlp.channel_names)} channels "
-                 f"({', '.join(self.nlp.channel_names)})",
-                 "Solver",
-                 f"  status        : {'converged' if self.success else 'FAILED'} ({self.status}: {self.message})",
-                 f"  iterations    : {self.iterations}",
-                 f"  time          : setup {self.timings['setup_s']:.3f} s, IPOPT {self.timings['solve_s']:.3f} s",
-                 "Parameters",
-                 f"  {'name':<10}{'estimate':>14}{'guess':>12}{'lower':>10}{'upper':>10}"]
-        for ps, v in zip(self.spec.parameters, self.p):
-            lines.append(f"  {str(ps.symbol):<10}{v:>14.6g}{ps.guess:>12.4g}{ps.lower:>10.3g}{ps.upper:>10.3g}")
-        lines += ["Fit",
-                  f"  objective J   : {self.objective:.6g}",
-                  f"  chi2 / dof    : {self.chi2_per_dof:.4f}  (2J / ({self.n_data} - {self.n_estimated}))",
-                  "  RMS residual  : " + ", ".join(f"{k} {v:.4g}" for k, v in self.rms.items())]
+        nlp = self.nlp
+        problem = Section("Problem", (
+            ("mesh", tr.mesh.describe()),
+            ("NLP", f"{nlp.n} variables, {nlp.m} constraints, {len(nlp.jacobianstructure()[0])} Jacobian and "
+                    f"{len(nlp.hessianstructure()[0])} Hessian non-zeros"),
+            ("data", f"{self.n_data} values in {len(nlp.channel_names)} channels ({', '.join(nlp.channel_names)})")))
+        solver = Section("Solver", (
+            ("status", f"{'converged' if self.success else 'FAILED'} ({self.status}: {self.message})"),
+            ("iterations", str(self.iterations)),
+            ("time", f"setup {self.timings['setup_s']:.3f} s, IPOPT {self.timings['solve_s']:.3f} s")))
+        parameters = Section("Parameters", (Table(
+            ("name", "estimate", "guess", "lower", "upper"),
+            [(str(ps.symbol), float(v), ps.guess, ps.lower, ps.upper) for ps, v in zip(self.spec.parameters, self.p)],
+            (None, ".6g", ".4g", ".3g", ".3g")),))
+        fit = Section("Fit", (
+            ("objective J", f"{self.objective:.6g}"),
+            ("chi2 / dof", f"{self.chi2_per_dof:.4f}  (2J / ({self.n_data} - {self.n_estimated}))"),
+            ("RMS residual", ", ".join(f"{k} {v:.4g}" for k, v in self.rms.items()))))
         notes = list(self.notes)
         if not self.success:
             notes.insert(0, f"IPOPT did not converge: {self.message.rstrip('.')}. The estimates are the last iterate, "
@@ -453,10 +446,7 @@ class EstimationResult:
         if self.success and self.chi2_per_dof > 1.5:
             notes.append(f"chi2/dof = {self.chi2_per_dof:.3g} is well above 1: the model does not fit to the noise "
                          "level (a missing effect or wrong sigma); see `rocketid diagnose`.")
-        if notes:
-            lines.append("Notes")
-            lines += [f"  [{i}] {n}" for i, n in enumerate(notes, 1)]
-        return "\n".join(lines)
+        return Summary(f"rocketid estimation: {self.spec.name}", (problem, solver, parameters, fit), notes)
 
     def to_dict(self) -> dict:
         """A JSON-ready dictionary (``success``, ``parameters``, ``objective``, ...)."""
@@ -515,12 +505,7 @@ def estimate(spec: ModelSpec, data: Measurements, *, guess: Mapping | Sequence[f
     nlp = prepared.nlp
     notes = []
     p0 = spec.parameter_vector(guess)
-    lo, hi = spec.lower, spec.upper
-    bad = [(str(s), v, a, b) for s, v, a, b in zip(spec.parameter_symbols, p0, lo, hi) if not a <= v <= b]
-    if bad:
-        s, v, a, b = bad[0]
-        raise ModelError(f"the guess {v:g} of parameter {s} lies outside its bounds [{a:g}, {b:g}]; "
-                         "move the guess inside or widen the bounds")
+    check_guess(spec, p0)
     warm = None
     if warm_start is not None:
         x0 = warm_start.x.copy()

@@ -38,6 +38,8 @@ from .errors import SettingsError
 from .sampling import SamplingResult, SamplingSettings, prepare_sampling, sample
 from .simulate import simulate, simulate_measurements
 from .solve import prepare
+from .summary import Section, Summary, Text
+from .summary import Table as SummaryTable
 
 __all__ = ["StudySettings", "StudyResult", "Table", "reproduce", "CHAPTER", "run_seeds"]
 
@@ -169,6 +171,10 @@ class Table:
         lines += [f"| {' | '.join(fmt(v) for v in r)} |" for r in self.rows]
         return "\n".join(lines)
 
+    def as_summary_table(self, digits: int = 6) -> SummaryTable:
+        """This table for a :class:`~rocketid.summary.Summary`, numbers to ``digits`` significant digits."""
+        return SummaryTable(self.columns, self.rows, (f".{digits}g",) * len(self.columns))
+
 
 @dataclass(frozen=True)
 class StudyResult:
@@ -273,35 +279,31 @@ class StudyResult:
                      tuple(rows))
 
     # ---- reports
-    def summary(self) -> str:
+    def summary(self) -> Summary:
+        """Setting, Tables 7.1-7.3, the comparison with the chapter, time; numbered notes."""
         s = self.settings
         smp = self.sampling
         est = smp.estimability
-        lines = ["rocketid reproduce: the chapter's study (section 7.3) on RA-66",
-                 "=" * 66,
-                 "Setting",
-                 f"  runs, n_iter  : {s.runs} runs (seeds {s.run_seeds[0]}..{s.run_seeds[-1]}), n_iter = {s.n_iter}"
-                 + ("" if s.is_chapter_setting else "  (shortened: the chapter uses 10 runs, n_iter = 2000)"),
-                 f"  data          : one data set, noise seed {s.data_seed}; 6600 samples of x, h, v, sigma = 1",
-                 f"  estimability  : scaling {s.scaling}, threshold {s.threshold:g}: np = {est.n_estimated} of "
-                 f"{est.eigenvalues.size} (the chapter: np = {CHAPTER['np']})",
-                 f"  sampling      : p_trial {s.distribution} within the bounds; {smp.executor} with {smp.workers} "
-                 f"worker{'s' if smp.workers != 1 else ''}",
-                 f"  draws         : {smp.n_draws} processed, {smp.n_failures} failed, {smp.n_wasted} wasted; "
-                 f"{smp.solves_per_s:.1f} solves per s",
-                 "", "Table 7.1: estimates (index 0: q2 fixed at V2^T p0)", self.table_7_1.to_markdown(5),
-                 "", "Table 7.2: average error |prediction - truth| over 6600 samples "
-                 "(prediction: high-accuracy simulation)", self.table_7_2.to_markdown(4),
-                 "", "Beside the chapter", self.chapter_comparison().to_markdown(4),
-                 "", f"Table 7.3: perturbed initial x, h, v (index 0 and the least-eta run, index {self.best_index})",
-                 self.table_7_3.to_markdown(4),
-                 "", "Time",
-                 "  " + ", ".join(f"{k} {v:.1f} s" for k, v in self.timings.items())]
-        notes = list(self.notes)
-        if notes:
-            lines.append("Notes")
-            lines += [f"  [{i}] {n}" for i, n in enumerate(notes, 1)]
-        return "\n".join(lines)
+        setting = Section("Setting", (
+            ("runs, n_iter", f"{s.runs} runs (seeds {s.run_seeds[0]}..{s.run_seeds[-1]}), n_iter = {s.n_iter}"
+                             + ("" if s.is_chapter_setting else
+                                "  (shortened: the chapter uses 10 runs, n_iter = 2000)")),
+            ("data", f"one data set, noise seed {s.data_seed}; 6600 samples of x, h, v, sigma = 1"),
+            ("estimability", f"scaling {s.scaling}, threshold {s.threshold:g}: np = {est.n_estimated} of "
+                             f"{est.eigenvalues.size} (the chapter: np = {CHAPTER['np']})"),
+            ("sampling", f"p_trial {s.distribution} within the bounds; {smp.executor} with {smp.workers} "
+                         f"worker{'s' if smp.workers != 1 else ''}"),
+            ("draws", f"{smp.n_draws} processed, {smp.n_failures} failed, {smp.n_wasted} wasted; "
+                      f"{smp.solves_per_s:.1f} solves per s")))
+        tables = [Section("Table 7.1: estimates (index 0: q2 fixed at V2^T p0)", (self.table_7_1.as_summary_table(5),)),
+                  Section("Table 7.2: average error |prediction - truth| over 6600 samples "
+                          "(prediction: high-accuracy simulation)", (self.table_7_2.as_summary_table(4),)),
+                  Section("Beside the chapter", (self.chapter_comparison().as_summary_table(4),)),
+                  Section(f"Table 7.3: perturbed initial x, h, v (index 0 and the least-eta run, index "
+                          f"{self.best_index})", (self.table_7_3.as_summary_table(4),))]
+        time_ = Section("Time", (Text(", ".join(f"{k} {v:.1f} s" for k, v in self.timings.items())),))
+        return Summary("rocketid reproduce: the chapter's study (section 7.3) on RA-66",
+                       (setting, *tables, time_), self.notes)
 
     def to_dict(self) -> dict:
         return {"settings": self.settings.to_dict(), "np": int(self.sampling.estimability.n_estimated),
@@ -353,7 +355,7 @@ class StudyResult:
         files = [self.table_7_1.write_csv(out / "table_7_1.csv"), self.table_7_2.write_csv(out / "table_7_2.csv"),
                  self.table_7_3.write_csv(out / "table_7_3.csv")]
         (out / "tables.md").write_text(self.to_markdown() + "\n")
-        (out / "summary.txt").write_text(self.summary() + "\n")
+        (out / "summary.txt").write_text(self.summary().text() + "\n")
         (out / "study.json").write_text(json.dumps(self.to_dict(), indent=1, default=float) + "\n")
         files += [out / "tables.md", out / "summary.txt", out / "study.json"]
         if plots:

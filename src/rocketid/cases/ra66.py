@@ -17,16 +17,17 @@ bounds        1e-4 <= p <= 1
 
 from __future__ import annotations
 
-import math
+from typing import Callable
 
 import numpy as np
 import sympy as sp
 
 from ..collocation.transcription import Mesh, graded_mesh
 from ..model import Model, ModelSpec
-from ..physics.ascent import ascent_dynamics, ascent_states, flight_conditions
+from ..physics.ascent import FlightConditions, ascent_dynamics, ascent_states, flight_conditions
+from .vehicle import RA66_VEHICLE, Vehicle
 
-__all__ = ["ra66", "ra66_truth", "ra66_times", "ra66_mesh", "RA66_P0", "RA66_TRUTH_VALUES"]
+__all__ = ["ra66", "ra66_truth", "ra66_times", "ra66_mesh", "ra66_vehicle_model", "RA66_P0", "RA66_TRUTH_VALUES"]
 
 RA66_P0 = (0.1, 0.6, 0.1, 0.6, 0.1, 0.6, 0.1, 0.12)
 RA66_TRUTH_VALUES = (0.5,) * 7 + (0.1,)
@@ -36,6 +37,44 @@ RA66_BOUNDS = (1e-4, 1.0)
 def ra66_alpha(t: sp.Symbol) -> sp.Expr:
     """The pitch-over attack angle (rad)."""
     return sp.Piecewise((-8 * sp.pi / 180 * sp.sin(sp.pi * (t - 4) / 20) ** 2, (t >= 4) & (t <= 24)), (0, True))
+
+
+def ra66_vehicle_model(name: str, description: str, alpha: Callable[[sp.Symbol], sp.Expr],
+                       aerodynamics: Callable[[Model, FlightConditions, sp.Symbol], tuple], *,
+                       atmosphere: str = "yang1983", sigma: float = 1.0, vehicle: Vehicle = RA66_VEHICLE) -> Model:
+    """A model of the RA-66 flight: the vehicle, the ascent from rest on [0, 66] s, x, h, v measured.
+
+    The reference cases differ only in their aerodynamics and attack-angle program.
+
+    Parameters
+    ----------
+    name, description : str
+    alpha : callable
+        ``alpha(t)``: the attack-angle program (rad), with kinks at 4 and 24 s.
+    aerodynamics : callable
+        ``aerodynamics(m, fc, alpha) -> (cd, cl)``: declares the coefficients' parameters on
+        ``m`` (in the order they should have) and returns the drag and lift coefficients.
+    atmosphere : {"yang1983", "us76"}
+    sigma : float
+        Noise standard deviation of x, h, v.
+    vehicle : Vehicle
+        Default :data:`~rocketid.cases.vehicle.RA66_VEHICLE`.
+
+    Returns
+    -------
+    Model
+        Not frozen (the caller may add to it).
+    """
+    m = Model(name, 0.0, 66.0, description=description)
+    st = ascent_states(m)
+    fc = flight_conditions(m, st, atmosphere=atmosphere)
+    a = m.input("alpha", alpha(m.t), breakpoints=(4.0, 24.0))
+    terms = vehicle.declare(m)
+    cd, cl = aerodynamics(m, fc, a)
+    ascent_dynamics(m, st, fc, thrust=terms.thrust, mass=terms.mass, area=terms.area, cd=cd, cl=cl, alpha=a)
+    for s in (st.x, st.h, st.v):
+        m.output(str(s), s, sigma=sigma)
+    return m
 
 
 def ra66(*, n_cd_segments: int = 6, atmosphere: str = "yang1983", sigma: float = 1.0) -> ModelSpec:
@@ -53,24 +92,15 @@ def ra66(*, n_cd_segments: int = 6, atmosphere: str = "yang1983", sigma: float =
     -------
     ModelSpec
     """
-    m = Model("RA-66", 0.0, 66.0, description="the chapter's study (METHOD.md section 2)")
-    st = ascent_states(m)
-    fc = flight_conditions(m, st, atmosphere=atmosphere)
-    alpha = m.input("alpha", ra66_alpha(m.t), breakpoints=(4.0, 24.0))
-    m0 = m.constant("m0", 20000.0)
-    mdot = m.constant("mdot", 100.0)
-    Pe = m.constant("Pe", 400000.0)
-    Sm = m.constant("Sm", math.pi * 1.0 ** 2)
-    bp = np.linspace(0.0, 66.0, n_cd_segments + 1)
-    cd_guess = [RA66_P0[i % 2] if n_cd_segments == 6 else 0.5 for i in range(n_cd_segments + 1)]
-    if n_cd_segments == 6:
-        cd_guess = list(RA66_P0[:7])
-    CD = m.piecewise_linear("CD", bp, cd_guess, bounds=RA66_BOUNDS, nominal=0.5)
-    CL = m.piecewise_linear("CL", [0.0, 66.0], RA66_P0[7], bounds=RA66_BOUNDS, ties=[(0, 1)], nominal=0.1)
-    ascent_dynamics(m, st, fc, thrust=Pe, mass=m0 - mdot * m.t, area=Sm, cd=CD, cl=CL, alpha=alpha)
-    for s in (st.x, st.h, st.v):
-        m.output(str(s), s, sigma=sigma)
-    return m.freeze()
+    def time_knot_coefficients(m, fc, alpha):
+        bp = np.linspace(0.0, 66.0, n_cd_segments + 1)
+        cd_guess = list(RA66_P0[:7]) if n_cd_segments == 6 else [0.5] * (n_cd_segments + 1)
+        CD = m.piecewise_linear("CD", bp, cd_guess, bounds=RA66_BOUNDS, nominal=0.5)
+        CL = m.piecewise_linear("CL", [0.0, 66.0], RA66_P0[7], bounds=RA66_BOUNDS, ties=[(0, 1)], nominal=0.1)
+        return CD, CL
+
+    return ra66_vehicle_model("RA-66", "the chapter's study (METHOD.md section 2)", ra66_alpha,
+                              time_knot_coefficients, atmosphere=atmosphere, sigma=sigma).freeze()
 
 
 def ra66_truth(spec: ModelSpec) -> np.ndarray:

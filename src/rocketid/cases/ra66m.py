@@ -25,14 +25,11 @@ Numbers beside RA-66's are in ``docs/reference-cases.md``.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import sympy as sp
 
 from ..model import Model, ModelSpec
-from ..physics.ascent import ascent_dynamics, ascent_states, flight_conditions
-from .ra66 import ra66_alpha
+from .ra66 import ra66_alpha, ra66_vehicle_model
 
 __all__ = ["ra66m", "ra66m_truth", "RA66M_MACH_KNOTS", "RA66M_CD_TRUTH", "RA66M_CL_ALPHA_TRUTH"]
 
@@ -63,22 +60,16 @@ def ra66m(*, cl_alpha: str = "constant", atmosphere: str = "yang1983", sigma: fl
     from ..errors import ModelError
     if cl_alpha not in ("constant", "mach"):
         raise ModelError(f"cl_alpha must be 'constant' or 'mach', got {cl_alpha!r}")
-    m = Model("RA-66M", 0.0, 66.0, description="RA-66 vehicle, CD(Mach), CL = CL_alpha alpha, alpha excitation")
-    st = ascent_states(m)
-    fc = flight_conditions(m, st, atmosphere=atmosphere)
-    alpha = m.input("alpha", ra66m_alpha(m.t), breakpoints=(4.0, 24.0))
-    m0 = m.constant("m0", 20000.0)
-    mdot = m.constant("mdot", 100.0)
-    Pe = m.constant("Pe", 400000.0)
-    Sm = m.constant("Sm", math.pi * 1.0 ** 2)
-    cd = m.table("CD_M", fc.mach, RA66M_MACH_KNOTS, 0.4, bounds=(0.01, 2.0), nominal=0.4)
-    if cl_alpha == "constant":
-        cla = m.parameter("CL_alpha", 2.0, bounds=(0.0, 10.0), nominal=2.5)
-    else:
-        cla = m.table("CL_alpha", fc.mach, RA66M_MACH_KNOTS, 2.0, bounds=(0.0, 10.0), nominal=2.5)
-    ascent_dynamics(m, st, fc, thrust=Pe, mass=m0 - mdot * m.t, area=Sm, cd=cd, cl=cla * alpha, alpha=alpha)
-    for s in (st.x, st.h, st.v):
-        m.output(str(s), s, sigma=sigma)
+    def mach_coefficients(m, fc, alpha):
+        cd = m.table("CD_M", fc.mach, RA66M_MACH_KNOTS, 0.4, bounds=(0.01, 2.0), nominal=0.4)
+        if cl_alpha == "constant":
+            cla = m.parameter("CL_alpha", 2.0, bounds=(0.0, 10.0), nominal=2.5)
+        else:
+            cla = m.table("CL_alpha", fc.mach, RA66M_MACH_KNOTS, 2.0, bounds=(0.0, 10.0), nominal=2.5)
+        return cd, cla * alpha
+
+    m = ra66_vehicle_model("RA-66M", "RA-66 vehicle, CD(Mach), CL = CL_alpha alpha, alpha excitation", ra66m_alpha,
+                           mach_coefficients, atmosphere=atmosphere, sigma=sigma)
     return m.freeze() if build else m
 
 

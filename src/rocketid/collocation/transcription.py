@@ -84,6 +84,24 @@ class Mesh:
         tau = (t - b[e]) / (b[e + 1] - b[e])
         return e, tau
 
+    def refine_first(self, pieces: int, ratio: float = 4.0) -> "Mesh":
+        """This mesh with its first element split geometrically into ``pieces + 1``
+        elements, each ``ratio`` times longer than the previous one (a short first element
+        resolves a singular start, such as a launch from rest).
+
+        ``pieces = 0`` gives the mesh back.
+        """
+        if not isinstance(pieces, (int, np.integer)) or pieces < 0:
+            raise SettingsError(f"refine_first must be a non-negative integer, got {pieces!r}")
+        if not ratio > 0:
+            raise SettingsError(f"the grading ratio must be positive, got {ratio!r}")
+        if pieces == 0:
+            return self
+        b = self.boundaries
+        w = float(ratio) ** np.arange(pieces + 1, dtype=float)
+        cuts = b[0] + (b[1] - b[0]) * np.cumsum(w)[:-1] / w.sum()
+        return Mesh(np.concatenate([[b[0]], cuts, b[1:]]), self.K)
+
     def describe(self) -> str:
         h = self.lengths
         kind = "uniform" if np.allclose(h, h[0]) else "graded"
@@ -100,15 +118,9 @@ def uniform_mesh(t0: float, tf: float, n_elements: int, K: int = 3) -> Mesh:
 def graded_mesh(t0: float, tf: float, n_elements: int, K: int = 3, *, refine_first: int = 0,
                 ratio: float = 4.0) -> Mesh:
     """Uniform elements, with the first element split geometrically into
-    ``refine_first + 1`` pieces (each ``ratio`` times the previous) to resolve a
-    singular start (see METHOD.md section 3)."""
-    base = np.linspace(t0, tf, int(n_elements) + 1)
-    if refine_first > 0:
-        h = base[1] - base[0]
-        w = ratio ** np.arange(refine_first + 1, dtype=float)
-        cuts = t0 + h * np.cumsum(w)[:-1] / w.sum()
-        base = np.concatenate([[t0], cuts, base[1:]])
-    return Mesh(base, K)
+    ``refine_first + 1`` pieces (each ``ratio`` times the previous; :meth:`Mesh.refine_first`)
+    to resolve a singular start."""
+    return uniform_mesh(t0, tf, n_elements, K).refine_first(refine_first, ratio)
 
 
 @dataclass(frozen=True)

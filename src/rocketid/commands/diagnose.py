@@ -23,7 +23,7 @@ import time
 
 import click
 
-from ..cli import EXIT_NOT_CONVERGED, NameValue, assignments, status, verbose_option
+from ..cli import EXIT_NOT_CONVERGED, NameValue, assignments, model_option, status, verbose_option
 from ..errors import SettingsError
 
 __all__ = ["command"]
@@ -33,9 +33,7 @@ __all__ = ["command"]
 @click.argument("data_file", metavar="DATA.csv", type=click.Path(dir_okay=False))
 @click.option("--out", "out", required=True, type=click.Path(file_okay=False), metavar="DIR",
               help="Folder for report.html, candidates.json, diagnosis.json, summary.txt and figures/.")
-@click.option("--model", "model", default="ra66", show_default=True, metavar="ra66|ra66m|PATH.py",
-              help="ra66: the chapter's time-knot CD(t) and CL; ra66m: Mach-indexed CD(M) and CL_alpha; "
-                   "or a Python file defining build_model().")
+@model_option
 @click.option("--level", type=float, default=0.05, show_default=True,
               help="Significance level of the tests and of the candidate ranking (0 < level < 1).")
 @click.option("--confirm", "confirm_top", type=click.IntRange(min=0), default=2, show_default=True, metavar="N",

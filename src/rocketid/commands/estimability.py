@@ -21,27 +21,16 @@ from dataclasses import replace
 
 import click
 
-from ..cli import (EXIT_NOT_CONVERGED, BUILTIN_MODELS, ModelSource, NameValue, data_options, fit_inputs,
-                   ipopt_options, load_model, status, verbose_option, write_json)
+from ..cli import (EXIT_NOT_CONVERGED, NameValue, data_options, fit_inputs, ipopt_options, load_model,
+                   model_option, status, verbose_option, write_json)
 from ..errors import SettingsError
 
-__all__ = ["command", "model_source"]
-
-
-def model_source(name: str) -> ModelSource:
-    """``--model``: the CLI's models (:func:`rocketid.cli.load_model`) and RA-66M."""
-    if name == "ra66m" and name not in BUILTIN_MODELS:
-        from ..cases import ra66_times, ra66m, ra66m_truth
-
-        spec = ra66m()
-        return ModelSource(spec, "ra66m", ra66m_truth(spec), ra66_times())
-    return load_model(name)
+__all__ = ["command"]
 
 
 @click.command("estimability")
 @click.argument("data_file", metavar="DATA.csv", type=click.Path(dir_okay=False))
-@click.option("--model", "model", default="ra66", show_default=True, metavar="ra66|ra66m|PATH.py",
-              help="A built-in model or a Python file defining build_model().")
+@model_option
 @click.option("--scaling", type=click.Choice(["none", "nominal"]), default="none", show_default=True,
               help="Decompose H_r in physical units, or with each parameter divided by its nominal value.")
 @click.option("--threshold", type=float, default=3000.0, show_default=True,
@@ -76,7 +65,7 @@ def command(data_file, model, scaling, threshold, n_estimated, at, guesses, colu
     except SettingsError as exc:
         raise SettingsError(f"--threshold: {exc}") from None
     options = ipopt_options(ipopt)
-    src = model_source(model)
+    src = load_model(model)
     spec = src.spec
     n_p = len(spec.parameters)
     if n_estimated is not None and not 1 <= n_estimated <= n_p:
@@ -110,7 +99,7 @@ def command(data_file, model, scaling, threshold, n_estimated, at, guesses, colu
     if extra_notes:
         est = replace(est, notes=est.notes + tuple(extra_notes))
     status(f"formed H_r in {sens.formed_s:.3f} s ({time.perf_counter() - t0:.2f} s in all)")
-    click.echo(est.summary())
+    click.echo(est.summary().text())
     payload = est.to_dict()
     payload.update({
         "model": spec.name,

@@ -83,7 +83,7 @@ def command(out, runs, n_iter, seed, data_seed, scaling, threshold, n_perturbati
     status(f"RA-66 study: {runs} runs, n_iter = {n_iter}, scaling {scaling}, executor {executor}; writing to {out}")
     result = reproduce(out, settings=settings, executor=executor, workers=workers, address=address, resume=resume,
                        progress=False if quiet else None, plots=not no_plots)
-    click.echo(result.summary())
+    click.echo(result.summary().text())
     click.echo(f"\nwrote {out}/table_7_1.csv, table_7_2.csv, table_7_3.csv, tables.md, study.json"
                + ("" if no_plots else ", predictions.png, eta.png"))
     smp = result.sampling

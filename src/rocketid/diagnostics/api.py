@@ -23,9 +23,9 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from ..cases.files import load_model_file
+from ..cases.registry import BUILTIN_MODELS, resolve_model
 from ..data import Measurements, read_csv
-from ..errors import DataError, ModelError, RocketidError, SettingsError
+from ..errors import DataError, RocketidError, SettingsError
 from ..model import Model, ModelSpec
 from ..solve import EstimationResult, estimate
 from .compare import Comparison, compare
@@ -33,52 +33,6 @@ from .locate import Location, locate
 from .plausibility import Plausibility, check_plausibility
 
 __all__ = ["diagnose", "DiagnosisReport", "resolve_model", "BUILTIN_MODELS"]
-
-
-def _ra66() -> ModelSpec:
-    from ..cases import ra66
-    return ra66()
-
-
-def _ra66m() -> ModelSpec:
-    from ..cases import ra66m
-    return ra66m()
-
-
-#: Built-in models by name: the chapter's parameterization and the Mach-indexed one.
-BUILTIN_MODELS = {"ra66": _ra66, "ra66m": _ra66m}
-
-
-def resolve_model(model: str | Path | ModelSpec | Model) -> tuple[ModelSpec, str]:
-    """The model of a diagnosis and its label.
-
-    Parameters
-    ----------
-    model : {"ra66", "ra66m"}, ModelSpec, Model or path
-        A built-in name, a model, or a Python file whose ``build_model()``
-        returns a ModelSpec (or a Model, frozen here).
-
-    Raises
-    ------
-    ModelError
-        Unknown name, missing file, no ``build_model``, or a file that fails.
-    """
-    if isinstance(model, ModelSpec):
-        return model, model.name
-    if isinstance(model, Model):
-        spec = model.freeze()
-        return spec, spec.name
-    if not isinstance(model, (str, Path)):
-        raise ModelError(f"model must be one of {', '.join(BUILTIN_MODELS)}, a ModelSpec or the path of a model file, "
-                         f"got {type(model).__name__}")
-    key = str(model)
-    if key in BUILTIN_MODELS:
-        return BUILTIN_MODELS[key](), key
-    if Path(key).suffix != ".py":
-        raise ModelError(f"unknown model {key!r}: use {', '.join(BUILTIN_MODELS)} or the path of a Python file (.py) "
-                         "that defines build_model()")
-    spec, _ = load_model_file(key)
-    return spec, key
 
 
 def _read_data(data, spec: ModelSpec) -> tuple[Measurements, str]:

@@ -472,7 +472,7 @@ def render_html(report, figures_folder: Path | None = None) -> tuple[str, list[P
         compare=_compare_section(report.comparison, figs), locate=_locate_section(report.location, figs),
         plausibility=_plausibility_section(report.plausibility, figs), candidates=_candidates_section(report, figs),
         confirm=_confirm_section(report, figs), history=_history_section(report, figs),
-        fit_summary=_e(fit.summary()),
+        fit_summary=_e(str(fit.summary())),
         footer=_e(f"Made by rocketid {_version()} on {_dt.datetime.now().strftime('%Y-%m-%d %H:%M')}; "
                   f"timings: {tm}. Self-contained: no network needed."))
     return page, figs.files

@@ -30,6 +30,7 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from ..errors import DataError
+from ..summary import Section, Summary
 
 __all__ = ["StatisticCriterion", "statistic_criterion", "criterion_of", "TERM_NAMES"]
 
@@ -78,12 +79,12 @@ class StatisticCriterion:
         out.update(s1=self.s1, k1=self.k1, s2=self.s2, k2=self.k2)
         return out
 
-    def summary(self) -> str:
-        lines = [f"statistic criterion (7.10) over {self.n} normalized residuals",
-                 f"  eta      : {self.eta:.6g}"]
-        lines += [f"  {name:<9}: {v:.6g}" for name, v in zip(TERM_NAMES, self.terms)]
-        lines.append(f"  moments  : s1 {self.s1:.4g}, k1 {self.k1:.4g}, s2 {self.s2:.4g}, k2 {self.k2:.4g}")
-        return "\n".join(lines)
+    def summary(self) -> Summary:
+        """eta, its four terms and the moments behind them."""
+        rows = [("eta", f"{self.eta:.6g}")] + [(name, f"{v:.6g}") for name, v in zip(TERM_NAMES, self.terms)]
+        rows.append(("moments", f"s1 {self.s1:.4g}, k1 {self.k1:.4g}, s2 {self.s2:.4g}, k2 {self.k2:.4g}"))
+        return Summary(f"statistic criterion (7.10) over {self.n} normalized residuals", (Section("", rows),),
+                       rule=False)
 
 
 def statistic_criterion(residuals: Mapping[str, Sequence[float]] | Sequence[float] | np.ndarray,

@@ -38,6 +38,7 @@ import numpy as np
 from ..errors import SettingsError
 from ..estimability import Estimability, analyze, estimate_q1
 from ..solve import EstimationResult, Prepared
+from ..summary import Section, Summary, Table, Text
 from .checkpoint import RunState, checkpoint_path, read_checkpoint, write_checkpoint
 from .criterion import TERM_NAMES, criterion_of
 from .executors import make_executor
@@ -261,43 +262,44 @@ class SamplingResult:
         """Draws evaluated per second of wall time in this call."""
         return self.n_evaluated / self.wall_s if self.wall_s > 0 else math.nan
 
-    def summary(self) -> str:
+    def summary(self) -> Summary:
         """Settings, reference, runs; numbered notes."""
         est = self.estimability
         s = self.settings
-        lines = ["rocketid statistic-criterion sampling (steps 1-10)",
-                 "=" * 60,
-                 "Settings",
-                 f"  n_iter        : {s.n_iter} draws in a row without improvement"
-                 + (f" (cap {s.max_draws} draws)" if s.max_draws else ""),
-                 f"  distribution  : {s.distribution_name} within the bounds",
-                 f"  scaling       : {s.scaling}; threshold {s.threshold:g}; np = {est.n_estimated} of "
-                 f"{est.eigenvalues.size}",
-                 f"  executor      : {self.executor} ({self.workers} worker{'s' if self.workers != 1 else ''}), "
-                 f"batches of {s.batch_size}",
-                 "Reference (draw 0: q2 fixed at V2^T p0)",
-                 f"  eta           : {self.reference.eta:.6g}  ({self._terms(self.reference)})",
-                 "Runs",
-                 f"  {'seed':>8}{'draws':>8}{'best at':>9}{'eta':>12}{'failed':>8}  stopped by"]
-        for r in self.runs:
-            at = r.best.draw if r.best is not None else "-"
-            lines.append(f"  {r.seed:>8}{r.n_draws:>8}{at:>9}{r.eta:>12.6g}{r.n_failures:>8}  {r.stopped_by}")
+        settings = Section("Settings", (
+            ("n_iter", f"{s.n_iter} draws in a row without improvement"
+                       + (f" (cap {s.max_draws} draws)" if s.max_draws else "")),
+            ("distribution", f"{s.distribution_name} within the bounds"),
+            ("scaling", f"{s.scaling}; threshold {s.threshold:g}; np = {est.n_estimated} of {est.eigenvalues.size}"),
+            ("executor", f"{self.executor} ({self.workers} worker{'s' if self.workers != 1 else ''}), "
+                         f"batches of {s.batch_size}")))
+        reference = Section("Reference (draw 0: q2 fixed at V2^T p0)", (
+            ("eta", f"{self.reference.eta:.6g}  ({self._terms(self.reference)})"),))
+        runs = Section("Runs", (Table(
+            ("seed", "draws", "best at", "eta", "failed", "stopped by"),
+            [(r.seed, r.n_draws, r.best.draw if r.best is not None else "-", r.eta, r.n_failures, r.stopped_by)
+             for r in self.runs], (None, None, None, ".6g")),))
+        sections = [settings, reference, runs]
         b = self.best_run
         if b is not None:
-            lines.append("Least-eta run: seed " + str(b.seed) + ", " + ", ".join(
-                f"{n}={v:.4g}" for n, v in zip(self.parameter_names, b.best.p)))
+            sections.append(Section("Least-eta run", (Text(f"seed {b.seed}: " + ", ".join(
+                f"{n}={v:.4g}" for n, v in zip(self.parameter_names, b.best.p))),)))
         its = sum(r.iterations for r in self.runs) / max(1, self.n_draws)
         retried = sum(r.n_retried for r in self.runs)
-        lines += ["Performance",
-                  f"  IPOPT         : {its:.2f} iterations per draw (warm-started from draw 0)"
-                  + (f"; {retried} warm starts failed and were repeated cold" if retried else ""),
-                  f"  wall time     : {self.wall_s:.2f} s for {self.n_evaluated} solves ({self.solves_per_s:.1f} per s); "
-                  f"steps 1-4 {self.setup_s:.2f} s, executor start-up {self.startup_s:.2f} s",
-                  f"  wasted        : {self.n_wasted} draws evaluated past a stopping point"
-                  + (f", {self.n_cancelled} cancelled" if self.n_cancelled else "")]
+        perf = [("IPOPT", f"{its:.2f} iterations per draw (warm-started from draw 0)"
+                          + (f"; {retried} warm starts failed and were repeated cold" if retried else "")),
+                ("wall time", f"{self.wall_s:.2f} s for {self.n_evaluated} solves ({self.solves_per_s:.1f} per s); "
+                              f"steps 1-4 {self.setup_s:.2f} s, executor start-up {self.startup_s:.2f} s"),
+                ("wasted", f"{self.n_wasted} draws evaluated past a stopping point"
+                           + (f", {self.n_cancelled} cancelled" if self.n_cancelled else ""))]
         if self.worker_setup_s:
-            lines.append("  worker set-up : " + ", ".join(f"{t:.2f}" for t in self.worker_setup_s)
-                         + " s (NLP rebuilt from the recipe, generated code from the disk cache)")
+            perf.append(("worker set-up", ", ".join(f"{t:.2f}" for t in self.worker_setup_s)
+                         + " s (NLP rebuilt from the recipe, generated code from the disk cache)"))
+        sections.append(Section("Performance", perf))
+        return Summary("rocketid statistic-criterion sampling (steps 1-10)", sections, self._notes())
+
+    def _notes(self) -> list[str]:
+        s = self.settings
         notes = []
         if not self.reference.success:
             notes.append(f"the reference solve (draw 0) failed: {self.reference.message}; every draw is "
@@ -315,10 +317,7 @@ class SamplingResult:
                 notes.append(f"run {r.seed} was interrupted after {r.n_draws} draws; resume it from its checkpoint")
             if r.resumed_from:
                 notes.append(f"run {r.seed} resumed from a checkpoint at draw {r.resumed_from}")
-        if notes:
-            lines.append("Notes")
-            lines += [f"  [{i}] {n}" for i, n in enumerate(notes, 1)]
-        return "\n".join(lines)
+        return notes
 
     @staticmethod
     def _terms(o: DrawOutcome) -> str:
