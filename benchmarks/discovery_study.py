@@ -112,7 +112,11 @@ def main(argv=None) -> int:
     records = []
     t0 = time.perf_counter()
     for case in todo:
-        rec = H.run_case(case)
+        try:
+            rec = H.run_case(case)
+        except Exception as exc:  # noqa: BLE001 - one failing case is a result, the study goes on
+            print(f"{case.id}: ERROR {type(exc).__name__}: {exc}", flush=True)
+            rec = H.error_record(case, exc)
         records.append(rec)
         f = rec["final"]
         print(f"{case.id}: {' + '.join(f['effects']) or 'nothing'}, {f['verdict']}, chi2/dof "

@@ -212,7 +212,10 @@ def run_case(case: Case, *, mesh=None, **kwargs) -> dict:
     import inspect
 
     from rocketid.diagnostics import diagnose
-    path = case_data(case)
+    try:
+        path = case_data(case)
+    except Exception as exc:  # noqa: BLE001 - a study records a failed truth, it does not stop
+        raise RuntimeError(f"{case.id}: the truth data could not be made: {exc}") from exc
     model = model_of(case)
     if "workers" in inspect.signature(diagnose).parameters:
         kwargs.setdefault("workers", 1)
@@ -247,3 +250,15 @@ def read_case_csv(case: Case):
 
 def record_json(records: list[dict]) -> str:
     return json.dumps(records, indent=1, default=lambda o: asdict(o) if hasattr(o, "__dataclass_fields__") else str(o))
+
+
+def error_record(case: Case, exc: BaseException) -> dict:
+    """The record of a case whose diagnosis raised: it fails, with the error as its verdict."""
+    final = {"effects": [], "parameters": {}, "chi2_per_dof": math.nan, "fits_to_noise": False,
+             "verdict": f"error: {type(exc).__name__}: {exc}"[:300], "explanation": "", "api": "error"}
+    return {"case": case.id, "vehicle": case.vehicle, "truth": case.truth_text(), "true_effects": list(case.true_names),
+            "profile": case.profile, "seed": case.seed, "base": {"chi2_per_dof": math.nan, "success": False},
+            "final": final, "source": "error", "variant": None,
+            "score": {"holds_truth": False, "wrong": [], "noise": False, "sizes": {}, "coefficients": {},
+                      "coefficients_ok": False, "passed": False, "wrong_explained": False},
+            "seconds": math.nan, "timings": {}, "verdict_text": [], "notes": []}

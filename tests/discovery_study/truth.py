@@ -210,12 +210,13 @@ SENSOR = {"bias_x", "bias_h", "bias_v", "scale_v", "time_offset"}
 def wind_profile(h, *, surface: float, jet: float, core_km: float, width_km: float, layer_m: float = 0.0):
     """Tailwind (m/s, along +x) at altitude ``h``: a surface wind plus a ``sech^2`` jet core.
 
-    ``layer_m > 0`` grows the surface wind from zero at the pad over that height
-    (``1 - exp(-h / layer_m)``), for vehicles that start from rest.
+    ``layer_m > 0`` multiplies the profile by a boundary layer ``1 - exp(-h / layer_m)`` that
+    vanishes at the pad, for vehicles that start from rest (any air speed at v = 0 would be a
+    normal force at the singular start; the jet's tail alone is 0.02 m/s at the ground).
     """
     mod = sp if isinstance(h, sp.Basic) else np
-    base = surface * (1 - mod.exp(-h / layer_m)) if layer_m > 0 else surface
-    return base + jet / mod.cosh((h - core_km * 1000.0) / (width_km * 1000.0)) ** 2
+    profile = surface + jet / mod.cosh((h - core_km * 1000.0) / (width_km * 1000.0)) ** 2
+    return profile * (1 - mod.exp(-h / layer_m)) if layer_m > 0 else profile
 
 
 def density_deviation(h, *, amplitude: float):
