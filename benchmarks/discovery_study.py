@@ -16,6 +16,7 @@ Run::
     python benchmarks/discovery_study.py                       # every case
     python benchmarks/discovery_study.py --cases s30-wind m-wind
     python benchmarks/discovery_study.py --group single --md study.md --json study.json
+    python benchmarks/discovery_study.py --json study.json --docs docs/effects.md   # the docs table
 """
 
 from __future__ import annotations
@@ -94,6 +95,8 @@ def main(argv=None) -> int:
     ap.add_argument("--group", choices=sorted(GROUPS), action="append", help="only these groups")
     ap.add_argument("--md", type=Path, help="write the Markdown table here")
     ap.add_argument("--json", type=Path, help="write the records here")
+    ap.add_argument("--docs", type=Path, help="replace the study table in this Markdown file (between the markers "
+                    "<!-- study-table:start --> and <!-- study-table:end -->)")
     args = ap.parse_args(argv)
     if args.cases:
         unknown = [c for c in args.cases if c not in C.BY_ID]
@@ -130,7 +133,22 @@ def main(argv=None) -> int:
     print(md)
     if args.md:
         args.md.write_text(md)
+    if args.docs:
+        replace_table(args.docs, md)
     return 0
+
+
+START, END = "<!-- study-table:start -->", "<!-- study-table:end -->"
+
+
+def replace_table(path: Path, md: str) -> None:
+    """Put ``md`` between the study-table markers of ``path``."""
+    text = path.read_text()
+    if START not in text or END not in text:
+        raise SystemExit(f"{path}: no {START} ... {END} markers; add them where the table goes")
+    head, rest = text.split(START, 1)
+    _, tail = rest.split(END, 1)
+    path.write_text(f"{head}{START}\n{md}{END}{tail}")
 
 
 if __name__ == "__main__":
