@@ -48,7 +48,6 @@ Compare ratios within one run; absolute times depend on the machine and its load
 from __future__ import annotations
 
 import argparse
-import copy
 import cProfile
 import json
 import os
@@ -370,10 +369,16 @@ def profile_row(label, N, K, spec, data, times, Y, root, repeat, log) -> dict:
     def objective_blas_dot(x):
         """The objective as it was before commit 60c3a14: ``r @ (w * r)`` (an OpenBLAS ddot)."""
         r = nlp._linear_residual(x)
-        return 0.5 * float(r @ (nlp._w_lin * r))
+        return 0.5 * float(r @ (nlp.structure.w_lin * r))
 
     def rocketid_config(options, objective=None):
-        timed = copy.copy(nlp)  # callbacks timed on a copy; the prepared NLP is left alone
+        class Timed:
+            """The NLP with timed callbacks (the prepared NLP, a frozen value, is left alone)."""
+
+            def __getattr__(self, name):
+                return getattr(nlp, name)
+
+        timed = Timed()
         acc: dict[str, list] = {}
 
         def wrap(name, fn=None):
@@ -424,7 +429,7 @@ def profile_row(label, N, K, spec, data, times, Y, root, repeat, log) -> dict:
     out["rocketid"] = rocketid_config({})
     out["rocketid_monotone"] = rocketid_config({"mu_strategy": "monotone"})
     out["rocketid_pivtol_1e-6"] = rocketid_config({"mumps_pivtol": 1e-6})
-    if getattr(nlp, "_G_lin", None) is not None and not any(not ch.linear for ch in nlp._channels):
+    if nlp.structure.G_lin is not None and not any(not ch.linear for ch in nlp.structure.channels):
         out["rocketid_blas_dot_objective"] = rocketid_config({}, objective=objective_blas_dot)
 
     # cProfile of one rocketid solve: Python-level view of the same call

@@ -119,23 +119,16 @@ def test_eta_and_its_terms_follow_method_section_5():
     assert crit["eta"] == pytest.approx(sum(terms), rel=1e-10)
 
 
-def test_eta_fallback_without_the_sampling_stage(monkeypatch):
-    import builtins
-    real_import = builtins.__import__
-
-    def fake(name, globals=None, locals=None, fromlist=(), level=0):
-        if "sampling.criterion" in name or (level > 0 and name == "sampling.criterion"):
-            raise ImportError("no sampling stage")
-        return real_import(name, globals, locals, fromlist, level)
-
+def test_eta_has_one_implementation():
+    """Issue 12: compare() no longer carries its own copy of eta (7.10); it is the sampling
+    stage's statistic_criterion, value for value."""
+    from rocketid.sampling.criterion import statistic_criterion
     rng = np.random.default_rng(5)
-    res, sig = {"x": rng.normal(size=500)}, {"x": 1.0}
-    ref, _ = cmp.criterion_terms(res, sig)
-    monkeypatch.setattr(builtins, "__import__", fake)
+    res, sig = {"x": rng.normal(size=500), "h": 3 * rng.standard_t(4, 500)}, {"x": 1.0, "h": 3.0}
     got, source = cmp.criterion_terms(res, sig)
-    assert "METHOD.md section 5" in source and "not found" in source
-    for k in ("eta", "|s1|", "|k1-3|", "|s1-s2|", "|k1-k2|"):
-        assert got[k] == pytest.approx(ref[k], rel=1e-10)
+    assert source == "rocketid.sampling.criterion"
+    assert got == statistic_criterion(res, sig).as_dict()
+    assert "METHOD.md" not in open(cmp.__file__).read().split("def criterion_terms")[1].split("\ndef ")[0]
 
 
 # ---------------------------------------------------------------------------
@@ -208,8 +201,8 @@ def bp_fit():
     from rocketid.cases import ra66m, ra66m_truth
     from rocketid.diagnostics.effects import with_effects
 
-    truth_spec = with_effects(ra66m(), "back_pressure", {"A_e": 0.1})
+    truth_spec = with_effects(ra66m(), "back_pressure_vacuum", {"A_e_vac": 0.1})
     p = ra66m_truth(truth_spec)  # the effect's parameter keeps the value given to with_effects
-    assert p[truth_spec.parameter_names.index("A_e")] == 0.1
+    assert p[truth_spec.parameter_names.index("A_e_vac")] == 0.1
     data = ri.simulate_measurements(truth_spec, p, ri.ra66_times(), seed=0)
     return ri.estimate(ra66m(), data)

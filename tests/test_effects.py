@@ -205,7 +205,8 @@ def test_an_effect_needing_what_the_model_lacks_says_what():
     k = m.parameter("k", 0.5)
     m.ode({y: -k * y})
     m.output("y", y, sigma=0.1)
-    with pytest.raises(ModelError, match="needs the definition 'thrust'"):
+    # issue 12: effects find the physics by role, and the message names the role to declare
+    with pytest.raises(ModelError, match=r"needs the thrust \(role 'thrust'\).*declare_role\('thrust'"):
         with_effects(m, ["back_pressure"])
     with pytest.raises(ModelError, match="output named 'h'"):
         with_effects(m, ["bias_h"])

@@ -38,7 +38,7 @@ LEVEL = 0.05
 
 #: effect -> true values; the base fit's chi2/dof is well above 1 for these
 VISIBLE = {
-    "back_pressure": {"A_e": 0.4},                       # A_e p0 = 10 % of the 400 kN thrust
+    "back_pressure_vacuum": {"A_e_vac": 0.4},            # A_e p0 = 10 % of the 400 kN thrust (vacuum thrust stated)
     "thrust_level": {"eps_thrust": 0.02},
     "transonic_drag": {"dCD_transonic": 0.2},
     "earth_rotation": {"k_rot": 1.0},                    # 28.5 deg N, launched east

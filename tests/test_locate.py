@@ -5,7 +5,8 @@ Hidden effects are simulated with the effects catalogue (``with_effects``) on
 RA-66M and fitted with the Mach-indexed model (``ra66m``), which leaves them
 visible; each must be located where its physics acts:
 
-* nozzle back-pressure (thrust ``P - A_e p_a(h)``): the deficit is largest near
+* nozzle back-pressure with the vacuum thrust stated (``back_pressure_vacuum``, thrust
+  ``P - A_e p_a(h)``): the deficit is largest near
   the ground, where the dynamic pressure is too low for CD(M) to absorb it, so
   the altitude residual fails from lift-off through the pitch-over, at low
   Mach and low q;
@@ -61,7 +62,7 @@ def clean_fit(m_spec):
 
 @pytest.fixture(scope="module")
 def bp_fit(m_spec):
-    return ri.estimate(m_spec, _data(m_spec, "back_pressure", {"A_e": 0.1}))
+    return ri.estimate(m_spec, _data(m_spec, "back_pressure_vacuum", {"A_e_vac": 0.1}))
 
 
 @pytest.fixture(scope="module")
@@ -294,7 +295,7 @@ def trap_fit():
     """RA-66 data with a small nozzle back-pressure (A_e = 0.02 m^2, 0.5 % of the thrust at sea
     level), fitted with the chapter's time-knot model."""
     spec = ri.ra66()
-    return ri.estimate(spec, _data(spec, "back_pressure", {"A_e": 0.02}))
+    return ri.estimate(spec, _data(spec, "back_pressure_vacuum", {"A_e_vac": 0.02}))
 
 
 def test_the_time_knot_model_passes_on_correct_data(ra66_noisy_fit):

@@ -1,6 +1,8 @@
 """The diagnosis report (ISSUE 5, item 6): ``diagnose()`` and ``rocketid diagnose``.
 
-The data have a hidden nozzle back-pressure (RA-66M, A_e = 0.1 m^2); the
+The data have a hidden nozzle back-pressure (RA-66M, A_e = 0.1 m^2, the stated thrust being the
+vacuum thrust: ``back_pressure_vacuum``, the catalogue's ``back_pressure`` before issue 8 made the
+sea-level convention the default); the
 report must say that the Mach-indexed model fails, where, that the
 coefficients are implausible, and rank the candidates; report.html must be
 self-contained (no http(s) URL in any src or href, every image a data: URI)
@@ -35,7 +37,7 @@ PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 @pytest.fixture(scope="module")
 def bp_data():
-    spec = with_effects(ra66m(), "back_pressure", {"A_e": 0.1})
+    spec = with_effects(ra66m(), "back_pressure_vacuum", {"A_e_vac": 0.1})
     return ri.simulate_measurements(spec, ra66m_truth(spec), ri.ra66_times(), seed=0)
 
 
@@ -88,8 +90,8 @@ def test_diagnose_ranks_the_candidates(report):
         pytest.skip("rocketid.diagnostics.score (part A of ISSUE 5) is not installed yet")
     rep, _ = report
     assert rep.ranking is not None and rep.ranking.candidates
-    assert rep.ranking.candidates[0].name == "back_pressure"
-    assert any("ranks back_pressure" in s for s in rep.verdict())
+    assert rep.ranking.candidates[0].name == "back_pressure_vacuum"
+    assert any("ranks back_pressure_vacuum" in s for s in rep.verdict())
     assert "rocketid candidate effects" in rep.summary()
 
 
@@ -98,19 +100,19 @@ def test_diagnose_confirms_the_leader(report):
     if missing:
         pytest.skip(f"rocketid.diagnostics.{', '.join(missing)} (part A of ISSUE 5) not installed yet")
     rep, out = report
-    assert rep.confirmed == ("back_pressure",) and rep.history is not None
+    assert rep.confirmed == ("back_pressure_vacuum",) and rep.history is not None
     best = rep.best
     assert best is rep.confirmations[0] and best.confirmed
-    a_e, se, (lo, hi) = best.effect_estimates["A_e"]
+    a_e, se, (lo, hi) = best.effect_estimates["A_e_vac"]
     assert lo <= 0.1 <= hi and se < 1e-3  # the hidden A_e = 0.1 m^2
-    assert len(rep.history) == 2 and rep.history.latest.label == "+ back_pressure"
+    assert len(rep.history) == 2 and rep.history.latest.label == "+ back_pressure_vacuum"
     assert rep.refit_plausibility[0].passed
-    assert any(s.startswith("Refit with back_pressure (confirmed)") for s in rep.verdict())
+    assert any(s.startswith("Refit with back_pressure_vacuum (confirmed)") for s in rep.verdict())
     page = (out / "report.html").read_text()
-    assert "After: the model with back_pressure" in page and "history residuals" in page
+    assert "After: the model with back_pressure_vacuum" in page and "history residuals" in page
     assert (out / "figures" / "history.png").is_file() and (out / "figures" / "after.png").is_file()
     d = json.loads((out / "diagnosis.json").read_text())
-    assert d["confirmations"][0]["effect"] == "back_pressure" and d["confirmations"][0]["confirmed"] is True
+    assert d["confirmations"][0]["effect"] == "back_pressure_vacuum" and d["confirmations"][0]["confirmed"] is True
     assert best.fit.chi2_per_dof < 1.1 < rep.fit.chi2_per_dof
     assert rep.after is not None and rep.after.chi2_per_dof == pytest.approx(best.fit.chi2_per_dof)
     assert rep.after.fits_to_noise
@@ -166,7 +168,7 @@ def test_candidates_json(report):
         assert 0.0 <= c["p_value"] <= 1.0
     assert [c["name"] for c in cands] == [c.name for c in rep.ranking.candidates]  # best first
     assert cands[0]["p_value"] == pytest.approx(rep.ranking.candidates[0].p_value_corrected)
-    assert cands[0]["name"] == "back_pressure"
+    assert cands[0]["name"] == "back_pressure_vacuum"
 
 
 class _Refs(HTMLParser):

@@ -28,17 +28,19 @@ import importlib.util
 import keyword
 import os
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from types import ModuleType
+from typing import Callable
 
+import numpy as np
 import sympy as sp
 from sympy.printing.numpy import NumPyPrinter
 
 from .model import ModelSpec
 from .symbolic import SymbolicModel, derive
 
-__all__ = ["GeneratedModel", "generate", "generate_source", "cache_dir"]
+__all__ = ["GeneratedModel", "OutputFunction", "generate", "generate_source", "cache_dir"]
 
 CODEGEN_VERSION = "2"
 
@@ -186,6 +188,51 @@ def generate_source(sym: SymbolicModel, spec_name: str = "") -> str:
 
 
 @dataclass(frozen=True)
+class OutputFunction:
+    """One generated output template ``y = h(u, d)`` per sample, with its sparsity.
+
+    Attributes
+    ----------
+    index : int
+        Position among the model's outputs (``output_<index>`` in the module).
+    name : str
+    linear : bool
+        ``h`` is affine in ``u`` with constant coefficients.
+    grad_idx : ndarray of int, shape (n_g,)
+        Columns of ``U`` the gradient is taken at.
+    hess_rows, hess_cols : ndarray of int, shape (n_h,)
+        Lower-triangle entries of the Hessian in ``U``'s columns.
+    value, gradient, hessian : callable
+        ``f(U, D)`` with ``U`` (n, n_u) and ``D`` (n, 1); shapes (n,), (n, n_g), (n, n_h).
+    """
+
+    index: int
+    name: str
+    linear: bool
+    grad_idx: np.ndarray
+    hess_rows: np.ndarray
+    hess_cols: np.ndarray
+    value: Callable
+    gradient: Callable
+    hessian: Callable
+
+    def evaluate(self, U: np.ndarray, D: np.ndarray, order: int = 0) -> tuple:
+        """``(y,)``, ``(y, dy/du)`` or ``(y, dy/du, d2y/du2)`` at the samples, for ``order`` 0, 1, 2."""
+        out = (self.value(U, D),)
+        if order >= 1:
+            out += (self.gradient(U, D),)
+        if order >= 2:
+            out += (self.hessian(U, D),)
+        return out
+
+
+def _index_array(values) -> np.ndarray:
+    a = np.asarray(values, dtype=np.int64)
+    a.flags.writeable = False
+    return a
+
+
+@dataclass(frozen=True)
 class GeneratedModel:
     """A loaded generated module with its source and sparsity patterns.
 
@@ -205,6 +252,15 @@ class GeneratedModel:
     path: Path
     module: ModuleType
     cached: bool
+    outputs: tuple = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self):
+        m = self.module
+        object.__setattr__(self, "outputs", tuple(
+            OutputFunction(k, name, bool(m.OUTPUT_LINEAR[k]), _index_array(m.OUTPUT_GRAD_IDX[k]),
+                           _index_array(m.OUTPUT_HESS_ROWS[k]), _index_array(m.OUTPUT_HESS_COLS[k]),
+                           getattr(m, f"output_{k}"), getattr(m, f"output_{k}_grad"), getattr(m, f"output_{k}_hess"))
+            for k, name in enumerate(m.OUTPUT_NAMES)))
 
     def __getattr__(self, name):
         return getattr(self.__dict__["module"], name)

@@ -31,7 +31,7 @@ import numpy as np
 from .errors import SensitivityError, SettingsError
 from .nlp import ParameterTransform
 from .sensitivity import Sensitivity, sensitivity_at, sensitivity_of
-from .solve import EstimationResult, Prepared, solve_nlp
+from .solve import EstimationResult, Prepared, fit_nlp
 from .summary import Section, Summary, Table, Text
 
 __all__ = ["Scaling", "Estimability", "analyze", "estimate_q1", "Uncertainty", "uncertainty",
@@ -309,31 +309,22 @@ def estimate_q1(prepared: Prepared, est: Estimability, q2: Sequence[float], *,
     spec = prepared.spec
     notes = []
     if warm_start is not None:
-        x0 = warm_start.x.copy()
-        warm = warm_start.solution
         # keep the states, move q1 to the least-squares fit of the previous p
-        x0[nlp.n_states_vars:] = np.linalg.lstsq(tf.P, warm_start.p - tf.c, rcond=None)[0]
+        x0 = nlp.layout.with_parameters(warm_start.x, warm_start.p)
+        warm = warm_start.solution
+
+        def cold_start():
+            p = np.clip(nlp.layout.parameters(x0), spec.lower, spec.upper)
+            S, _ = prepared.initial_states(p)
+            return nlp.initial_x(S, p)
     else:
         p_start = est.p_of(np.concatenate([est.q_of(est.evaluated_at)[: est.n_estimated], q2]))
         S, note = prepared.initial_states(np.clip(p_start, spec.lower, spec.upper))
         if note:
             notes.append(note)
         x0 = nlp.initial_x(S, p_start)
-        warm = None
-    sol = solve_nlp(nlp, x0, options=options, warm=warm)
-    if warm is not None and not sol.success:
-        # a warm start that fails is retried cold before giving up
-        S, _ = prepared.initial_states(np.clip(tf.P @ x0[nlp.n_states_vars:] + tf.c, spec.lower, spec.upper))
-        sol = solve_nlp(nlp, nlp.initial_x(S, np.clip(tf.P @ x0[nlp.n_states_vars:] + tf.c, spec.lower, spec.upper)),
-                        options=options)
-        notes.append("the warm-started solve failed and was repeated from a simulation")
-    p = tf.P @ sol.x[nlp.n_states_vars:] + tf.c
-    from dataclasses import replace as _replace
-    prep = _replace(prepared, nlp=nlp)
-    return EstimationResult(success=sol.success and bool(np.all(np.isfinite(sol.x))), status=sol.status,
-                            message=sol.message, p=p, objective=sol.objective, iterations=sol.iterations, x=sol.x,
-                            solution=sol, prepared=prep, timings={"setup_s": setup, "solve_s": sol.solve_s},
-                            notes=tuple(notes))
+        warm = cold_start = None
+    return fit_nlp(prepared, nlp, x0, options=options, warm=warm, cold_start=cold_start, setup_s=setup, notes=notes)
 
 
 @dataclass(frozen=True)

@@ -59,7 +59,34 @@ __all__ = [
     "FamilySpec",
     "InputSpec",
     "OutputSpec",
+    "TableSpec",
+    "ROLES",
 ]
+
+#: Physical roles a model's symbols can play, and what each is. The physics builders
+#: (:mod:`rocketid.physics.ascent`) declare them; a model written by hand declares them with
+#: :meth:`Model.declare_role`. Diagnostics and candidate effects find the physics through the
+#: roles (never through a symbol's name) and say which analysis a model without a role cannot have.
+ROLES = {
+    "downrange": "downrange distance (state), m",
+    "altitude": "altitude above the launch site (state), m",
+    "speed": "speed relative to the ground (state), m/s",
+    "flight_path_angle": "flight-path angle (state), rad",
+    "density": "air density (definition), kg/m^3",
+    "gravity": "gravitational acceleration (definition), m/s^2",
+    "dynamic_pressure": "dynamic pressure (definition), Pa",
+    "sound_speed": "speed of sound (definition), m/s",
+    "mach": "Mach number (definition)",
+    "attack_angle": "attack angle (an input, definition or expression), rad",
+    "thrust": "thrust (definition), N",
+    "thrust_direction": "thrust direction relative to the velocity (definition), rad",
+    "mass": "vehicle mass (definition), kg",
+    "drag_coefficient": "drag coefficient (definition)",
+    "lift_coefficient": "lift coefficient (definition)",
+    "drag": "drag force (definition), N",
+    "lift": "lift force (definition), N",
+    "reference_area": "aerodynamic reference area (constant), m^2",
+}
 
 
 # ---------------------------------------------------------------------------
@@ -192,6 +219,31 @@ class OutputSpec:
 
 
 @dataclass(frozen=True)
+class TableSpec:
+    """A coefficient table made by :meth:`Model.table`: piecewise linear in a flight-condition variable.
+
+    Attributes
+    ----------
+    name : str
+        The table's name (its knots are ``<name>_<j>``).
+    variable : sympy.Expr
+        The independent variable (e.g. the ``mach`` definition).
+    variable_role : str or None
+        The role of that variable (``"mach"``, ``"dynamic_pressure"``, ...; see :data:`ROLES`), if it has one.
+    knots : tuple of float
+        Knot positions in the variable.
+    parameters : tuple of sympy.Symbol
+        The knot parameters, in knot order.
+    """
+
+    name: str
+    variable: sp.Expr
+    variable_role: str | None
+    knots: tuple[float, ...]
+    parameters: tuple[sp.Symbol, ...]
+
+
+@dataclass(frozen=True)
 class ModelSpec:
     """An immutable, validated model: the value handed to every later stage.
 
@@ -213,6 +265,27 @@ class ModelSpec:
     outputs: tuple[OutputSpec, ...]
     description: str = ""
     _builder: "Model | None" = field(default=None, repr=False, compare=False)
+    roles: tuple[tuple[str, sp.Expr], ...] = ()
+    tables: tuple[TableSpec, ...] = ()
+
+    # -- physical roles --------------------------------------------------------
+    def role(self, role: str) -> sp.Expr | None:
+        """The symbol (or expression) playing ``role`` (one of :data:`ROLES`), or None."""
+        if role not in ROLES:
+            raise ModelError(f"unknown role {role!r}; roles are {', '.join(ROLES)}")
+        return dict(self.roles).get(role)
+
+    def require_role(self, role: str, analysis: str) -> sp.Expr:
+        """The symbol playing ``role``; a :class:`ModelError` saying that ``analysis`` needs it otherwise."""
+        expr = self.role(role)
+        if expr is None:
+            raise ModelError(missing_role_message(self.name, role, analysis))
+        return expr
+
+    def table_of(self, parameter: sp.Symbol | str) -> TableSpec | None:
+        """The :class:`TableSpec` holding ``parameter`` as a knot, or None."""
+        sym = self.symbol(parameter) if isinstance(parameter, str) else parameter
+        return next((tb for tb in self.tables if sym in tb.parameters), None)
 
     # -- symbols -----------------------------------------------------------
     @property
@@ -486,6 +559,8 @@ class Model:
         self._definitions: list[tuple[sp.Symbol, sp.Expr]] = []
         self._equations: dict[sp.Symbol, sp.Expr] = {}
         self._outputs: list[OutputSpec] = []
+        self._roles: dict[str, sp.Expr] = {}
+        self._tables: list[TableSpec] = []
 
     # -- attribute access ----------------------------------------------------
     def __getattr__(self, name: str) -> sp.Symbol:
@@ -506,7 +581,77 @@ class Model:
         new._definitions = list(self._definitions)
         new._equations = dict(self._equations)
         new._outputs = list(self._outputs)
+        new._roles = dict(self.__dict__.get("_roles", {}))
+        new._tables = list(self.__dict__.get("_tables", []))
         return new
+
+    def remove_family(self, family: sp.Symbol | str) -> None:
+        """Remove a time family and its knot parameters (to replace it by another
+        parameterization: redefine every expression that uses it first).
+
+        Raises
+        ------
+        ModelError
+            Not a family of the model, or still used by an equation, definition or output.
+        """
+        sym = self._names.get(family) if isinstance(family, str) else family
+        fam = next((f for f in self._families if f.symbol == sym), None)
+        if fam is None:
+            raise ModelError(f"{family} is not a family of model {self.name!r}")
+        used = [str(k) for k, e in self._equations.items() if sym in e.free_symbols]
+        used += [str(d) for d, e in self._definitions if sym in e.free_symbols]
+        used += [o.name for o in self._outputs if sym in o.expr.free_symbols]
+        if used:
+            raise ModelError(f"family {sym} of model {self.name!r} is still used by {', '.join(used)}; redefine them "
+                             "before removing it")
+        knots = set(fam.knots)
+        self._families = [f for f in self._families if f is not fam]
+        self._parameters = [p for p in self._parameters if p.symbol not in knots]
+        for s in knots | {sym}:
+            self._names.pop(str(s), None)
+
+    # -- physical roles --------------------------------------------------------
+    def declare_role(self, role: str, expr: sp.Expr | str) -> None:
+        """Declare that ``expr`` (a component, or an expression of them) plays ``role``.
+
+        Parameters
+        ----------
+        role : str
+            One of :data:`ROLES` (``"altitude"``, ``"speed"``, ``"mach"``, ``"thrust"``, ...).
+        expr : sympy.Expr or str
+            A symbol of this model (or its name), or an expression of its symbols
+            (an attack angle written as ``theta_cmd - theta``).
+
+        Examples
+        --------
+        >>> m = Model("user", 0.0, 10.0)
+        >>> alt = m.state("alt", 0.0)
+        >>> m.declare_role("altitude", alt)
+        """
+        if role not in ROLES:
+            raise ModelError(f"unknown role {role!r}; roles are {', '.join(ROLES)}")
+        if isinstance(expr, str):
+            if expr not in self._names:
+                raise ModelError(f"role {role!r}: model {self.name!r} has no component named {expr!r}")
+            expr = self._names[expr]
+        expr = sp.sympify(expr)
+        unknown = {str(x) for x in expr.free_symbols} - set(self._names)
+        if unknown:
+            raise ModelError(f"role {role!r}: {', '.join(sorted(unknown))} is not a component of model {self.name!r}")
+        self._roles[role] = expr
+
+    def role(self, role: str) -> sp.Expr | None:
+        """The symbol (or expression) declared for ``role``, or None."""
+        if role not in ROLES:
+            raise ModelError(f"unknown role {role!r}; roles are {', '.join(ROLES)}")
+        return self._roles.get(role)
+
+    def require_role(self, role: str, analysis: str) -> sp.Expr:
+        """The symbol playing ``role``; a :class:`ModelError` saying that ``analysis`` needs it otherwise."""
+        expr = self.role(role)
+        if expr is None:
+            raise ModelError(missing_role_message(self.name, role, analysis))
+        return expr
 
     def _new_symbol(self, name: str) -> sp.Symbol:
         if not isinstance(name, str) or not name.isidentifier():
@@ -729,6 +874,8 @@ class Model:
             raise ModelError(f"table {name}: {g.size} guesses for {kn.size} knots")
         ps = [self._add_parameter(f"{name}_{j}", g[j], bounds, nominal) for j in range(kn.size)]
         X = sp.sympify(variable)
+        vrole = next((r for r, e in self._roles.items() if e == X), None)
+        self._tables.append(TableSpec(str(name), X, vrole, tuple(float(k) for k in kn), tuple(ps)))
         # exact piecewise-linear interpolation with flat ends, written with ramps
         # max(X - M_j, 0) instead of Piecewise conditions (cheap to substitute and
         # differentiate when X is itself piecewise, as Mach is)
@@ -843,10 +990,18 @@ class Model:
             families=tuple(self._families), definitions=tuple(self._definitions),
             equations=tuple(self._equations[s.symbol] for s in self._states),
             outputs=tuple(self._outputs), description=self.description, _builder=self.copy(),
+            roles=tuple(self._roles.items()), tables=tuple(self._tables),
         )
         _check_symbols(spec)
         check_guess(spec)
         return spec
+
+
+def missing_role_message(model: str, role: str, analysis: str) -> str:
+    """The error text for a model without the role an analysis needs."""
+    return (f"{analysis} needs the {ROLES[role].split(' (')[0]} (role {role!r}), which model {model!r} does not "
+            f"declare; the physics builders of rocketid.physics.ascent declare it, or declare it yourself with "
+            f"m.declare_role({role!r}, symbol)")
 
 
 def _check_symbols(spec: ModelSpec) -> None:

@@ -125,18 +125,18 @@ def solve_collocation(nlp: CollocationNLP, p: np.ndarray, gamma0: np.ndarray, *,
     ndarray
         ``gamma`` with ``max |c| <= tol * (1 + max |gamma|)``.
     """
-    nsv = nlp.n_states_vars
-    x = np.concatenate([np.asarray(gamma0, float), np.asarray(p, float)])
-    m_eq = nlp.m_ic + nlp.m_col
+    lay = nlp.layout
+    eq, states = lay.equality_rows, lay.state_columns
+    x = lay.pack(gamma0, p)
     scale = 1.0 + np.max(np.abs(gamma0))
     for it in range(max_iter):
-        c = nlp.constraints(x)[:m_eq]
+        c = nlp.constraints(x)[eq]
         if not np.all(np.isfinite(c)):
             raise SensitivityError("the collocation equations are not finite at this point (the trajectory left "
                                    "the model's domain); start from a feasible trajectory")
         if np.max(np.abs(c)) <= tol * scale:
-            return x[:nsv]
-        J = nlp.jacobian_matrix(x)[:m_eq, :nsv].tocsc()
+            return lay.states(x)
+        J = nlp.jacobian_matrix(x)[eq, states].tocsc()
         try:
             dx = spla.splu(J).solve(-c)
         except RuntimeError as exc:
@@ -145,9 +145,8 @@ def solve_collocation(nlp: CollocationNLP, p: np.ndarray, gamma0: np.ndarray, *,
         # damped step when far away
         step = 1.0
         for _ in range(20):
-            xn = x.copy()
-            xn[:nsv] += step * dx
-            cn = nlp.constraints(xn)[:m_eq]
+            xn = lay.pack(lay.states(x) + step * dx, lay.reduced(x))
+            cn = nlp.constraints(xn)[eq]
             if np.all(np.isfinite(cn)) and np.max(np.abs(cn)) < np.max(np.abs(c)) * (1 - 1e-4 * step) + tol * scale:
                 break
             step *= 0.5
@@ -192,7 +191,7 @@ def sensitivity_at(prepared: Prepared, p: np.ndarray | None = None, *, gamma: np
     if solve:
         gamma = solve_collocation(nlp, p, gamma)
     else:
-        c = nlp.constraints(np.concatenate([gamma, p]))[:nlp.m_ic + nlp.m_col]
+        c = nlp.constraints(nlp.layout.pack(gamma, p))[nlp.layout.equality_rows]
         worst = float(np.max(np.abs(c))) if c.size else 0.0
         if not worst <= 1e-6 * (1.0 + np.max(np.abs(gamma))):
             raise SensitivityError(f"the given gamma does not satisfy the collocation equations at p (max |c| = "
@@ -204,22 +203,21 @@ def sensitivity_at(prepared: Prepared, p: np.ndarray | None = None, *, gamma: np
 def sensitivity_of(fit: EstimationResult) -> Sensitivity:
     """Sensitivities at a converged fit's solution (full parameter vector)."""
     nlp = _full(fit.nlp)
-    w = fit.nlp.full_vector(fit.x)
-    gamma = w[:nlp.n_states_vars]
+    gamma = fit.nlp.layout.states(fit.x)  # the transform maps only the parameters
     gamma = solve_collocation(nlp, fit.p, gamma)
     return _form(nlp, fit.p, gamma)
 
 
 def _form(nlp: CollocationNLP, p: np.ndarray, gamma: np.ndarray) -> Sensitivity:
     t0 = time.perf_counter()
-    nsv = nlp.n_states_vars
+    lay = nlp.layout
+    states, params = lay.state_columns, lay.parameter_columns
     n_p = p.size
-    x = np.concatenate([gamma, p])
-    m_eq = nlp.m_ic + nlp.m_col
-    J = nlp.jacobian_matrix(x)[:m_eq].tocsc()
-    c_g, c_p = J[:, :nsv], J[:, nsv:]
+    x = lay.pack(gamma, p)
+    J = nlp.jacobian_matrix(x)[lay.equality_rows].tocsc()
+    c_g, c_p = J[:, states], J[:, params]
     Hy = nlp.output_jacobian(x).tocsc()
-    h_g, h_p = Hy[:, :nsv], Hy[:, nsv:]
+    h_g, h_p = Hy[:, states], Hy[:, params]
     ny = Hy.shape[0]
     # the square Jacobian of (c, h - y) with respect to w = (gamma, y), and J_p
     Jw = sps.bmat([[c_g, None], [h_g, -sps.identity(ny, format="csc")]], format="csc")
@@ -234,18 +232,14 @@ def _form(nlp: CollocationNLP, p: np.ndarray, gamma: np.ndarray) -> Sensitivity:
     if not np.all(np.isfinite(sol)):
         raise SensitivityError("the back-solve with the LU factors of J_w gave non-finite values "
                                "(numerically singular Jacobian)")
-    dgamma = sol[:nsv]
-    S = sol[nsv:]
+    dgamma = sol[states]
+    S = sol[lay.n_state_vars:]  # the rows of J_w after the states are the outputs
     Z = np.vstack([np.eye(n_p), sol])
     sigma = nlp.sigma_vector()
     Sw = S / sigma[:, None]
     H_r = Sw.T @ Sw
     H_r = 0.5 * (H_r + H_r.T)
-    lay = nlp.transcription.layout
-    slices, start = {}, 0
-    for name, ch in zip(nlp.channel_names, nlp._channels):
-        slices[name] = slice(start, start + ch.n)
-        start += ch.n
+    slices = nlp.channel_slices()
     notes = []
     colnorm = np.linalg.norm(Sw, axis=0)
     for name, cn in zip(nlp.spec.parameter_names, colnorm):
@@ -254,5 +248,5 @@ def _form(nlp: CollocationNLP, p: np.ndarray, gamma: np.ndarray) -> Sensitivity:
                          "it does not enter the model's equations or outputs, or is masked")
     return Sensitivity(
         p=np.asarray(p, float).copy(), parameter_names=nlp.spec.parameter_names, S=S,
-        state_sensitivity=dgamma.reshape(lay.n_nodes, lay.n_states, n_p), Z=Z, sigma=sigma, H_r=H_r,
+        state_sensitivity=dgamma.reshape(lay.layout.n_nodes, lay.layout.n_states, n_p), Z=Z, sigma=sigma, H_r=H_r,
         channel_slices=slices, gamma=gamma, formed_s=time.perf_counter() - t0, notes=tuple(notes))

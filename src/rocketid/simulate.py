@@ -22,6 +22,7 @@ families, input kinks), where the right-hand side is not smooth.
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from typing import Mapping, Sequence
 
@@ -104,6 +105,14 @@ def evaluate_along(spec: ModelSpec, expr: sp.Expr, times: np.ndarray, states: np
     return np.broadcast_to(np.asarray(val, dtype=float), times.shape).copy()
 
 
+class _GaveUp(Exception):
+    """Raised inside the right-hand side when the simulation's wall-time limit has passed."""
+
+    def __init__(self, t: float):
+        super().__init__(t)
+        self.t = float(t)
+
+
 class _RHS:
     """``ds/dt`` from the residuals ``F = A(s) ds/dt + b(s)``, with the guard."""
 
@@ -138,6 +147,7 @@ class _RHS:
                 self._inputs.append(lambda t, tt=tt, vv=vv: float(np.interp(t, tt, vv)))
         self.s0 = None
         self.guarded = False
+        self.deadline = None
 
     def locals_(self, t: float) -> list[float]:
         out = []
@@ -149,6 +159,8 @@ class _RHS:
         return out
 
     def __call__(self, t: float, ds: np.ndarray) -> np.ndarray:
+        if self.deadline is not None and time.perf_counter() > self.deadline:
+            raise _GaveUp(t)
         s = self.s0 + ds
         vals = self._fn(t, *s, *(f(t) for f in self._inputs), *self.locals_(t))
         n = self.n
@@ -166,7 +178,8 @@ class _RHS:
 
 def simulate(spec: ModelSpec, p: Sequence[float] | Mapping | None = None, times: Sequence[float] | None = None,
              *, rtol: float = 1e-12, atol: float = 1e-12, method: str = "DOP853",
-             initial_state: Sequence[float] | None = None, guard: float = 1e-9) -> Trajectory:
+             initial_state: Sequence[float] | None = None, guard: float = 1e-9,
+             max_wall_time: float | None = None) -> Trajectory:
     """Integrate ``spec`` at parameters ``p`` with SciPy.
 
     Parameters
@@ -184,6 +197,10 @@ def simulate(spec: ModelSpec, p: Sequence[float] | Mapping | None = None, times:
         Overrides the model's initial state (Table 7.3's perturbed starts).
     guard : float
         Below this magnitude an implicit derivative coefficient is treated as zero.
+    max_wall_time : float, optional
+        Give up after this many seconds of wall time: the trajectory is then
+        returned with ``success`` False, NaN beyond the time reached and a
+        message that says so (a stiff or crawling integration cannot hang a caller).
 
     Returns
     -------
@@ -200,13 +217,22 @@ def simulate(spec: ModelSpec, p: Sequence[float] | Mapping | None = None, times:
     s0 = spec.initial_state(pvec) if initial_state is None else np.asarray(initial_state, dtype=float)
     rhs = _RHS(spec, pvec, guard)
     rhs.s0 = s0
+    if max_wall_time is not None:
+        if not max_wall_time > 0:
+            raise SettingsError(f"max_wall_time must be a positive number of seconds, got {max_wall_time!r}")
+        rhs.deadline = time.perf_counter() + float(max_wall_time)
     bps = [b for b in spec.breakpoints if spec.t0 <= b <= spec.tf]
     out = np.full((times.size, s0.size), np.nan)
     ds = np.zeros_like(s0)
     ok, msg = True, "integration successful"
     for a, b in zip(bps[:-1], bps[1:]):
         sel = (times >= a) & (times <= b) if b == bps[-1] else (times >= a) & (times < b)
-        sol = solve_ivp(rhs, (a, b), ds, method=method, rtol=rtol, atol=atol, dense_output=True)
+        try:
+            sol = solve_ivp(rhs, (a, b), ds, method=method, rtol=rtol, atol=atol, dense_output=True)
+        except _GaveUp as stop:
+            ok, msg = False, (f"gave up after {max_wall_time:g} s of wall time (max_wall_time) at t = {stop.t:.4g} s "
+                              f"of [{spec.t0:g}, {spec.tf:g}]")
+            break
         if not sol.success:
             ok, msg = False, f"integration failed on [{a:g}, {b:g}]: {sol.message}"
             break

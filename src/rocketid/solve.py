@@ -18,9 +18,9 @@ import json
 import math
 import time
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
-from typing import Any, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 import sympy as sp
@@ -30,7 +30,7 @@ from .collocation.transcription import Mesh, Transcription, transcribe
 from .data import Measurements
 from .errors import DataError, ModelError, SettingsError, SolverError
 from .model import ModelSpec, check_guess
-from .nlp import CollocationNLP
+from .nlp import CollocationNLP, build_nlp
 from .summary import Section, Summary, Table
 
 __all__ = ["IPOPT_OPTIONS", "check_ipopt_options", "NLPSolution", "solve_nlp", "EstimationResult",
@@ -301,7 +301,7 @@ def prepare(spec: ModelSpec, data: Measurements, *, mesh: Mesh | None = None) ->
     gen = generate(spec)
     mesh = mesh if mesh is not None else default_mesh(spec)
     tr = transcribe(spec, data, mesh)
-    nlp = CollocationNLP(tr, gen, data)
+    nlp = build_nlp(tr, gen, data)
     return Prepared(spec, data, tr, nlp, time.perf_counter() - t0, gen.cached)
 
 
@@ -327,6 +327,8 @@ class EstimationResult:
     timings : dict
         ``setup_s`` (model to ready NLP) and ``solve_s`` (the IPOPT call alone).
     notes : tuple of str
+    retried : bool
+        A warm-started solve failed and this is the cold solve that repeated it.
     """
 
     success: bool
@@ -340,6 +342,7 @@ class EstimationResult:
     prepared: Prepared
     timings: dict
     notes: tuple = ()
+    retried: bool = False
 
     @property
     def spec(self) -> ModelSpec:
@@ -511,17 +514,64 @@ def estimate(spec: ModelSpec, data: Measurements, *, guess: Mapping | Sequence[f
         x0 = warm_start.x.copy()
         warm = warm_start.solution
         if guess is not None:
-            x0[nlp.n_states_vars:] = p0
+            x0 = nlp.layout.with_reduced(x0, p0)  # (7.5): the reduced parameters are p
     else:
         S, note = prepared.initial_states(p0)
         if note:
             notes.append(note)
         x0 = nlp.initial_x(S, p0)
+    return fit_nlp(prepared, nlp, x0, options=options, warm=warm, setup_s=prepared.setup_s, notes=notes)
+
+
+def fit_nlp(prepared: Prepared, nlp: CollocationNLP, x0: np.ndarray, *, options: Mapping[str, Any] | None = None,
+            warm: NLPSolution | None = None, cold_start: Callable[[], np.ndarray] | None = None,
+            setup_s: float = 0.0, notes: Sequence[str] = ()) -> EstimationResult:
+    """The one fitting path: solve ``nlp`` from ``x0`` and make the :class:`EstimationResult`.
+
+    Parameters
+    ----------
+    prepared : Prepared
+        The model collocated against the data; the result holds it with ``nlp``.
+    nlp : CollocationNLP
+        The problem: ``prepared.nlp`` (7.5) or a transformed one (7.9).
+    x0 : ndarray, shape (nlp.n,)
+    options : mapping, optional
+        IPOPT options.
+    warm : NLPSolution, optional
+        Multipliers to warm-start IPOPT.
+    cold_start : callable, optional
+        ``cold_start() -> x0``: a warm-started solve that fails is repeated once from
+        this start without multipliers (the result's ``retried`` is then True).
+    setup_s : float
+        The set-up time to report.
+    notes : sequence of str
+        Notes gathered before the solve.
+
+    Returns
+    -------
+    EstimationResult
+        ``success`` is False when IPOPT fails or returns non-finite values.
+    """
+    notes = list(notes)
     sol = solve_nlp(nlp, x0, options=options, warm=warm)
-    p = spec.parameter_vector(nlp.transform.P @ sol.x[nlp.n_states_vars:] + nlp.transform.c)
-    if not np.all(np.isfinite(sol.x)):
+    retried = False
+    if warm is not None and cold_start is not None and not sol.success:
+        sol = solve_nlp(nlp, cold_start(), options=options)
+        retried = True
+        notes.append("the warm-started solve failed and was repeated from a simulation")
+    return result_of(prepared, nlp, sol, setup_s=setup_s, notes=notes, retried=retried)
+
+
+def result_of(prepared: Prepared, nlp: CollocationNLP, sol: NLPSolution, *, setup_s: float = 0.0,
+              notes: Sequence[str] = (), retried: bool = False) -> EstimationResult:
+    """The :class:`EstimationResult` of a solution ``sol`` of ``nlp`` (no solve)."""
+    notes = list(notes)
+    finite = bool(np.all(np.isfinite(sol.x)))
+    if not finite:
         notes.append("the solver returned non-finite values")
+    if prepared.nlp is not nlp:
+        prepared = replace(prepared, nlp=nlp)
     return EstimationResult(
-        success=sol.success and bool(np.all(np.isfinite(sol.x))), status=sol.status, message=sol.message, p=p,
+        success=sol.success and finite, status=sol.status, message=sol.message, p=nlp.layout.parameters(sol.x),
         objective=sol.objective, iterations=sol.iterations, x=sol.x, solution=sol, prepared=prepared,
-        timings={"setup_s": prepared.setup_s, "solve_s": sol.solve_s}, notes=tuple(notes))
+        timings={"setup_s": setup_s, "solve_s": sol.solve_s}, notes=tuple(notes), retried=retried)

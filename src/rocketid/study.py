@@ -27,6 +27,7 @@ import csv
 import json
 import math
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
@@ -464,32 +465,62 @@ def reproduce(out: str | Path | None = None, *, settings: StudySettings | None =
         raise SettingsError("give either settings= or keyword settings, not both")
     if resume and out is None:
         raise SettingsError("resume needs the output directory of the interrupted study (out=...)")
-    t_start = time.perf_counter()
-    timings = {}
+    clock = _Clock()
     spec = ra66()
-    p_true = ra66_truth(spec)
-    times = ra66_times()
-    t0 = time.perf_counter()
-    traj = simulate(spec, p_true, times)
-    outs = traj.outputs()
-    truth = np.stack([outs[c] for c in CHANNELS], axis=1)
-    data = simulate_measurements(spec, p_true, times, seed=settings.data_seed)
-    timings["data_s"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    prepared = prepare(spec, data)
-    timings["prepare_s"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    problem = prepare_sampling(prepared, spec.guess, settings.sampling_settings())
-    timings["steps_1_4_s"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    smp = sample(problem, seeds=settings.run_seeds, executor=executor, workers=workers, client=client,
-                 address=address, checkpoint_dir=out, resume=resume, progress=progress, callback=callback)
-    timings["sampling_s"] = time.perf_counter() - t0
+    p_true, times = ra66_truth(spec), ra66_times()
+    with clock("data_s"):
+        truth, data = _truth_and_data(spec, p_true, times, settings.data_seed)
+    with clock("prepare_s"):
+        prepared = prepare(spec, data)
+    with clock("steps_1_4_s"):
+        problem = prepare_sampling(prepared, spec.guess, settings.sampling_settings())
+    with clock("sampling_s"):
+        smp = sample(problem, seeds=settings.run_seeds, executor=executor, workers=workers, client=client,
+                     address=address, checkpoint_dir=out, resume=resume, progress=progress, callback=callback)
+    with clock("tables_s"):
+        estimates, eta = _run_estimates(smp, len(spec.parameters))
+        errors, predictions = _prediction_errors(spec, estimates, times, truth)
+        best_index = smp.runs.index(smp.best_run) + 1 if smp.best_run is not None else 0
+        pert, perturbed, rows3 = _perturbed_starts(spec, p_true, times, estimates, best_index, settings)
+        tables = _tables(spec.parameter_names, estimates, eta, errors, rows3)
+    notes = _study_notes(settings, smp, errors, perturbed, pert, best_index)
+    timings = clock.total()
+    for a in (estimates, eta, errors, pert, perturbed, truth, predictions):
+        a.flags.writeable = False
+    res = StudyResult(settings, smp, spec.parameter_names, p_true, estimates, eta, errors, best_index, pert, perturbed,
+                      times, truth, predictions, *tables, timings, tuple(notes))
+    if out is not None:
+        res.write(out, plots=plots)
+    return res
 
-    t0 = time.perf_counter()
-    names = spec.parameter_names
-    n_p = len(names)
-    R = settings.runs
+
+class _Clock:
+    """Wall time of named steps, and the total since the clock was made."""
+
+    def __init__(self):
+        self.start = time.perf_counter()
+        self.timings: dict[str, float] = {}
+
+    @contextmanager
+    def __call__(self, name: str):
+        t0 = time.perf_counter()
+        yield
+        self.timings[name] = time.perf_counter() - t0
+
+    def total(self) -> dict[str, float]:
+        return {**self.timings, "total_s": time.perf_counter() - self.start}
+
+
+def _truth_and_data(spec, p_true: np.ndarray, times: np.ndarray, data_seed: int) -> tuple[np.ndarray, Any]:
+    """The noise-free x, h, v (n, 3) from the high-accuracy simulator, and the noisy data set."""
+    outs = simulate(spec, p_true, times).outputs()
+    truth = np.stack([outs[c] for c in CHANNELS], axis=1)
+    return truth, simulate_measurements(spec, p_true, times, seed=data_seed)
+
+
+def _run_estimates(smp: SamplingResult, n_p: int) -> tuple[np.ndarray, np.ndarray]:
+    """Row 0: the reference (index 0); row i: run i's least-eta draw (NaN if it has none)."""
+    R = len(smp.runs)
     estimates = np.full((R + 1, n_p), math.nan)
     eta = np.full(R + 1, math.nan)
     estimates[0] = smp.reference.p
@@ -498,31 +529,41 @@ def reproduce(out: str | Path | None = None, *, settings: StudySettings | None =
         if r.best is not None:
             estimates[i] = r.best.p
             eta[i] = r.best.eta
-    errors = np.full((R + 1, 3), math.nan)
-    predictions = np.full((R + 1, times.size, 3), math.nan)
-    for i in range(R + 1):
-        errors[i], predictions[i] = _mean_abs_errors(spec, estimates[i], times, truth)
-    best = smp.best_run
-    best_index = smp.runs.index(best) + 1 if best is not None else 0
+    return estimates, eta
 
+
+def _prediction_errors(spec, estimates: np.ndarray, times: np.ndarray, truth: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """Table 7.2: each estimate's mean |prediction - truth| (rows, 3) and the predictions."""
+    errors = np.full((estimates.shape[0], 3), math.nan)
+    predictions = np.full((estimates.shape[0], times.size, 3), math.nan)
+    for i in range(estimates.shape[0]):
+        errors[i], predictions[i] = _mean_abs_errors(spec, estimates[i], times, truth)
+    return errors, predictions
+
+
+def _perturbed_starts(spec, p_true, times, estimates, best_index: int, settings: StudySettings):
+    """Table 7.3: index 0 and the least-eta run predicting flights from perturbed x, h, v."""
     pert = np.random.default_rng([settings.seed, 73]).standard_normal((settings.n_perturbations, 3))
     state_names = [str(s) for s in spec.state_symbols]
     idx = [state_names.index(c) for c in CHANNELS]
     perturbed = np.full((settings.n_perturbations, 2, 3), math.nan)
-    rows3 = []
+    rows = []
     for j, d in enumerate(pert):
         s0 = spec.initial_state(p_true).copy()
         s0[idx] += d
-        tt = simulate(spec, p_true, times, initial_state=s0)
-        o = tt.outputs()
+        o = simulate(spec, p_true, times, initial_state=s0).outputs()
         truth_j = np.stack([o[c] for c in CHANNELS], axis=1)
         for g, index in enumerate((0, best_index)):
             if g == 1 and best_index == 0:
                 continue
             perturbed[j, g], _ = _mean_abs_errors(spec, estimates[index], times, truth_j, initial_state=s0)
-            rows3.append((j + 1, float(d[0]), float(d[1]), float(d[2]), index, *map(float, perturbed[j, g])))
-    timings["tables_s"] = time.perf_counter() - t0
+            rows.append((j + 1, float(d[0]), float(d[1]), float(d[2]), index, *map(float, perturbed[j, g])))
+    return pert, perturbed, rows
 
+
+def _tables(names, estimates, eta, errors, rows3) -> tuple[Table, Table, Table]:
+    R = estimates.shape[0] - 1
     t71 = Table("table_7_1", "Estimates: index 0 = q2 fixed at V2^T p0; 1..R = least-eta draw of each run",
                 ("index", *names, "eta"),
                 tuple((i, *map(float, estimates[i]), float(eta[i])) for i in range(R + 1)))
@@ -530,7 +571,11 @@ def reproduce(out: str | Path | None = None, *, settings: StudySettings | None =
                 ("index", *CHANNELS), tuple((i, *map(float, errors[i])) for i in range(R + 1)))
     t73 = Table("table_7_3", "Average error with perturbed initial x, h, v (index 0 and the least-eta run)",
                 ("case", "x0", "h0", "v0", "index", *CHANNELS), tuple(rows3))
+    return t71, t72, t73
 
+
+def _study_notes(settings: StudySettings, smp: SamplingResult, errors, perturbed, pert, best_index: int) -> list[str]:
+    R = settings.runs
     notes = []
     est = smp.estimability
     notes.append(f"scaling '{settings.scaling}' gives np = {est.n_estimated} of {est.eigenvalues.size} with threshold "
@@ -559,11 +604,4 @@ def reproduce(out: str | Path | None = None, *, settings: StudySettings | None =
             notes.append(f"runs {', '.join(map(str, bad))} do not beat index 0 on every channel (the chapter: all do)")
     if smp.n_failures:
         notes.append(f"{smp.n_failures} draws failed over all runs (recorded per run in study.json)")
-    timings["total_s"] = time.perf_counter() - t_start
-    for a in (estimates, eta, errors, pert, perturbed, truth, predictions):
-        a.flags.writeable = False
-    res = StudyResult(settings, smp, names, p_true, estimates, eta, errors, best_index, pert, perturbed, times, truth,
-                      predictions, t71, t72, t73, timings, tuple(notes))
-    if out is not None:
-        res.write(out, plots=plots)
-    return res
+    return notes

@@ -4,15 +4,17 @@
 
     rocketid diagnose data.csv --out report/                 # the chapter's RA-66 parameterization
     rocketid diagnose data.csv --out report/ --model ra66m   # Mach-indexed CD(M), CL = CL_alpha alpha
-    rocketid diagnose data.csv --out report/ --model my_model.py --level 0.01 --confirm 3
+    rocketid diagnose data.csv --out report/ --model my_model.py --holdout 0:40 --max-effects 2
 
 Runs :func:`rocketid.diagnostics.api.diagnose` (fit, compare, locate,
-plausibility, candidate ranking, refit confirmation of the leaders) and writes
+plausibility, candidate ranking, every contender refitted, the acceptance test,
+effects added stepwise until the model reaches the noise) and writes
 ``DIR/report.html`` (self-contained: opens with no network),
 ``DIR/candidates.json`` (``{"candidates": [...]}``, best first, each with
 ``name``, ``statistic``, ``p_value`` (corrected) and ``group``),
-``DIR/diagnosis.json``, ``DIR/summary.txt`` and ``DIR/figures/*.png``; prints
-the verdict. Exit codes as every rocketid command: 0 the report is written
+``DIR/diagnosis.json`` (with ``"final"``: the effects added, every parameter's
+value and std, chi2/dof, fits_to_noise and the verdict), ``DIR/summary.txt`` and
+``DIR/figures/*.png``; prints the verdict. Exit codes as every rocketid command: 0 the report is written
 (whatever it finds), 1 the base fit did not converge (the report is still
 written), 2 bad input.
 """
@@ -37,14 +39,25 @@ __all__ = ["command"]
 @click.option("--level", type=float, default=0.05, show_default=True,
               help="Significance level of the tests and of the candidate ranking (0 < level < 1).")
 @click.option("--confirm", "confirm_top", type=click.IntRange(min=0), default=2, show_default=True, metavar="N",
-              help="Refit the model with each of the N leading significant candidates.")
+              help="0: rank the candidates only. Otherwise every significant contender (each confounded group's "
+                   "leader, every candidate whose predicted fall is within 10x of the leader's) is refitted.")
+@click.option("--holdout", default="auto", show_default=True, metavar="auto|none|START:END",
+              help="Hold-out check of the final model: 'auto' fits the first 45/66 of the model's horizon and "
+                   "predicts the rest; START:END sets the fit window (s); 'none' skips it.")
+@click.option("--max-effects", type=click.IntRange(min=1), default=3, show_default=True, metavar="N",
+              help="Add at most N effects (stepwise).")
+@click.option("--workers", type=click.IntRange(min=1), default=None, metavar="N",
+              help="Parallel refit processes (default: up to 2).")
+@click.option("--refit-timeout", type=float, default=180.0, show_default=True, metavar="SECONDS",
+              help="Give up a refit or hold-out prediction after this long (it is reported as given up).")
 @click.option("--window", type=float, default=None, metavar="SECONDS",
               help="Window length of the located statistics (default: the flight's span / 22).")
 @click.option("--time-column", default="t", show_default=True, help="Name of the time column.")
 @click.option("--sigma", "sigmas", multiple=True, type=NameValue(float), metavar="NAME=VALUE",
               help="Noise standard deviation of an output (repeatable; default: the model's).")
 @verbose_option
-def command(data_file, out, model, level, confirm_top, window, time_column, sigmas):
+def command(data_file, out, model, level, confirm_top, holdout, max_effects, workers, refit_timeout, window,
+            time_column, sigmas):
     """Fit a model to DATA.csv and diagnose what it misses; write DIR/report.html.
 
     The report compares each channel with the model, locates where the
@@ -59,13 +72,17 @@ def command(data_file, out, model, level, confirm_top, window, time_column, sigm
         raise SettingsError(f"--level must be between 0 and 1, got {level:g}")
     if window is not None and not window > 0:
         raise SettingsError(f"--window must be a positive number of seconds, got {window:g}")
+    if not refit_timeout > 0:
+        raise SettingsError(f"--refit-timeout must be a positive number of seconds, got {refit_timeout:g}")
+    holdout = _holdout(holdout)
     spec, label = resolve_model(model)
     sig = assignments(sigmas, "--sigma", allowed=list(spec.output_names))
     data = read_csv(data_file, spec.output_names, time_column=time_column, sigma=sig)
     status(f"read {data.n_samples} values of {', '.join(data.names)} from {data_file}; fitting {spec.name} and "
            "diagnosing")
     t0 = time.perf_counter()
-    report = diagnose(data, spec, level=level, confirm_top=confirm_top, window=window)
+    report = diagnose(data, spec, level=level, confirm_top=confirm_top, window=window, holdout=holdout,
+                      max_effects=max_effects, workers=workers, refit_timeout=refit_timeout)
     report = _relabel(report, label, str(data_file))
     path = report.write(out)
     for line in report.verdict():
@@ -73,6 +90,22 @@ def command(data_file, out, model, level, confirm_top, window, time_column, sigm
     click.echo(f"wrote {path} and {path.parent / 'candidates.json'} ({time.perf_counter() - t0:.1f} s)")
     if not report.fit.success:
         click.get_current_context().exit(EXIT_NOT_CONVERGED)
+
+
+def _holdout(text: str):
+    """'auto', 'none' or 'START:END' -> the diagnose() argument."""
+    t = text.strip().lower()
+    if t == "auto":
+        return "auto"
+    if t == "none":
+        return None
+    try:
+        a, b = (float(x) for x in t.split(":"))
+    except ValueError:
+        raise SettingsError(f"--holdout must be auto, none or START:END in seconds (e.g. 0:45), got {text!r}") from None
+    if not b > a:
+        raise SettingsError(f"--holdout START:END needs END > START, got {text!r}")
+    return a, b
 
 
 def _relabel(report, model_label: str, data_label: str):

@@ -17,7 +17,7 @@ from __future__ import annotations
 import math
 import time
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
@@ -32,7 +32,7 @@ from .compare import Comparison, compare
 from .locate import Location, locate
 from .plausibility import Plausibility, check_plausibility
 
-__all__ = ["diagnose", "DiagnosisReport", "resolve_model", "BUILTIN_MODELS"]
+__all__ = ["diagnose", "DiagnosisReport", "FinalModel", "resolve_model", "BUILTIN_MODELS"]
 
 
 def _read_data(data, spec: ModelSpec) -> tuple[Measurements, str]:
@@ -41,6 +41,43 @@ def _read_data(data, spec: ModelSpec) -> tuple[Measurements, str]:
     if isinstance(data, (str, Path)):
         return read_csv(data, spec.output_names), str(data)
     raise DataError(f"data must be Measurements or the path of a CSV file, got {type(data).__name__}")
+
+
+@dataclass(frozen=True)
+class FinalModel:
+    """The model the diagnosis ends with.
+
+    Attributes
+    ----------
+    effects : tuple of str
+        The effects added, in the order added (empty: none).
+    parameters : dict
+        ``{name: (value, std)}`` of every estimated parameter (std NaN when not available).
+    chi2_per_dof : float
+    fits_to_noise : bool
+        chi2/dof inside the noise band and residuals no less white than clean data.
+    verdict : str
+        ``"nothing missing"``, ``"explained"``, ``"partly explained"`` or
+        ``"not explained by the catalogue"``.
+    explanation : str
+        One sentence: what was found, what remains and where, or what to try.
+    fit : EstimationResult
+    """
+
+    effects: tuple
+    parameters: dict
+    chi2_per_dof: float
+    fits_to_noise: bool
+    verdict: str
+    explanation: str
+    fit: EstimationResult = field(repr=False)
+
+    def to_dict(self) -> dict:
+        return {"effects": list(self.effects),
+                "parameters": {k: {"value": float(v), "std": None if not math.isfinite(s) else float(s)}
+                               for k, (v, s) in self.parameters.items()},
+                "chi2_per_dof": float(self.chi2_per_dof), "fits_to_noise": bool(self.fits_to_noise),
+                "verdict": self.verdict, "explanation": self.explanation}
 
 
 @dataclass(frozen=True)
@@ -59,23 +96,29 @@ class DiagnosisReport:
         None when the data are too short for the windows (see :attr:`notes`).
     plausibility : Plausibility
     ranking : object or None
-        :class:`rocketid.diagnostics.score.CandidateRanking` (None when the
-        ranking could not be made; see :attr:`notes`).
+        :class:`rocketid.diagnostics.score.CandidateRanking` at the base fit (None when
+        the ranking could not be made; see :attr:`notes`).
     confirmations : tuple
-        :class:`rocketid.diagnostics.refit.Confirmation` of the leading candidates.
+        :class:`rocketid.diagnostics.refit.Confirmation` of the final model's effects against
+        the base model (with the hold-out check); empty when nothing was added.
     confirmed : tuple of str
-        The candidates' names, in the order of :attr:`confirmations`.
+        The effects of each confirmation (``"a + b"``), in the same order.
     refit_plausibility : tuple of Plausibility
-        The plausibility checks of each refit, in the same order.
+        The plausibility checks of each confirmation's refit.
     after : Comparison or None
-        The comparison of the best confirmed refit (the lowest BIC).
+        The comparison of the final model.
     history : object or None
-        :class:`rocketid.diagnostics.history.ModelHistory`: the base fit, then the
-        best refit (:attr:`best`).
+        :class:`rocketid.diagnostics.history.ModelHistory`: the base fit, then each step.
     level : float
     timings : dict
         Wall time of each step, s.
     notes : tuple of str
+    discovery : Discovery or None
+        The stepwise search (:mod:`rocketid.diagnostics.step`): every contender's refit and
+        acceptance test, step by step.
+    final : FinalModel or None
+    variant : DiagnosisReport or None
+        For a model with time-knot drag: the same discovery on its Mach-indexed variant.
     """
 
     model: str
@@ -93,12 +136,20 @@ class DiagnosisReport:
     level: float
     timings: dict
     notes: tuple = ()
+    discovery: Any = None
+    final: FinalModel | None = None
+    variant: Any = None
 
     # ---- verdicts
     @property
     def fails(self) -> bool:
-        """The residuals are not white noise, or the coefficients are implausible."""
-        return (not self.comparison.fits_to_noise) or (not self.plausibility.passed)
+        """The base model does not reach the noise, or its coefficients are implausible."""
+        return (not self._base_fits()) or (not self.plausibility.passed)
+
+    @property
+    def steps(self) -> tuple:
+        """The steps of the stepwise search (empty without one)."""
+        return () if self.discovery is None else self.discovery.steps
 
     def effect_name(self, confirmation) -> str:
         """The candidate name a confirmation refitted."""
@@ -109,33 +160,29 @@ class DiagnosisReport:
 
     @property
     def best(self):
-        """The best refit (None without a converged one): among those within
-        :data:`BIC_TIE` of the lowest BIC, the one with plausible coefficients and
-        then the best hold-out prediction (:attr:`choice`)."""
-        i, _ = self._choice()
-        return None if i is None else self.confirmations[i]
-
-    def _choice(self):
-        pl = [p.passed for p in self.refit_plausibility] if len(self.refit_plausibility) == len(self.confirmations) \
-            else None
-        return _choose(self.confirmations, pl)
+        """The confirmation of the final model (None when nothing was added)."""
+        return self.confirmations[-1] if self.confirmations else None
 
     @property
     def choice(self) -> str:
-        """Why :attr:`best` was chosen."""
-        return self._choice()[1]
+        """Why the final model's last effect was chosen."""
+        chosen = [s for s in self.steps if s.chosen is not None]
+        return chosen[-1].why if chosen else "nothing was chosen"
 
     def verdict(self) -> list[str]:
         """The diagnosis in a few sentences."""
         out = []
         c = self.comparison
-        if c.fits_to_noise:
+        base_ok = self._base_fits()
+        if base_ok:
             out.append(f"The residuals of {self.fit.spec.name} are white noise at the stated sigma "
                        f"(chi2/dof {c.chi2_per_dof:.3f}).")
         else:
-            out.append(f"{self.fit.spec.name} does not fit to the noise: chi2/dof = {c.chi2_per_dof:.3g}, "
-                       f"residuals not white.")
-        if self.location is not None and self.location.findings:
+            out.append(f"{self.fit.spec.name} does not fit to the noise: chi2/dof = {c.chi2_per_dof:.3g}"
+                       + (f" (band <= {self.discovery.band.upper:.4g})" if self.discovery is not None else "")
+                       + ", residuals not white." if not c.fits_to_noise else
+                       f"{self.fit.spec.name} does not fit to the noise: chi2/dof = {c.chi2_per_dof:.3g}.")
+        if self.location is not None and self.location.findings and not base_ok:
             f = self.location.findings[0]
             out.append(f"It fails most in: {f.text}.")
             e = self.location.earliest
@@ -155,20 +202,38 @@ class DiagnosisReport:
                            f"{self.level:g}.")
             else:
                 out.append(f"No candidate effect is significant at {self.level:g} (best: {top.name}).")
+        for s in self.steps:
+            if s.acceptances:
+                acc = sum(a.accepted for a in s.acceptances)
+                out.append(f"Step {s.number}: {len(s.acceptances)} refit(s) ({', '.join(a.refit.name for a in s.acceptances)}); "
+                           f"{acc} reach(es) the noise with plausible sizes; "
+                           + (f"added {s.chosen.refit.name} (chi2/dof {s.chosen.refit.chi2_per_dof:.4g}; {s.why})."
+                              if s.chosen is not None else f"none added ({s.why})."))
         b = self.best
         if b is not None:
             name = self.effect_name(b)
             est = "; ".join(f"{k} = {v[0]:.4g} +- {v[1]:.2g}" for k, v in b.effect_estimates.items())
-            if len(self.confirmations) > 1:
-                out.append(f"Best refit: {name} ({self.choice}).")
             out.append(f"Refit with {name} ({'confirmed' if b.confirmed else 'NOT confirmed'}): chi2/dof "
                        f"{b.fit.chi2_per_dof:.4g} (was {self.fit.chi2_per_dof:.4g}), LR {_p(b.lr_p_value)}, "
                        f"BIC {b.bic[0]:.6g} -> {b.bic[1]:.6g}; {est}.")
+        if self.final is not None:
+            out.append(f"Verdict: {self.final.verdict}. {self.final.explanation}")
+        if self.variant is not None and self.variant.final is not None:
+            v = self.variant.final
+            out.append(f"On the Mach-indexed variant ({self.variant.fit.spec.name}): {v.verdict}"
+                       + (f" with {', '.join(v.effects)}" if v.effects else "")
+                       + f" (chi2/dof {v.chi2_per_dof:.4g}).")
         return out
 
+    def _base_fits(self) -> bool:
+        if self.discovery is not None:
+            from .accept import fits_to_noise
+            return fits_to_noise(self.fit, self.discovery.band)[0]
+        return self.comparison.fits_to_noise
+
     def summary(self) -> str:
-        """Fixed sections (verdict, compare, locate, plausibility, candidates,
-        confirmations) and numbered notes."""
+        """Fixed sections (verdict, compare, locate, plausibility, candidates, steps,
+        confirmations, history) and numbered notes."""
         lines = [f"rocketid diagnosis: {self.fit.spec.name} on {self.data_label}", "=" * 60, "Verdict"]
         lines += [f"  {s}" for s in self.verdict()]
         lines += ["", self.comparison.summary()]
@@ -176,6 +241,16 @@ class DiagnosisReport:
         lines += ["", self.plausibility.summary()]
         if self.ranking is not None:
             lines += ["", self.ranking.summary()]
+        if self.steps:
+            lines += ["", "Stepwise search (every contender refitted; accepted = reaches the noise with plausible "
+                          "sizes and coefficients)"]
+            for s in self.steps:
+                lines.append(f"  step {s.number}: {s.why}")
+                for a in s.acceptances:
+                    r = a.refit
+                    lines.append(f"    {r.name:<22} chi2/dof {r.chi2_per_dof:>9.4g}  BIC {r.bic[1]:>12.6g}  "
+                                 f"{'ACCEPTED' if a.accepted else ('admissible' if a.admissible else 'rejected')}"
+                                 + ("" if a.accepted else f": {a.reason()}"))
         for c in self.confirmations:
             lines += ["", c.summary()]
         if self.history is not None:
@@ -214,6 +289,13 @@ class DiagnosisReport:
                "location": self.location.to_dict() if self.location is not None else None,
                "plausibility": self.plausibility.to_dict(), "candidates": self.candidates_payload()["candidates"],
                "confirmations": [_confirmation_dict(c, n) for c, n in zip(self.confirmations, self.confirmed)],
+               "final": None if self.final is None else self.final.to_dict(),
+               "steps": [s.to_dict() for s in self.steps],
+               "noise_band": None if self.discovery is None else self.discovery.band.to_dict(),
+               "variant": None if self.variant is None else {
+                   "model": self.variant.fit.spec.name,
+                   "final": None if self.variant.final is None else self.variant.final.to_dict(),
+                   "steps": [s.to_dict() for s in self.variant.steps]},
                "timings": dict(self.timings), "notes": list(self.notes)}
         return out
 
@@ -286,11 +368,198 @@ def _confirmation_dict(c, name: str | None = None) -> dict:
     return d
 
 
+# ---------------------------------------------------------------------------
+# the named steps of diagnose()
+# ---------------------------------------------------------------------------
+
+
+def _check_settings(level, confirm_top, max_effects, refit_timeout) -> None:
+    if not 0 < level < 1:
+        raise SettingsError(f"level must be in (0, 1), got {level}")
+    if isinstance(confirm_top, bool) or not isinstance(confirm_top, (int, np.integer)) or confirm_top < 0:
+        raise SettingsError(f"confirm_top must be a non-negative integer, got {confirm_top!r}")
+    if isinstance(max_effects, bool) or not isinstance(max_effects, (int, np.integer)) or max_effects < 1:
+        raise SettingsError(f"max_effects must be a positive integer, got {max_effects!r}")
+    if isinstance(refit_timeout, bool) or not isinstance(refit_timeout, (int, float)) or not refit_timeout > 0:
+        raise SettingsError(f"refit_timeout must be a positive number of seconds, got {refit_timeout!r}")
+
+
+def _fit_base(spec, meas, guess, mesh, options, notes: list) -> EstimationResult:
+    if mesh is None:
+        # a short first element: effects that act from lift-off (misalignment, Earth
+        # rotation) are otherwise blurred by the singular start (docs/effects.md); the
+        # candidates' refits reuse this mesh
+        from ..solve import default_mesh
+        mesh = default_mesh(spec, refine_first=3)
+    fit = estimate(spec, meas, guess=guess, mesh=mesh, options=options)
+    if not fit.success:
+        notes.append(f"the base fit did not converge ({fit.message}); the diagnosis describes its last iterate")
+    return fit
+
+
+def _describe(fit, level, window, notes: list) -> tuple:
+    """compare -> locate -> plausibility of one fit."""
+    comp = compare(fit, level=level)
+    try:
+        loc = locate(fit, comp, window=window, level=level)
+    except DataError as exc:
+        loc = None
+        notes.append(f"no location: {exc}")
+    return comp, loc, check_plausibility(fit, level=level)
+
+
+def _candidate_effects(candidates) -> list:
+    from .effects import CATALOGUE, resolve_effects
+    return resolve_effects(list(CATALOGUE.values()) if candidates is None else list(candidates))
+
+
+def _confirm_final(fit, disc, holdout, level, timeout, options, notes: list) -> tuple:
+    """The final model's effects confirmed against the base model (LR, BIC, hold-out), started
+    from the final estimate; and the plausibility of its coefficients."""
+    from .refit import confirm
+    if disc is None or not disc.effects:
+        return (), (), ()
+    guess = dict(zip(disc.fit.spec.parameter_names, (float(v) for v in disc.fit.p)))
+    try:
+        conf = confirm(fit, list(disc.effects), guess=guess, holdout=holdout, level=level, options=options,
+                       timeout=timeout)
+    except RocketidError as exc:
+        notes.append(f"the final model could not be confirmed: {exc}")
+        return (), (), ()
+    try:
+        pl = (check_plausibility(conf.fit, level=level),)
+    except RocketidError as exc:
+        notes.append(f"the plausibility of the final model could not be checked: {exc}")
+        pl = ()
+    return (conf,), (" + ".join(disc.effect_names),), pl
+
+
+def _history(spec, fit, disc, notes: list):
+    from .history import ModelHistory
+    try:
+        history = ModelHistory().add(f"{spec.name}", fit)
+        for s in (disc.steps if disc is not None else ()):
+            if s.fit is not None:
+                history = history.add("+ " + " + ".join(s.effects), s.fit)
+        return history
+    except RocketidError as exc:
+        notes.append(f"model history failed: {exc}")
+        return None
+
+
+def _suggest(ranking) -> str:
+    """Which free-shape term to try, from the kind of the best-ranked candidate."""
+    top = ranking.candidates[0] if ranking is not None and ranking.candidates else None
+    kind = top.kind if top is not None else ""
+    if kind in ("propulsion", "mass"):
+        return ("a thrust error in time (rocketid.diagnostics.thrust_profile_effect on the mesh's element boundaries) "
+                "or your own propulsion term (custom_effect)")
+    if kind == "environment":
+        return ("a wind profile with a surface value and more basis functions (wind_effect(..., surface=True)) or a "
+                "density profile on more knots (density_effect(...))")
+    if kind == "aero":
+        return "a drag correction piecewise linear in Mach on more knots (Model.table on the Mach role)"
+    if kind == "sensor":
+        return "a sensor model of the failing channel (custom_effect redefining that output)"
+    return "a term of your own written with custom_effect"
+
+
+def _where(fit, level, window) -> str:
+    try:
+        loc = locate(fit, compare(fit, level=level), window=window, level=level)
+    except RocketidError:
+        return "(not located)"
+    return loc.findings[0].text if loc.findings else "spread over the flight, no window stands out"
+
+
+def _final(disc, ranking, level, window) -> FinalModel | None:
+    """The final model in the user's words."""
+    if disc is None:
+        return None
+    fit = disc.fit
+    std = {}
+    if disc.refit is not None and len(disc.refit.std) == len(disc.refit.parameter_names):
+        std = dict(zip(disc.refit.parameter_names, (float(v) for v in disc.refit.std)))
+    elif not disc.effects:
+        try:
+            from ..estimability import uncertainty
+            std = dict(zip(fit.spec.parameter_names, (float(v) for v in uncertainty(fit).standard_errors)))
+        except RocketidError:
+            std = {}
+    params = {n: (float(v), std.get(n, math.nan)) for n, v in zip(fit.spec.parameter_names, fit.p)}
+    names = ", ".join(disc.effect_names)
+    band = disc.band
+    amb = f" {disc.ambiguous[0].upper()}{disc.ambiguous[1:]}." if disc.ambiguous else ""
+    if disc.verdict == "nothing missing":
+        text = (f"{fit.spec.name} reaches the noise (chi2/dof {fit.chi2_per_dof:.4g}, band <= {band.upper:.4g}); "
+                "no candidate effect is both significant and needed.")
+    elif disc.verdict == "explained":
+        r = disc.refit
+        base_names = set(disc.base_fit.spec.parameter_names)
+        sizes = {}
+        for e in disc.effects:
+            sizes.update(e.sizes(disc.vehicle))
+        est = "; ".join(f"{n} = {v:.4g} +- {s:.2g}" + (f" (realistic {sizes[n]:.3g})" if n in sizes else "")
+                        for n, (v, s) in params.items() if n not in base_names)
+        text = f"the model with {names} reaches the noise (chi2/dof {fit.chi2_per_dof:.4g}): {est}."
+        if r is not None and r.identifiability:
+            text += f" Caution: {r.identifiability}."
+        ties = [n.split(": ", 1)[1] for n in disc.notes if "BIC within" in n and ": " in n and "ambiguous" not in n]
+        if ties:
+            text += f" Rivals: {ties[-1]}."
+    elif disc.verdict == "partly explained":
+        text = (f"the model with {names} still leaves chi2/dof {fit.chi2_per_dof:.4g} (band <= {band.upper:.4g}), "
+                f"located in: {_where(fit, level, window)}.{amb} Try {_suggest(ranking)}.")
+    elif disc.ambiguous:
+        text = (f"{disc.ambiguous} (chi2/dof {fit.chi2_per_dof:.4g} without them, band <= {band.upper:.4g}); the "
+                f"residual sits in: {_where(fit, level, window)}. Other data (another channel, a measured thrust or "
+                "mass, an atmosphere sounding) would separate them.")
+    else:
+        text = (f"no catalogue effect explains the misfit (chi2/dof {fit.chi2_per_dof:.4g}, band <= {band.upper:.4g}); "
+                f"the residual sits in: {_where(fit, level, window)}. Try {_suggest(ranking)}.")
+    return FinalModel(disc.effect_names, params, float(fit.chi2_per_dof), bool(disc.fits_to_noise), disc.verdict,
+                      text[0].upper() + text[1:], fit)
+
+
+def _variant(fit, meas, effects, settings: dict, notes: list):
+    """For time-knot drag: the discovery on the Mach-indexed variant, and the user's model with its effects."""
+    from .effects import with_effects
+    from .variant import mach_variant, time_knot_drag
+    if not time_knot_drag(fit.spec):
+        return None
+    try:
+        spec_v = mach_variant(fit)
+    except RocketidError as exc:
+        notes.append(f"no Mach-indexed variant of the time-knot drag: {exc}")
+        return None
+    rep = diagnose(meas, spec_v, candidates=effects, variant=False, holdout=None, **settings)
+    if rep.final is not None and rep.final.effects:
+        try:
+            spec_u = with_effects(fit.spec, [e for e in effects if e.name in rep.final.effects])
+            mine = estimate(spec_u, meas, mesh=fit.prepared.transcription.mesh, options=settings.get("options"))
+            notes.append(f"the time-knot drag absorbs most force effects; the Mach-indexed variant finds "
+                         f"{', '.join(rep.final.effects)} ({rep.final.verdict}, chi2/dof {rep.final.chi2_per_dof:.4g}); "
+                         f"{fit.spec.name} with them fits at chi2/dof {mine.chi2_per_dof:.4g} (without: "
+                         f"{fit.chi2_per_dof:.4g})")
+        except RocketidError as exc:
+            notes.append(f"the variant's effects could not be added to {fit.spec.name}: {exc}")
+    else:
+        notes.append(f"the Mach-indexed variant of the time-knot drag: {rep.final.verdict if rep.final else 'no verdict'}"
+                     f" (chi2/dof {rep.fit.chi2_per_dof:.4g})")
+    return rep
+
+
 def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Model = "ra66", *,
              out: str | Path | None = None, candidates: Sequence | None = None, level: float = 0.05,
              confirm_top: int = 2, window: float | None = None, guess: Mapping | Sequence[float] | None = None,
-             mesh=None, options: Mapping[str, Any] | None = None) -> DiagnosisReport:
-    """Fit ``model`` to ``data`` and diagnose what it misses.
+             mesh=None, options: Mapping[str, Any] | None = None, holdout: tuple | str | None = "auto",
+             max_effects: int = 3, workers: int | None = None, refit_timeout: float = 180.0,
+             refine: bool = True, variant: bool | str = "auto") -> DiagnosisReport:
+    """Fit ``model`` to ``data`` and find what it misses::
+
+        fit -> compare -> locate -> plausibility
+            -> discover (screen -> refit every contender -> accept -> step, to the noise)
+            -> confirm the final model (LR, BIC, hold-out) -> history -> final verdict -> report
 
     Parameters
     ----------
@@ -303,116 +572,91 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
     out : path, optional
         Write the report there (:meth:`DiagnosisReport.write`).
     candidates : sequence of Effect or str, optional
-        Candidate effects to rank (default: part A's catalogue).
+        Candidate effects (default: the whole catalogue); ``custom_effect`` values are
+        refitted like catalogue ones.
     level : float
         Significance level of every test and of the ranking.
     confirm_top : int
-        Refit the model with each of this many leading significant candidates.
+        0: rank only, refit nothing. Any other value: every contender is refitted
+        (:mod:`rocketid.diagnostics.screen`: every significant candidate that leads its
+        confounded group or whose predicted fall is within 10x of the leader's).
     window : float, optional
         Window length of :func:`~rocketid.diagnostics.locate.locate`, s.
     guess, mesh, options
         Passed to :func:`rocketid.estimate`.
+    holdout : "auto", (float, float) or None
+        Fit window of the final model's hold-out check: ``"auto"`` follows the
+        model's horizon (the first 45/66 of it), None skips it.
+    max_effects : int
+        Cap of the stepwise search.
+    workers : int, optional
+        Parallel refit processes (default: up to 2).
+    refit_timeout : float
+        Seconds each refit and hold-out prediction may take before it is given up.
+    refine : bool
+        Try more flexible shapes of a chosen effect that leaves a residual.
+    variant : "auto" or bool
+        For a model with time-knot drag, also run the discovery on its Mach-indexed
+        variant (``rocketid.diagnostics.variant``): ``"auto"`` does so unless the model
+        itself is explained (the time-knot drag absorbs most force effects, so "nothing
+        missing" or a partial answer on it needs the variant's word); True always.
 
     Returns
     -------
     DiagnosisReport
+        :attr:`~DiagnosisReport.final` holds the final model and the verdict.
     """
-    if not 0 < level < 1:
-        raise SettingsError(f"level must be in (0, 1), got {level}")
-    if isinstance(confirm_top, bool) or not isinstance(confirm_top, (int, np.integer)) or confirm_top < 0:
-        raise SettingsError(f"confirm_top must be a non-negative integer, got {confirm_top!r}")
+    from .refit import holdout_window
+    from .step import discover
+
+    _check_settings(level, confirm_top, max_effects, refit_timeout)
+    if variant not in (True, False, "auto"):
+        raise SettingsError(f"variant must be 'auto', True or False, got {variant!r}")
     spec, label = resolve_model(model)
+    holdout_window(spec, holdout)           # refuse a bad window before any work
     meas, data_label = _read_data(data, spec)
     notes: list[str] = []
-    timings = {}
-    t0 = time.perf_counter()
-    if mesh is None:
-        # a short first element: effects that act from lift-off (misalignment, Earth
-        # rotation) are otherwise blurred by the singular start (docs/effects.md); the
-        # candidates' refits reuse this mesh
-        from ..solve import default_mesh
-        mesh = default_mesh(spec, refine_first=3)
-    fit = estimate(spec, meas, guess=guess, mesh=mesh, options=options)
-    timings["fit_s"] = time.perf_counter() - t0
-    if not fit.success:
-        notes.append(f"the base fit did not converge ({fit.message}); the diagnosis describes its last iterate")
-    t0 = time.perf_counter()
-    comp = compare(fit, level=level)
-    timings["compare_s"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    try:
-        loc = locate(fit, comp, window=window, level=level)
-    except DataError as exc:
-        loc = None
-        notes.append(f"no location: {exc}")
-    timings["locate_s"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    plaus = check_plausibility(fit, level=level)
-    timings["plausibility_s"] = time.perf_counter() - t0
-    ranking, confirmations, confirmed, history, after = None, [], [], None, None
-    t0 = time.perf_counter()
-    try:
-        from .score import rank_candidates
-    except ImportError as exc:
-        rank_candidates = None
-        notes.append(f"candidate ranking is not available ({exc})")
-    if rank_candidates is not None:
+    timings: dict = {}
+
+    def timed(key, fn, *args, **kw):
+        t0 = time.perf_counter()
+        value = fn(*args, **kw)
+        timings[key] = time.perf_counter() - t0
+        return value
+
+    fit = timed("fit_s", _fit_base, spec, meas, guess, mesh, options, notes)
+    comp, loc, plaus = timed("describe_s", _describe, fit, level, window, notes)
+    effects = _candidate_effects(candidates)
+    disc, ranking = None, None
+    if confirm_top > 0:
         try:
-            ranking = rank_candidates(fit, candidates, level=level)
+            disc = timed("discover_s", discover, fit, effects, level=level, max_effects=int(max_effects),
+                         workers=workers, timeout=float(refit_timeout), options=options, refine=refine,
+                         holdout=holdout)
         except RocketidError as exc:
-            notes.append(f"the candidate ranking failed: {exc}")
-    timings["rank_s"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    if ranking is not None and confirm_top > 0:
-        sig = [c for c in ranking.candidates if getattr(c, "significant", False)]
-        chosen = sig[:confirm_top]
-        if not chosen and ranking.candidates and (not comp.fits_to_noise or not plaus.passed):
-            chosen = list(ranking.candidates[:1])
-            notes.append(f"no candidate is significant at {level:g}; the best-ranked one ({chosen[0].name}) was "
-                         "refitted anyway because the base model fails")
-        try:
-            from .refit import confirm
-        except ImportError as exc:
-            confirm = None
-            notes.append(f"refit confirmation is not available ({exc})")
-        if confirm is not None:
-            for c in chosen:
-                try:
-                    with warnings.catch_warnings():
-                        warnings.simplefilter("ignore", RuntimeWarning)
-                        confirmations.append(confirm(fit, c.name))
-                        confirmed.append(c.name)
-                except RocketidError as exc:
-                    notes.append(f"refitting with {c.name} failed: {exc}")
-    refit_pl = []
-    for c in confirmations:
-        try:
-            refit_pl.append(check_plausibility(c.fit, level=level))
-        except RocketidError as exc:
-            notes.append(f"the plausibility of the refit with {confirmed[len(refit_pl)]} could not be checked: {exc}")
-            refit_pl = []
-            break
-    best_i, _ = _choose(confirmations, [p.passed for p in refit_pl] if refit_pl else None)
-    timings["confirm_s"] = time.perf_counter() - t0
-    try:
-        from .history import ModelHistory
-        history = ModelHistory().add(f"{spec.name}", fit)
-        if best_i is not None:
-            history = history.add(f"+ {confirmed[best_i]}", confirmations[best_i].fit)
-    except ImportError as exc:
-        history = None
-        notes.append(f"model history is not available ({exc})")
-    except RocketidError as exc:
-        notes.append(f"model history failed: {exc}")
-    if best_i is not None:
-        try:
-            after = compare(confirmations[best_i].fit, level=level)
-        except RocketidError as exc:
-            notes.append(f"the best refit could not be compared: {exc}")
+            notes.append(f"the discovery failed: {exc}")
+        if disc is not None:
+            notes.extend(disc.notes)
+            ranking = disc.steps[0].screen.ranking if disc.steps else None
+            notes.extend(n for s in disc.steps[:1] for n in s.screen.notes if "ranking failed" in n)
+    else:
+        from .screen import screen
+        scr = timed("rank_s", screen, fit, effects, level=level)
+        ranking = scr.ranking
+        notes.extend(n for n in scr.notes if "ranking failed" in n)
+    confs, names, pls = timed("confirm_s", _confirm_final, fit, disc, holdout, level, refit_timeout, options, notes)
+    history = _history(spec, fit, disc, notes)
+    after = compare(disc.fit, level=level) if disc is not None and disc.effects else None
+    final = _final(disc, ranking, level, window)
+    var = None
+    if confirm_top > 0 and (variant is True or (variant == "auto" and (final is None or final.verdict != "explained"))):
+        settings = dict(level=level, confirm_top=confirm_top, window=window, options=options,
+                        max_effects=max_effects, workers=workers, refit_timeout=refit_timeout, refine=refine)
+        var = timed("variant_s", _variant, fit, meas, effects, settings, notes)
     report = DiagnosisReport(model=label, data_label=data_label, fit=fit, comparison=comp, location=loc,
-                             plausibility=plaus, ranking=ranking, confirmations=tuple(confirmations),
-                             confirmed=tuple(confirmed), refit_plausibility=tuple(refit_pl), after=after,
-                             history=history, level=float(level), timings=timings, notes=tuple(notes))
+                             plausibility=plaus, ranking=ranking, confirmations=confs, confirmed=names,
+                             refit_plausibility=pls, after=after, history=history, level=float(level),
+                             timings=timings, notes=tuple(notes), discovery=disc, final=final, variant=var)
     if out is not None:
         report.write(out)
     return report

@@ -217,27 +217,13 @@ def theil(predicted: np.ndarray, measured: np.ndarray) -> Theil:
 
 
 def criterion_terms(residuals: Mapping[str, np.ndarray], sigma: Mapping[str, float]) -> tuple[dict, str]:
-    """eta (7.10) and its terms over all channels, each divided by its sigma.
+    """eta (7.10) and its terms over all channels, each divided by its sigma, computed by
+    :func:`rocketid.sampling.criterion.statistic_criterion` (the one implementation).
 
-    Uses :func:`rocketid.sampling.criterion.statistic_criterion` when that
-    module is installed; otherwise the same formula (METHOD.md section 5) is
-    computed here. Returns ``({"eta", "|s1|", "|k1-3|", "|s1-s2|", "|k1-k2|",
-    "s1", "k1", "s2", "k2"}, source)``.
+    Returns ``({"eta", "|s1|", "|k1-3|", "|s1-s2|", "|k1-k2|", "s1", "k1", "s2", "k2"}, source)``.
     """
-    try:
-        from ..sampling.criterion import statistic_criterion
-    except ImportError:  # pragma: no cover - the sampling stage is part of the package
-        statistic_criterion = None
-    if statistic_criterion is not None:
-        return statistic_criterion(dict(residuals), dict(sigma)).as_dict(), "rocketid.sampling.criterion"
-    e = np.concatenate([np.asarray(r, float) / sigma[k] for k, r in residuals.items()])
-    s1, k1 = float(np.mean(e ** 3)), float(np.mean(e ** 4))
-    d = e - e.mean()
-    z2, z3, z4 = (float(np.mean(d ** j)) for j in (2, 3, 4))
-    s2, k2 = z3 / z2 ** 1.5, z4 / z2 ** 2
-    terms = {"|s1|": abs(s1), "|k1-3|": abs(k1 - 3), "|s1-s2|": abs(s1 - s2), "|k1-k2|": abs(k1 - k2)}
-    return {"eta": sum(terms.values()), **terms, "s1": s1, "k1": k1, "s2": s2, "k2": k2}, \
-        "rocketid.diagnostics.compare (METHOD.md section 5; rocketid.sampling.criterion not found)"
+    from ..sampling.criterion import statistic_criterion
+    return statistic_criterion(dict(residuals), dict(sigma)).as_dict(), "rocketid.sampling.criterion"
 
 
 # ---------------------------------------------------------------------------

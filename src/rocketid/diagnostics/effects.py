@@ -44,18 +44,19 @@ needs no fade: its surface layer ``tanh(h / 500 m)`` vanishes at the pad.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from types import MappingProxyType
 from typing import Callable, Iterable, Mapping, Sequence
 
+import numpy as np
 import sympy as sp
 
 from ..errors import ModelError
-from ..model import Model, ModelSpec
+from ..model import ROLES, Model, ModelSpec, missing_role_message
 from ..physics.atmosphere import us76_pressure
 from ..physics.gravity import EARTH_RADIUS
 
-__all__ = ["Effect", "CATALOGUE", "KINDS", "custom_effect", "with_effects", "apply_effect", "resolve_effects",
+__all__ = ["Effect", "Vehicle", "back_pressure_effect", "thrust_profile_effect", "CATALOGUE", "KINDS", "custom_effect", "with_effects", "apply_effect", "resolve_effects",
            "is_present", "check_effect_parameters", "effect_parameter_problems", "wind_effect", "density_effect", "earth_rotation_effect",
            "liftoff_fade", "EARTH_RATE", "LIFTOFF_FADE_TIME"]
 
@@ -89,7 +90,18 @@ class Effect:
         The model change, in formulas.
     realistic : mapping of str to float
         A realistic magnitude of each parameter, keyed by parameter name
-        (empty when unknown, as for most custom effects).
+        (empty when unknown, as for most custom effects), for RA-66's vehicle.
+    relative : callable, optional
+        ``relative(vehicle) -> {parameter: realistic magnitude}`` for another
+        vehicle (:class:`Vehicle`: its thrust, mass flow, speed, ...); the
+        sizes the decision judges plausibility by (:meth:`sizes`).
+    refine : callable, optional
+        ``refine(vehicle) -> list of Effect``: more flexible shapes of the same
+        physics (more knots, a surface value), tried when this effect leaves a
+        residual (the knot count is chosen by BIC).
+    least : mapping of str to float
+        The smallest plausible magnitude of a parameter whose size physics fixes
+        (Earth's rotation rate factor ``k_rot``); empty for most effects.
     """
 
     name: str
@@ -98,6 +110,9 @@ class Effect:
     apply: Callable[[Model], tuple] = field(compare=False, repr=False)
     description: str = ""
     realistic: Mapping[str, float] = field(default_factory=dict, compare=False)
+    relative: Callable | None = field(default=None, compare=False, repr=False)
+    refine: Callable | None = field(default=None, compare=False, repr=False)
+    least: Mapping[str, float] = field(default_factory=dict, compare=False)
 
     def __post_init__(self):
         if not isinstance(self.name, str) or not self.name.isidentifier():
@@ -107,11 +122,66 @@ class Effect:
         if not callable(self.apply):
             raise ModelError(f"effect {self.name!r}: apply must be a function apply(model) -> parameters")
         object.__setattr__(self, "realistic", MappingProxyType({str(k): float(v) for k, v in self.realistic.items()}))
+        object.__setattr__(self, "least", MappingProxyType({str(k): float(v) for k, v in self.least.items()}))
 
     @property
     def parameter_names(self) -> tuple[str, ...]:
         """Names of the parameters the effect declares (known for catalogue effects)."""
         return tuple(self.realistic)
+
+    def sizes(self, vehicle: "Vehicle | None" = None) -> dict[str, float]:
+        """Realistic magnitude of each parameter for ``vehicle`` (RA-66's without one)."""
+        out = dict(self.realistic)
+        if vehicle is not None and self.relative is not None:
+            out.update({k: abs(float(v)) for k, v in self.relative(vehicle).items()})
+        return out
+
+    def refinements(self, vehicle: "Vehicle | None" = None) -> list["Effect"]:
+        """More flexible shapes of this effect (empty when it has none)."""
+        return list(self.refine(vehicle)) if self.refine is not None else []
+
+
+@dataclass(frozen=True)
+class Vehicle:
+    """The scales of a vehicle's flight that realistic effect sizes are stated against.
+
+    Attributes
+    ----------
+    thrust : float
+        Thrust at the start, N.
+    mass : float
+        Mass at the start, kg.
+    mass_flow : float
+        Mean mass flow over the flight, kg/s (0 when the mass does not change).
+    speed : float
+        Largest speed, m/s.
+    start_speed : float
+        Speed at the start, m/s.
+    duration : float
+        The model's horizon, s.
+    altitude : (float, float)
+        Altitude range flown, m.
+    mach : (float, float) or None
+        Mach range flown.
+    sigma : dict
+        Noise sigma of each measured channel.
+    sample_interval : float
+        Median time between samples, s.
+    knot_times : tuple of float
+        Element boundaries of the fit's mesh (where time knots of a refined shape may sit).
+    """
+
+    thrust: float
+    mass: float
+    mass_flow: float
+    speed: float
+    start_speed: float
+    duration: float
+    altitude: tuple
+    mach: tuple | None
+    sigma: Mapping[str, float]
+    sample_interval: float
+    knot_times: tuple = ()
 
 
 # ---------------------------------------------------------------------------
@@ -130,6 +200,61 @@ def _definition(m: Model, name: str, effect: str) -> sp.Expr:
     except ModelError:
         raise ModelError(f"effect {effect!r} needs the definition {name!r}, which model {m.name!r} does not "
                          "have (the ascent model of rocketid.physics.ascent defines it)") from None
+
+
+def _role(m: Model, role: str, effect: str) -> sp.Expr:
+    """The symbol (or expression) playing ``role`` in ``m``; a ModelError naming the effect otherwise."""
+    expr = m.role(role)
+    if expr is None:
+        raise ModelError(missing_role_message(m.name, role, f"effect {effect!r}"))
+    return expr
+
+
+def _role_definition(m: Model, role: str, effect: str) -> tuple[sp.Symbol, sp.Expr]:
+    """``(symbol, expression)`` of the definition playing ``role``."""
+    sym = _role(m, role, effect)
+    try:
+        return sym, m.definition(sym)
+    except ModelError:
+        raise ModelError(f"effect {effect!r} redefines the {ROLES[role].split(' (')[0]} (role {role!r}), so it must "
+                         f"be a definition (m.define) of model {m.name!r}; it is {sym}") from None
+
+
+def _role_state(m: Model, role: str, effect: str) -> sp.Symbol:
+    """The state playing ``role``."""
+    sym = _role(m, role, effect)
+    try:
+        m.der(sym)
+    except ModelError:
+        raise ModelError(f"effect {effect!r} needs the {ROLES[role].split(' (')[0]} (role {role!r}) to be a state of "
+                         f"model {m.name!r}; it is {sym}") from None
+    return sym
+
+
+def _initial_value(m: Model, state: sp.Symbol) -> float:
+    return float(next(s.initial for s in m._states if s.symbol == state))
+
+
+def _expanded(m: Model, expr: sp.Expr) -> sp.Expr:
+    """``expr`` with the model's definitions substituted, recursively."""
+    defs = dict(m._definitions)
+    for _ in range(50):
+        hit = {s: defs[s] for s in expr.free_symbols if s in defs}
+        if not hit:
+            return expr
+        expr = expr.xreplace(hit)
+    return expr
+
+
+def _output_of(m: Model, role: str, channel: str, effect: str) -> tuple[str, sp.Expr]:
+    """The measured output that reads the state playing ``role`` (the output named ``channel`` when no
+    output is that state alone)."""
+    sym = m.role(role)
+    if sym is not None:
+        for name in m.output_names:
+            if m.output_expression(name) == sym:
+                return name, sym
+    return channel, _output(m, channel, effect)
 
 
 def _component(m: Model, name: str, effect: str, what: str) -> sp.Symbol:
@@ -177,29 +302,75 @@ def _gauss(h: sp.Expr, centre: float, width: float) -> sp.Expr:
 # ---------------------------------------------------------------------------
 
 
-def _back_pressure(m: Model) -> tuple:
-    thrust = _definition(m, "thrust", "back_pressure")
-    h = _state(m, "h", "back_pressure")
-    area = m.parameter("A_e", 0.0, bounds=(0.0, math.inf), nominal=0.4)   # an area: not negative
-    m.redefine("thrust", thrust - area * _define(m, "p_ambient", us76_pressure(h), "back_pressure"))
-    return (area,)
+SEA_LEVEL_PRESSURE = 101325.0
+"""p0 of the 1976 standard atmosphere, Pa."""
+
+
+def back_pressure_effect(reference: str = "sea_level", *, name: str | None = None) -> Effect:
+    """Nozzle back-pressure: the thrust changes with the ambient pressure ``p_a(h)``.
+
+    Parameters
+    ----------
+    reference : {"sea_level", "vacuum"}
+        The pressure at which the model's stated thrust ``P`` holds.
+        ``"sea_level"`` (a static firing's figure, the default): ``P + A_e (p0 - p_a(h))``,
+        the thrust rises as the vehicle climbs. ``"vacuum"``: ``P - A_e p_a(h)``, the
+        stated thrust is the vacuum thrust and the atmosphere takes ``A_e p_a`` off it.
+    name : str, optional
+        Default ``back_pressure`` (sea level) or ``back_pressure_vacuum``.
+
+    Notes
+    -----
+    ``A_e >= 0`` is the nozzle exit area. When the model's thrust already depends on
+    altitude (it has a nozzle term), the effect is a correction ``dA_e`` of that area,
+    of either sign, written the same way.
+    """
+    if reference not in ("sea_level", "vacuum"):
+        raise ModelError(f"back-pressure reference must be 'sea_level' or 'vacuum', got {reference!r}")
+    name = name or ("back_pressure" if reference == "sea_level" else "back_pressure_vacuum")
+    suffix = "" if reference == "sea_level" else "_vac"
+
+    def apply(m: Model) -> tuple:
+        sym, thrust = _role_definition(m, "thrust", name)
+        h = _role_state(m, "altitude", name)
+        nozzle = h in _expanded(m, thrust).free_symbols
+        if nozzle:
+            # the model has a nozzle term already: estimate a correction of its area, either sign
+            area = m.parameter("dA_e" + suffix, 0.0, nominal=0.1)
+        else:
+            area = m.parameter("A_e" + suffix, 0.0, bounds=(0.0, math.inf), nominal=0.4)   # an area: not negative
+        pa = _define(m, "p_ambient", us76_pressure(h), name)
+        change = area * (SEA_LEVEL_PRESSURE - pa) if reference == "sea_level" else -area * pa
+        m.redefine(sym, thrust + change)
+        return (area,)
+
+    what = ("P + A_e (p0 - p_a(h)): the stated thrust P holds at sea level (p0 = 101325 Pa) and rises as the "
+            "ambient pressure falls" if reference == "sea_level" else
+            "P - A_e p_a(h): the stated thrust P is the vacuum thrust")
+    desc = (f"thrust {what}; p_a the 1976 standard's pressure; A_e >= 0 the nozzle exit area, m^2 (a correction "
+            "dA_e of either sign when the model's thrust already has a nozzle term)")
+    title = "nozzle back-pressure" + (" (vacuum thrust stated)" if reference == "vacuum" else "")
+    return Effect(name, title, "propulsion", apply, desc, {"A_e" + suffix: 0.4},
+                  relative=lambda veh: {"A_e" + suffix: 0.1 * veh.thrust / SEA_LEVEL_PRESSURE,
+                                        "dA_e" + suffix: 0.1 * veh.thrust / SEA_LEVEL_PRESSURE})
 
 
 def _thrust_level(m: Model) -> tuple:
-    thrust = _definition(m, "thrust", "thrust_level")
+    sym, thrust = _role_definition(m, "thrust", "thrust_level")
     eps = m.parameter("eps_thrust", 0.0, nominal=0.02)
-    m.redefine("thrust", thrust * (1 + eps))
+    m.redefine(sym, thrust * (1 + eps))
     return (eps,)
 
 
 def _mass_flow(m: Model) -> tuple:
-    mass = _definition(m, "mass", "mass_flow")
-    mdot = _component(m, "mdot", "mass_flow", "the mass-flow constant")
-    if mdot not in mass.free_symbols:
-        raise ModelError(f"effect 'mass_flow' scales the constant mdot in the definition of mass, but model "
-                         f"{m.name!r} has mass = {mass}")
+    sym, mass = _role_definition(m, "mass", "mass_flow")
+    m0 = _expanded(m, mass).xreplace({m.t: m.t0})
+    if m.t not in _expanded(m, mass).free_symbols:
+        raise ModelError(f"effect 'mass_flow' scales the mass consumed since t0, but the mass of model {m.name!r} "
+                         f"does not change with time ({mass})")
     eps = m.parameter("eps_mdot", 0.0, nominal=0.015)
-    m.redefine("mass", mass.xreplace({mdot: mdot * (1 + eps)}))
+    # m(t) = m(t0) - (m(t0) - m(t)) (1 + eps): the mass flow scaled by 1 + eps
+    m.redefine(sym, mass - eps * (m0 - mass))
     return (eps,)
 
 
@@ -208,25 +379,32 @@ TRANSONIC_WIDTH = 0.2
 
 
 def _transonic_drag(m: Model) -> tuple:
-    cd = _definition(m, "cd", "transonic_drag")
-    _definition(m, "mach", "transonic_drag")
+    sym, cd = _role_definition(m, "drag_coefficient", "transonic_drag")
+    mach = _role(m, "mach", "transonic_drag")
     dcd = m.parameter("dCD_transonic", 0.0, nominal=0.2)
-    m.redefine("cd", cd + dcd * _gauss(m.mach, TRANSONIC_MACH, TRANSONIC_WIDTH))
+    m.redefine(sym, cd + dcd * _gauss(mach, TRANSONIC_MACH, TRANSONIC_WIDTH))
     return (dcd,)
 
 
 def _misalignment(m: Model) -> tuple:
-    at = _definition(m, "alpha_thrust", "misalignment")
+    sym, at = _role_definition(m, "thrust_direction", "misalignment")
     delta = m.parameter("delta_thrust", 0.0, nominal=math.radians(0.25))
-    m.redefine("alpha_thrust", at + delta * liftoff_fade(m.t))
+    v = m.role("speed")
+    # from rest the flight-path equation is singular and a normal force needs the lift-off fade (module
+    # notes); a vehicle that starts moving (a start speed > 0) takes the misalignment from t0 on
+    moving = v is not None and m.has(str(v)) and _initial_value(m, v) > 0
+    m.redefine(sym, at + (delta if moving else delta * liftoff_fade(m.t - m.t0)))
     return (delta,)
+
+
+_CHANNEL_ROLE = {"x": "downrange", "h": "altitude", "v": "speed"}
 
 
 def _bias(channel: str) -> Callable[[Model], tuple]:
     def apply(m: Model) -> tuple:
-        expr = _output(m, channel, f"bias_{channel}")
+        name, expr = _output_of(m, _CHANNEL_ROLE[channel], channel, f"bias_{channel}")
         b = m.parameter(f"b_{channel}", 0.0, nominal=1.0)
-        m.redefine_output(channel, expr + b)
+        m.redefine_output(name, m.output_expression(name) + b)
         return (b,)
     apply.__name__ = f"_bias_{channel}"
     return apply
@@ -234,9 +412,9 @@ def _bias(channel: str) -> Callable[[Model], tuple]:
 
 def _scale(channel: str) -> Callable[[Model], tuple]:
     def apply(m: Model) -> tuple:
-        expr = _output(m, channel, f"scale_{channel}")
+        name, expr = _output_of(m, _CHANNEL_ROLE[channel], channel, f"scale_{channel}")
         k = m.parameter(f"k_{channel}", 0.0, nominal=1e-3)
-        m.redefine_output(channel, (1 + k) * expr)
+        m.redefine_output(name, (1 + k) * m.output_expression(name))
         return (k,)
     apply.__name__ = f"_scale_{channel}"
     return apply
@@ -277,8 +455,8 @@ WIND_SPEED_EPS = 0.1
 
 def wind_effect(centres_km: Sequence[float] = WIND_CENTRES_KM, width_km: float = WIND_WIDTH_KM, *,
                 name: str = "wind", prefix: str = "wind_", realistic_speed: float = 30.0,
-                air_mach: bool = True, air_alpha: bool = True) -> Effect:
-    """A horizontal wind profile ``W(h) = tanh(h / 500 m) sum_j w_j exp(-((h - c_j)/s)^2 / 2)``.
+                air_mach: bool = True, air_alpha: bool = True, surface: bool = False) -> Effect:
+    """A horizontal wind profile ``W(h) = w_0 + tanh(h / 500 m) sum_j w_j exp(-((h - c_j)/s)^2 / 2)``.
 
     Parameters
     ----------
@@ -287,46 +465,57 @@ def wind_effect(centres_km: Sequence[float] = WIND_CENTRES_KM, width_km: float =
     width_km : float
         Their standard width ``s``, km.
     name, prefix : str
-        Effect name, and parameter names ``<prefix>1 ..``.
+        Effect name, and parameter names ``<prefix>1 ..`` (``<prefix>0`` the surface wind).
     realistic_speed : float
         Realistic magnitude of each coefficient, m/s.
     air_mach, air_alpha : bool
         Use the airspeed in the Mach number, and the air-relative attack angle
         ``alpha + (theta - theta_air)`` in the lift coefficient (both physical;
         switch off only to study their share).
+    surface : bool
+        Add a surface wind ``w_0`` (constant in altitude; without it the wind
+        vanishes at the pad through the surface layer).
 
     Notes
     -----
-    ``W`` is carried as the state ``<name>_speed`` with ``dW/dt = W'(h) v
-    sin(theta)`` from ``W = 0``: the launch is at ``h = 0``, where the surface
-    layer makes the wind vanish.
+    The altitude-varying part is carried as the state ``<name>_speed`` with
+    ``dW/dt = W'(h) v sin(theta)`` from 0: the launch is at ``h = 0``, where the surface
+    layer makes it vanish. The lift uses the air-relative attack angle: the model's
+    attack angle (role ``attack_angle``, a symbol or an expression) is replaced in the
+    lift coefficient; a model whose lift coefficient does not contain it is refused,
+    with the reason, rather than silently keeping the ground-relative angle.
     """
     centres = tuple(float(c) * 1000.0 for c in centres_km)
     width = float(width_km) * 1000.0
     names = tuple(f"{prefix}{j + 1}" for j in range(len(centres)))
 
     def apply(m: Model) -> tuple:
-        h = _state(m, "h", name)
-        v = _state(m, "v", name)
-        th = _state(m, "theta", name)
-        rho = _component(m, "rho", name, "the air-density definition")
-        qbar = _component(m, "qbar", name, "the dynamic-pressure definition")
-        qdef = _definition(m, "qbar", name)
-        mdef = _definition(m, "mach", name)
-        drag = _definition(m, "drag", name)
-        lift = _definition(m, "lift", name)
-        cl = _definition(m, "cl", name)
+        h = _role_state(m, "altitude", name)
+        v = _role_state(m, "speed", name)
+        th = _role_state(m, "flight_path_angle", name)
+        rho = _role(m, "density", name)
+        qbar, qdef = _role_definition(m, "dynamic_pressure", name)
+        mach, mdef = _role_definition(m, "mach", name)
+        dsym, drag = _role_definition(m, "drag", name)
+        lsym, lift = _role_definition(m, "lift", name)
+        clsym, cl = _role_definition(m, "lift_coefficient", name)
         for what, expr in (("drag", drag), ("lift", lift)):
             if sp.diff(expr, qbar, 2) != 0 or expr.xreplace({qbar: 0}) != 0:
-                raise ModelError(f"effect {name!r} needs {what} proportional to qbar; model {m.name!r} has "
-                                 f"{what} = {expr}")
+                raise ModelError(f"effect {name!r} needs {what} proportional to the dynamic pressure {qbar}; model "
+                                 f"{m.name!r} has {what} = {expr}")
+        alpha = m.role("attack_angle")
+        if air_alpha and alpha is None:
+            raise ModelError(missing_role_message(m.name, "attack_angle", f"effect {name!r} (the lift coefficient at "
+                                                  "the air-relative attack angle)"))
         ws = tuple(m.parameter(n, 0.0, nominal=realistic_speed) for n in names)
+        w0 = m.parameter(f"{prefix}0", 0.0, nominal=realistic_speed / 3) if surface else sp.S.Zero
         profile = sp.tanh(h / SURFACE_LAYER_M) * sum((w * _gauss(h, c, width) for w, c in zip(ws, centres)), sp.S.Zero)
-        # W(h) is carried as a state, dW/dt = W'(h) dh/dt, W(0) = 0 (the surface layer vanishes at the pad):
-        # the same profile along the trajectory, with far smaller derivative expressions than W(h) inlined
-        # into every force term (code generation ~20 s instead of ~130 s)
-        W = m.state(f"{name}_speed", 0.0)
-        m.ode({W: sp.diff(profile, h) * v * sp.sin(th)})
+        # the altitude-varying part is carried as a state, dW/dt = W'(h) dh/dt, from 0 (the surface layer
+        # vanishes at the pad): the same profile along the trajectory, with far smaller derivative
+        # expressions than W(h) inlined into every force term (code generation ~20 s instead of ~130 s)
+        Wv = m.state(f"{name}_speed", 0.0)
+        m.ode({Wv: sp.diff(profile, h) * v * sp.sin(th)})
+        W = Wv + w0
         # air-relative velocity (u, w) = (v cos theta - W, v sin theta); its norm V_a written so that
         # W = 0 gives V_a = v exactly and derivatives exist at v = 0:
         # V_a = v + Q / (v + sqrt(v^2 + Q + eps^2)), Q = V_a^2 - v^2 = W (W - 2 v cos theta)
@@ -334,24 +523,39 @@ def wind_effect(centres_km: Sequence[float] = WIND_CENTRES_KM, width_km: float =
         Va = m.define(f"{name}_airspeed", v + Q / (v + sp.sqrt(v ** 2 + Q + WIND_SPEED_EPS ** 2)))
         along = v - W * sp.cos(th)      # V_a cos(Delta): air-relative velocity along the flight path
         across = W * sp.sin(th)         # V_a sin(Delta)
-        m.redefine("qbar", qdef.xreplace({v: Va}))
+        m.redefine(qbar, qdef.xreplace({v: Va}))
         if air_mach:
-            m.redefine("mach", mdef.xreplace({v: Va}))
-        if air_alpha and m.has("alpha"):
+            m.redefine(mach, mdef.xreplace({v: Va}))
+        if air_alpha:
             # alpha_air = alpha + (theta - theta_air) = alpha - Delta
-            m.redefine("cl", cl.xreplace({m.alpha: m.alpha - sp.atan2(across, along)}))
-        # drag along -(u, w), lift normal to it, projected on the flight path (drag) and its normal (lift):
+            delta = sp.atan2(across, along)
+            new_cl = cl.xreplace({alpha: alpha - delta})
+            if new_cl == cl and not isinstance(alpha, sp.Symbol):
+                new_cl = cl.subs(alpha, alpha - delta)
+            if new_cl == cl and _expanded(m, alpha).free_symbols & _expanded(m, cl).free_symbols:
+                raise ModelError(f"effect {name!r}: the lift coefficient {cl} of model {m.name!r} does not contain "
+                                 f"its attack angle {alpha} (role 'attack_angle') as such, so the air-relative "
+                                 "attack angle cannot replace it; write the lift coefficient with that expression, or "
+                                 "declare the role as the expression it uses")
+            m.redefine(clsym, new_cl)
+        # forces along the air-relative velocity (drag) and normal to it (lift), projected on the
+        # flight path (drag) and its normal (lift):
         # per unit (rho/2 V_a) the tangential force is -(cd along + cl across) S, the normal (cl along - cd across) S
         half = rho * Va / 2
-        m.redefine("drag", drag.xreplace({qbar: half * along}) + lift.xreplace({qbar: half * across}))
-        m.redefine("lift", lift.xreplace({qbar: half * along}) - drag.xreplace({qbar: half * across}))
-        return ws
+        m.redefine(dsym, drag.xreplace({qbar: half * along}) + lift.xreplace({qbar: half * across}))
+        m.redefine(lsym, lift.xreplace({qbar: half * along}) - drag.xreplace({qbar: half * across}))
+        return ws + ((w0,) if surface else ())
 
-    desc = (f"horizontal wind W(h) = tanh(h/{SURFACE_LAYER_M:g} m) sum_j {prefix}j exp(-((h - c_j)/{width_km:g} km)^2/2), "
-            f"c_j = {', '.join(f'{c:g}' for c in centres_km)} km (positive downrange). Air-relative velocity "
-            "(v cos theta - W, v sin theta); qbar and Mach from the air-relative speed V_a; drag along the air-relative "
-            "velocity, lift normal to it; alpha_air = alpha + (theta - theta_air) in the lift coefficient.")
-    return Effect(name, "horizontal wind profile", "environment", apply, desc, {n: realistic_speed for n in names})
+    desc = (f"horizontal wind W(h) = {'w_0 + ' if surface else ''}tanh(h/{SURFACE_LAYER_M:g} m) sum_j {prefix}j "
+            f"exp(-((h - c_j)/{width_km:g} km)^2/2), c_j = {', '.join(f'{c:g}' for c in centres_km)} km (positive "
+            "downrange). Air-relative velocity (v cos theta - W, v sin theta); qbar and Mach from the air-relative "
+            "speed V_a; drag along the air-relative velocity, lift normal to it; alpha_air = alpha + (theta - "
+            "theta_air) in the lift coefficient.")
+    realistic = {n: realistic_speed for n in names}
+    if surface:
+        realistic[f"{prefix}0"] = realistic_speed / 3
+    return Effect(name, "horizontal wind profile" + (" with a surface wind" if surface else ""), "environment",
+                  apply, desc, realistic)
 
 
 DENSITY_CENTRES_KM = (0.0, 6.0, 12.0, 18.0)
@@ -366,10 +570,10 @@ def density_effect(centres_km: Sequence[float] = DENSITY_CENTRES_KM, width_km: f
     names = tuple(f"{prefix}{j + 1}" for j in range(len(centres)))
 
     def apply(m: Model) -> tuple:
-        rho = _definition(m, "rho", name)
-        h = _state(m, "h", name)
+        sym, rho = _role_definition(m, "density", name)
+        h = _role_state(m, "altitude", name)
         ds = tuple(m.parameter(n, 0.0, nominal=realistic) for n in names)
-        m.redefine("rho", rho * (1 + sum((d * _gauss(h, c, width) for d, c in zip(ds, centres)), sp.S.Zero)))
+        m.redefine(sym, rho * (1 + sum((d * _gauss(h, c, width) for d, c in zip(ds, centres)), sp.S.Zero)))
         return ds
 
     desc = (f"air density rho(h) (1 + sum_j {prefix}j exp(-((h - c_j)/{width_km:g} km)^2/2)), "
@@ -389,21 +593,27 @@ def earth_rotation_effect(latitude_deg: float = 28.5, azimuth_deg: float = 90.0,
         v dtheta/dt += f_lo(t) 2 Omega v cos(phi) sin(A)
                        + Omega^2 r cos(phi) (cos(theta) cos(phi) + sin(theta) sin(phi) cos(A))
 
-    ``k_rot`` = 1 is the real Earth; the Coriolis term is phased in by the lift-off fade.
+    ``k_rot`` = 1 is the real Earth; from rest the Coriolis term is phased in by the lift-off fade,
+    from a moving start it acts from ``t0``. ``k_rot`` is fixed by physics: an estimate below
+    0.2 (another latitude or azimuth changes it by a factor of order one, not by 100) is not
+    Earth's rotation (:attr:`Effect.least`).
     """
     phi = math.radians(latitude_deg)
     az = math.radians(azimuth_deg)
 
     def apply(m: Model) -> tuple:
-        h = _state(m, "h", name)
-        v = _state(m, "v", name)
-        th = _state(m, "theta", name)
+        h = _role_state(m, "altitude", name)
+        v = _role_state(m, "speed", name)
+        th = _role_state(m, "flight_path_angle", name)
         k = m.parameter("k_rot", 0.0, nominal=1.0)
         om = k * EARTH_RATE
         r = EARTH_RADIUS + h
         cphi, sphi, saz, caz = math.cos(phi), math.sin(phi), math.sin(az), math.cos(az)
         m.add_term(v, om ** 2 * r * cphi * (sp.sin(th) * cphi - sp.cos(th) * sphi * caz))
-        normal = (liftoff_fade(m.t) * 2 * om * v * cphi * saz
+        # from rest the Coriolis term is phased in by the lift-off fade (module notes); a vehicle that
+        # starts moving takes it from t0 on
+        fade = sp.S.One if _initial_value(m, v) > 0 else liftoff_fade(m.t - m.t0)
+        normal = (fade * 2 * om * v * cphi * saz
                   + om ** 2 * r * cphi * (sp.cos(th) * cphi + sp.sin(th) * sphi * caz))
         # add_term adds to d theta/dt: the model's v-multiplied form gets v * (normal / v) = normal, exactly
         m.add_term(th, normal / v)
@@ -412,32 +622,97 @@ def earth_rotation_effect(latitude_deg: float = 28.5, azimuth_deg: float = 90.0,
     desc = (f"Earth rotation at latitude {latitude_deg:g} deg, azimuth {azimuth_deg:g} deg: Coriolis "
             "(2 Omega v cos(lat) sin(az) in v dtheta/dt, phased in by the lift-off fade) and centrifugal "
             "(Omega^2 r cos(lat) ...) accelerations, Omega = k_rot * 7.292e-5 rad/s")
-    return Effect(name, "Earth rotation", "kinematics", apply, desc, {"k_rot": 1.0})
+    return Effect(name, "Earth rotation", "kinematics", apply, desc, {"k_rot": 1.0}, least={"k_rot": 0.2})
+
+
+def thrust_profile_effect(knot_times: Sequence[float], *, name: str | None = None) -> Effect:
+    """A thrust error that varies in time: ``P (1 + eps(t))``, ``eps`` piecewise linear on ``knot_times``.
+
+    The knots should be element boundaries of the fit's mesh (``Vehicle.knot_times``).
+    """
+    knots = tuple(float(k) for k in knot_times)
+    name = name or f"thrust_profile_{len(knots)}"
+    names = tuple(f"eps_P{j}" for j in range(len(knots)))
+
+    def apply(m: Model) -> tuple:
+        sym, thrust = _role_definition(m, "thrust", name)
+        eps = m.piecewise_linear("eps_P", knots, 0.0, nominal=0.02)
+        m.redefine(sym, thrust * (1 + eps))
+        return tuple(getattr(m, n) for n in names)
+
+    return Effect(name, f"thrust error in time ({len(knots)} knots)", "propulsion", apply,
+                  f"thrust P (1 + eps(t)), eps piecewise linear in time on {', '.join(f'{k:g}' for k in knots)} s",
+                  {n: 0.02 for n in names})
+
+
+def _spread(lo: float, hi: float, n: int) -> list[float]:
+    return [lo + (hi - lo) * (j + 0.5) / n for j in range(n)]
+
+
+def _refine_wind(vehicle: "Vehicle | None") -> list[Effect]:
+    top = (vehicle.altitude[1] if vehicle is not None else 30000.0) / 1000.0
+    out = []
+    for n in (4, 6, 8):
+        centres = _spread(0.0, max(top, 4.0), n)
+        width = max(top, 4.0) / n
+        out.append(wind_effect(centres, width, name=f"wind_surface_{n}", prefix="wind_", surface=True))
+    return out
+
+
+def _refine_density(vehicle: "Vehicle | None") -> list[Effect]:
+    top = (vehicle.altitude[1] if vehicle is not None else 30000.0) / 1000.0
+    out = []
+    for n in (6, 8):
+        centres = [0.0] + _spread(0.0, max(top, 4.0), n - 1)
+        out.append(density_effect(centres, max(top, 4.0) / (n - 1), name=f"density_{n}", prefix="drho_"))
+    return out
+
+
+def _refine_thrust(vehicle: "Vehicle | None") -> list[Effect]:
+    if vehicle is None or len(vehicle.knot_times) < 3:
+        return []
+    bounds = np.asarray(vehicle.knot_times, float)
+    out = []
+    for n in (3, 5, 9):
+        want = np.linspace(bounds[0], bounds[-1], n)
+        knots = sorted({float(bounds[np.argmin(np.abs(bounds - w))]) for w in want})
+        if len(knots) >= 2:
+            out.append(thrust_profile_effect(knots))
+    return out
 
 
 def _build_catalogue() -> dict[str, Effect]:
+    def rel_bias(channel: str, floor: float, sigmas: float):
+        return lambda veh: {f"b_{channel}": max(floor, sigmas * float(veh.sigma.get(channel, 0.0)))}
+
+    bp = back_pressure_effect("sea_level")
+    bp = replace(bp, refine=lambda veh: [back_pressure_effect("vacuum")])
     effects = [
-        Effect("back_pressure", "nozzle back-pressure", "propulsion", _back_pressure,
-               "thrust P(h) = P - A_e p_a(h), p_a the 1976 standard's pressure; A_e >= 0 the nozzle exit area, m^2",
-               {"A_e": 0.4}),
+        bp,
+        back_pressure_effect("vacuum"),
         Effect("thrust_level", "thrust-level error", "propulsion", _thrust_level,
-               "thrust P (1 + eps_thrust)", {"eps_thrust": 0.02}),
+               "thrust P (1 + eps_thrust)", {"eps_thrust": 0.02}, refine=_refine_thrust),
         Effect("mass_flow", "mass-flow error", "mass", _mass_flow,
-               "mass m0 - mdot (1 + eps_mdot) t", {"eps_mdot": 0.015}),
+               "mass m(t0) - (m(t0) - m(t)) (1 + eps_mdot): the mass flow scaled by 1 + eps_mdot",
+               {"eps_mdot": 0.02}),
         Effect("transonic_drag", "transonic drag rise", "aero", _transonic_drag,
                f"cd + dCD_transonic exp(-((M - {TRANSONIC_MACH:g})/{TRANSONIC_WIDTH:g})^2/2)", {"dCD_transonic": 0.2}),
-        wind_effect(),
+        replace(wind_effect(), refine=_refine_wind),
         earth_rotation_effect(),
         Effect("misalignment", "thrust misalignment", "propulsion", _misalignment,
-               "thrust direction alpha_thrust = alpha + delta_thrust f_lo(t) (an attack-angle bias of the thrust, "
-               "rad, phased in by the lift-off fade)", {"delta_thrust": math.radians(0.25)}),
-        density_effect(),
-        Effect("bias_x", "downrange sensor bias", "sensor", _bias("x"), "z_x = x + b_x, m", {"b_x": 5.0}),
-        Effect("bias_h", "altitude sensor bias", "sensor", _bias("h"), "z_h = h + b_h, m", {"b_h": 5.0}),
-        Effect("bias_v", "speed sensor bias", "sensor", _bias("v"), "z_v = v + b_v, m/s", {"b_v": 0.5}),
+               "thrust direction alpha_thrust = alpha + delta_thrust, rad, from t0 when the vehicle starts moving "
+               "(start speed > 0), else phased in by the lift-off fade f_lo(t)", {"delta_thrust": math.radians(0.25)}),
+        replace(density_effect(), refine=_refine_density),
+        Effect("bias_x", "downrange sensor bias", "sensor", _bias("x"), "z_x = x + b_x, m", {"b_x": 5.0},
+               relative=rel_bias("x", 5.0, 5.0)),
+        Effect("bias_h", "altitude sensor bias", "sensor", _bias("h"), "z_h = h + b_h, m", {"b_h": 5.0},
+               relative=rel_bias("h", 5.0, 5.0)),
+        Effect("bias_v", "speed sensor bias", "sensor", _bias("v"), "z_v = v + b_v, m/s", {"b_v": 0.5},
+               relative=rel_bias("v", 0.5, 0.5)),
         Effect("scale_v", "speed scale factor", "sensor", _scale("v"), "z_v = (1 + k_v) v", {"k_v": 1e-3}),
         Effect("time_offset", "time-tag offset", "sensor", _time_offset,
-               "every output z(t) = y(t - tau) ~ y - tau dy/dt, tau in s", {"tau": 0.01}),
+               "every output z(t) = y(t - tau) ~ y - tau dy/dt, tau in s", {"tau": 0.01},
+               relative=lambda veh: {"tau": max(0.01, float(veh.sample_interval))}),
     ]
     return {e.name: e for e in effects}
 
@@ -447,7 +722,8 @@ CATALOGUE: dict[str, Effect] = _build_catalogue()
 
 
 def custom_effect(name: str, apply: Callable[[Model], Iterable[sp.Symbol]], *, title: str | None = None,
-                  kind: str = "custom", description: str = "", realistic: Mapping[str, float] | None = None) -> Effect:
+                  kind: str = "custom", description: str = "", realistic: Mapping[str, float] | None = None,
+                  relative: Callable | None = None) -> Effect:
     """An effect the user writes in a few lines of SymPy.
 
     Parameters
@@ -459,7 +735,11 @@ def custom_effect(name: str, apply: Callable[[Model], Iterable[sp.Symbol]], *, t
         new parameters (a symbol or a sequence of symbols).
     title, kind, description : str
     realistic : mapping, optional
-        Realistic magnitude of each parameter, by name.
+        Realistic magnitude of each parameter, by name: the diagnosis calls an
+        estimate beyond 5 times it implausible (without one, any size is accepted).
+    relative : callable, optional
+        ``relative(vehicle) -> {name: magnitude}`` from the vehicle's scales
+        (:class:`Vehicle`), when the size depends on the vehicle.
 
     Examples
     --------
@@ -475,7 +755,8 @@ def custom_effect(name: str, apply: Callable[[Model], Iterable[sp.Symbol]], *, t
             raise ModelError(f"effect {name!r}: apply(model) must return the parameters it declared")
         return (out,) if isinstance(out, sp.Basic) else tuple(out)
     wrapped.__name__ = getattr(apply, "__name__", name)
-    return Effect(name, title or name.replace("_", " "), kind, wrapped, description, dict(realistic or {}))
+    return Effect(name, title or name.replace("_", " "), kind, wrapped, description, dict(realistic or {}),
+                  relative=relative)
 
 
 # ---------------------------------------------------------------------------
@@ -624,6 +905,8 @@ def effect_parameter_problems(spec: ModelSpec, declared: Mapping[str, Sequence[s
     for o in spec.outputs:
         used |= spec.expand(o.expr).free_symbols
     params = {p.symbol: p for p in spec.parameters}
+    # a knot of a time family enters through the family's symbol
+    used |= {k for f in spec.families if f.symbol in used for k in f.knots}
     problems: dict[str, str] = {}
     for name, syms in declared.items():
         for s in syms:

@@ -709,7 +709,11 @@ def _findings(windows: dict, tg: np.ndarray, conds: dict, phases: tuple, span: f
         for a, b, s, kind in runs:
             covered[a:b + 1] = True
             seg = slice(a, b + 1)
-            k = a + int(np.argmax(np.abs(w.z[seg])))
+            # the peak is taken among windows of the finding's own sign, so that the words
+            # ("drifts negative") and the number ("up to -2.8e+02 sigma") agree
+            own = np.flatnonzero(sign[seg] == s)
+            own = own if own.size else np.arange(b + 1 - a)
+            k = a + int(own[np.argmax(np.abs(w.z[seg][own]))])
             if kind is None:
                 mags = np.abs(w.bias[seg])
                 kind = "drift" if b > a and (mags.max() > 2 * max(mags[0], mags[-1], 1e-12) or

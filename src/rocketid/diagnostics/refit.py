@@ -39,12 +39,10 @@ from ..nlp import ParameterTransform
 from ..sensitivity import sensitivity_at
 from ..simulate import simulate
 from ..solve import EstimationResult, estimate, prepare
+from .compare import DEFAULT_LAGS, ljung_box as _ljung_box
 from .effects import Effect, resolve_effects, with_effects
 
 __all__ = ["Confirmation", "confirm", "ljung_box", "information_criteria", "DEFAULT_LAGS"]
-
-DEFAULT_LAGS = 20
-"""Lags of the Ljung-Box test (0.2 s at 100 Hz)."""
 
 WEAK = 0.25
 """Standard error, as a share of the realistic size (or of the estimate), above which a note calls an
@@ -58,37 +56,11 @@ DISCRETIZATION_WARN = 0.1
 """Collocation-minus-simulation difference, in noise sigmas, above which a note asks for a finer mesh."""
 
 
-def ljung_box(residuals: Sequence[float], lags: int = DEFAULT_LAGS) -> tuple[float, float]:
-    """The Ljung-Box portmanteau test of whiteness.
-
-    ``Q = n (n + 2) sum_{k=1..h} rho_k^2 / (n - k)`` with ``rho_k`` the sample
-    autocorrelation at lag ``k``; under white residuals ``Q ~ chi2(h)``.
-
-    Parameters
-    ----------
-    residuals : sequence of float, shape (n,)
-        In time order.
-    lags : int
-        ``h``.
-
-    Returns
-    -------
-    (Q, p_value)
-    """
-    e = np.asarray(residuals, float).ravel()
-    n = e.size
-    if not isinstance(lags, (int, np.integer)) or lags < 1:
-        raise SettingsError(f"lags must be a positive integer, got {lags!r}")
-    if n <= lags + 1:
-        raise DataError(f"the Ljung-Box test with {lags} lags needs more than {lags + 1} residuals, got {n}")
-    d = e - e.mean()
-    c0 = float(np.einsum("i,i->", d, d))
-    if c0 == 0.0:
-        return 0.0, 1.0
-    k = np.arange(1, lags + 1)
-    rho = np.array([np.einsum("i,i->", d[j:], d[:-j]) for j in k]) / c0
-    q = float(n * (n + 2) * np.sum(rho ** 2 / (n - k)))
-    return q, float(stats.chi2.sf(q, lags))
+def ljung_box(residuals: Sequence[float], lags: int | None = None) -> tuple[float, float]:
+    """``(Q, p_value)`` of the Ljung-Box whiteness test: :func:`rocketid.diagnostics.compare.ljung_box`
+    (the one implementation; default lags :data:`DEFAULT_LAGS`, at most ``n // 5``)."""
+    lb = _ljung_box(residuals, lags)
+    return lb.statistic, lb.p_value
 
 
 def information_criteria(fit: EstimationResult) -> tuple[float, float]:
@@ -136,6 +108,9 @@ class Confirmation:
         (base, new) fits on the hold-out window.
     effect_covariance : ndarray or None
         Covariance of the effect's parameters (in ``effect_estimates`` order).
+    acceptance : Acceptance or None
+        The acceptance test of the refit (:mod:`rocketid.diagnostics.accept`): does it
+        reach the noise with a plausible size and plausible coefficients.
     """
 
     effects: tuple
@@ -159,11 +134,15 @@ class Confirmation:
     timings: dict = field(default_factory=dict)
     holdout_fits: tuple | None = field(default=None, repr=False)
     effect_covariance: np.ndarray | None = field(default=None, repr=False)
+    acceptance: Any = field(default=None, repr=False)
 
     @property
     def confirmed(self) -> bool:
-        """LR significant at the level, BIC lower and the refit converged."""
-        return bool(self.fit.success and self.lr_p_value < self.level and self.bic[1] < self.bic[0])
+        """The refit converged, the LR test is significant at the level, BIC fell, and -- the
+        acceptance test -- it reaches the noise with a plausible size and plausible base
+        coefficients. Never true for a refit far from the noise or with an implausible size."""
+        ok = bool(self.fit.success and self.lr_p_value < self.level and self.bic[1] < self.bic[0])
+        return ok and (self.acceptance is None or self.acceptance.accepted)
 
     def covers(self, truth: Mapping[str, float]) -> dict[str, bool]:
         """Whether each 95 % interval covers a known true value (for studies with synthetic data)."""
@@ -197,6 +176,7 @@ class Confirmation:
             "discretization": {k: float(v) for k, v in self.discretization.items()},
             "parameters": {k: float(v) for k, v in zip(self.fit.spec.parameter_names, self.fit.p)},
             "level": self.level, "lags": self.lags, "notes": list(self.notes),
+            "acceptance": None if self.acceptance is None else self.acceptance.to_dict(),
             "timings": {k: float(v) for k, v in self.timings.items()},
         }
 
@@ -224,9 +204,12 @@ class Confirmation:
         lines.append("Effect parameters (95 % interval)")
         for name, (v, s, (lo, hi)) in self.effect_estimates.items():
             lines.append(f"  {name:<14}{v:>13.6g} +- {s:<10.3g} [{lo:.6g}, {hi:.6g}]")
-        if self.notes:
+        notes = list(self.notes)
+        if self.acceptance is not None and not self.acceptance.accepted:
+            notes.insert(0, "not accepted: " + self.acceptance.reason())
+        if notes:
             lines.append("Notes")
-            lines += [f"  [{i}] {n}" for i, n in enumerate(self.notes, 1)]
+            lines += [f"  [{i}] {n}" for i, n in enumerate(notes, 1)]
         return "\n".join(lines)
 
 
@@ -238,10 +221,11 @@ def _p(p: float) -> str:
     return f"{p:.3g}" if p >= 1e-3 else f"{p:.1e}"
 
 
-def _predict(fit: EstimationResult, measurements: Measurements) -> dict[str, np.ndarray]:
-    """Outputs of ``fit``'s model at its estimate, at each channel's sample times (high-accuracy simulation)."""
+def _predict(fit: EstimationResult, measurements: Measurements, timeout: float | None = None) -> dict[str, np.ndarray]:
+    """Outputs of ``fit``'s model at its estimate, at each channel's sample times (high-accuracy
+    simulation, given up after ``timeout`` seconds with an error that says so)."""
     times = np.unique(np.concatenate([c.times for c in measurements.channels]))
-    traj = simulate(fit.spec, fit.p, times, rtol=1e-10, atol=1e-10)
+    traj = simulate(fit.spec, fit.p, times, rtol=1e-10, atol=1e-10, max_wall_time=timeout)
     if not traj.success:
         raise RocketidError(f"the prediction failed: {traj.message}")
     out = traj.outputs()
@@ -280,9 +264,32 @@ def _fit_window(spec, window: Measurements, mesh, guess, options, reference: np.
     return estimate(spec, window, guess=guess, mesh=mesh, options=options, prepared=prep), blind
 
 
+HOLDOUT_SHARE = 45.0 / 66.0
+"""``holdout="auto"`` fits the first this share of the model's horizon (RA-66: 0-45 s of 66 s)."""
+
+
+def holdout_window(spec, holdout) -> tuple[float, float] | None:
+    """The hold-out fit window: ``"auto"`` follows the model's horizon (:data:`HOLDOUT_SHARE`),
+    a pair is taken as given, None skips the check."""
+    if holdout is None:
+        return None
+    if isinstance(holdout, str):
+        if holdout != "auto":
+            raise SettingsError(f"holdout must be 'auto', None or a window (start, end), got {holdout!r}")
+        return float(spec.t0), float(spec.t0 + HOLDOUT_SHARE * (spec.tf - spec.t0))
+    try:
+        a, b = (float(holdout[0]), float(holdout[1]))
+    except (TypeError, ValueError, IndexError):
+        raise SettingsError(f"holdout must be 'auto', None or a window (start, end), got {holdout!r}") from None
+    if not b > a:
+        raise SettingsError(f"holdout must be a window (start, end) with end > start, got {holdout!r}")
+    return a, b
+
+
 def confirm(fit: EstimationResult, effect: Effect | str | Sequence[Effect | str], *,
-            holdout: tuple[float, float] | None = (0.0, 45.0), guess: Mapping | None = None,
-            level: float = 0.05, lags: int = DEFAULT_LAGS, options: Mapping[str, Any] | None = None) -> Confirmation:
+            holdout: tuple[float, float] | str | None = "auto", guess: Mapping | None = None,
+            level: float = 0.05, lags: int | None = None, options: Mapping[str, Any] | None = None,
+            timeout: float | None = None) -> Confirmation:
     """Add ``effect`` to ``fit``'s model, refit from nominal values and compare (module notes).
 
     Parameters
@@ -291,9 +298,9 @@ def confirm(fit: EstimationResult, effect: Effect | str | Sequence[Effect | str]
         The base fit.
     effect : Effect, str, or a sequence of them
         One effect, or a confounded group to add together.
-    holdout : (float, float) or None
-        Fit window of the hold-out check (samples after it are predicted);
-        None skips the check.
+    holdout : "auto", (float, float) or None
+        Fit window of the hold-out check (samples after it are predicted):
+        ``"auto"`` fits the first 45/66 of the model's horizon; None skips the check.
     guess : mapping, optional
         Starting values by parameter name over the model's nominal guesses
         (effect parameters start at 0).
@@ -303,6 +310,9 @@ def confirm(fit: EstimationResult, effect: Effect | str | Sequence[Effect | str]
         Lags of the Ljung-Box test.
     options : mapping, optional
         IPOPT options.
+    timeout : float, optional
+        Seconds each solve and each hold-out prediction may take; one that exceeds
+        it is given up, and a note says so (default :data:`REFIT_TIMEOUT`).
 
     Returns
     -------
@@ -316,6 +326,10 @@ def confirm(fit: EstimationResult, effect: Effect | str | Sequence[Effect | str]
     if not (0.0 < float(level) < 1.0):
         raise SettingsError(f"level must be in (0, 1), got {level!r}")
     t0 = time.perf_counter()
+    timeout = REFIT_TIMEOUT if timeout is None else float(timeout)
+    holdout = holdout_window(fit.spec, holdout)
+    options = dict(options or {})
+    options.setdefault("max_wall_time", timeout)
     effects = resolve_effects(effect)
     base_spec = fit.spec
     spec = with_effects(base_spec, effects)
@@ -325,7 +339,9 @@ def confirm(fit: EstimationResult, effect: Effect | str | Sequence[Effect | str]
     t1 = time.perf_counter()
     notes: list[str] = []
     if not new.success:
-        notes.append(f"the refit did not converge ({new.message}); its statistics are not those of an optimum")
+        gave = "wall" in new.message.lower()
+        notes.append(f"the refit {'gave up after ' + format(timeout, 'g') + ' s' if gave else 'did not converge'} "
+                     f"({new.message}); its statistics are not those of an optimum")
     dof = new.n_estimated - fit.n_estimated
     lr = 2.0 * (fit.objective - new.objective)
     if lr < 0:
@@ -380,13 +396,15 @@ def confirm(fit: EstimationResult, effect: Effect | str | Sequence[Effect | str]
 
     # discretization: the collocation against the high-accuracy simulator at the refit's estimate
     disc = {}
+    D = float("nan")
     try:
-        pred = _predict(new, data)
+        pred = _predict(new, data, timeout)
         sig = dict(zip(new.nlp.channel_names, new.nlp.channel_sigmas))
         worst = []
         for ch in new.nlp.channel_names:
             d = np.abs(new.predictions[ch] - pred[ch]) / sig[ch]
             disc[ch] = float(d.max())
+            D = (0.0 if not np.isfinite(D) else D) + float(np.sum(d ** 2))
             worst.append((disc[ch], ch, float(data[ch].times[int(np.argmax(d))])))
         w = max(worst)
         if w[0] > DISCRETIZATION_WARN:
@@ -400,9 +418,7 @@ def confirm(fit: EstimationResult, effect: Effect | str | Sequence[Effect | str]
     # hold-out: fit both models on the window, predict the rest
     hold_rms, hold_fits = None, None
     if holdout is not None:
-        a, b = (float(holdout[0]), float(holdout[1]))
-        if not b > a:
-            raise SettingsError(f"holdout must be a window (start, end) with end > start, got {holdout!r}")
+        a, b = holdout
         rest = _after(data, b)
         if rest is None:
             notes.append(f"no samples after t = {b:g} s: the hold-out check was skipped")
@@ -410,9 +426,12 @@ def confirm(fit: EstimationResult, effect: Effect | str | Sequence[Effect | str]
             try:
                 window = data.window(a, b)
                 fb, blind_b = _fit_window(base_spec, window, mesh, None, options, fit.p)
-                fn, blind_n = _fit_window(spec, window, mesh, guess, options, new.p)
+                # from the model's own guesses, as the base model: a parameter the window's data do not
+                # reach is held at its guess, and a guess taken from the full-data estimate would carry
+                # the predicted samples into the prediction
+                fn, blind_n = _fit_window(spec, window, mesh, None, options, new.p)
                 hold_fits = (fb, fn)
-                pb, pn = _predict(fb, rest), _predict(fn, rest)
+                pb, pn = _predict(fb, rest, timeout), _predict(fn, rest, timeout)
                 hold_rms = {c.name: (float(np.sqrt(np.mean((pb[c.name] - c.values) ** 2))),
                                      float(np.sqrt(np.mean((pn[c.name] - c.values) ** 2)))) for c in rest.channels}
                 for label, f, blind in (("base", fb, blind_b), ("new", fn, blind_n)):
@@ -424,11 +443,437 @@ def confirm(fit: EstimationResult, effect: Effect | str | Sequence[Effect | str]
             except RocketidError as exc:
                 notes.append(f"the hold-out check failed: {exc}")
     t3 = time.perf_counter()
+    acceptance = _acceptance(fit, new, effects, base_spec, D, level)
     return Confirmation(
         effects=tuple(e.name for e in effects), fit=new, base_fit=fit, lr_statistic=float(lr),
         lr_p_value=float(lr_p), dof=int(dof), aic=(aic0, aic1), bic=(bic0, bic1), whiteness=white, rms=rms,
         holdout_rms=hold_rms, effect_estimates=estimates, chi2_per_dof=(fit.chi2_per_dof, new.chi2_per_dof),
         discretization=disc, holdout=None if holdout is None else (float(holdout[0]), float(holdout[1])),
-        level=float(level), lags=int(lags), notes=tuple(notes),
+        level=float(level), lags=int(lags or DEFAULT_LAGS), notes=tuple(notes),
         timings={"refit_s": t1 - t0, "checks_s": t2 - t1, "holdout_s": t3 - t2, "total_s": t3 - t0},
-        holdout_fits=hold_fits, effect_covariance=cov)
+        holdout_fits=hold_fits, effect_covariance=cov, acceptance=acceptance)
+
+
+def _acceptance(fit: EstimationResult, new: EstimationResult, effects: Sequence[Effect], base_spec, D: float,
+                level: float):
+    """The acceptance test of a confirmation's refit, with the noise band of its data and the
+    discretization measured at the refit; None when it cannot be formed."""
+    from .accept import NoiseBand, accept, BAND_LEVEL
+    from .screen import vehicle_of
+
+    try:
+        vehicle = vehicle_of(fit)
+        sizes = {}
+        for e in effects:
+            sizes.update({k: v for k, v in e.sizes(vehicle).items() if math.isfinite(v) and v > 0})
+        r = summarize_refit(new, fit.objective, fit.n_estimated, effects, tuple(e.name for e in effects), sizes,
+                            level=level, base_parameters=base_spec.parameter_names,
+                            least={k: v for e in effects for k, v in e.least.items()})
+        dof = max(1, new.n_data - new.n_estimated)
+        upper = float(stats.chi2.isf(BAND_LEVEL, dof) / dof) + (D / dof if np.isfinite(D) else 0.0)
+        return accept(r, NoiseBand(upper, dof, D), level=level)
+    except (RocketidError, ValueError, np.linalg.LinAlgError):
+        return None
+
+
+# ---------------------------------------------------------------------------
+# Step 2 of the discovery -- refit every contender, in parallel, under a time guard
+# ---------------------------------------------------------------------------
+
+#: Seconds a refit may take before it is given up (``diagnose(refit_timeout=...)``).
+REFIT_TIMEOUT = 180.0
+
+
+@dataclass(frozen=True)
+class Refit:
+    """One refit of the model with a set of effects: what the acceptance test needs, and nothing
+    that cannot cross a process boundary.
+
+    Attributes
+    ----------
+    effects : tuple of str
+        Every effect in the refitted model, in the order added (the last one is new).
+    added : tuple of str
+        The effect names this refit adds to the current model (one, or a refined shape).
+    success : bool
+        IPOPT converged (and the refit did not time out).
+    message : str
+    gave_up : bool
+        The refit exceeded its time limit (``message`` says after how long).
+    parameter_names : tuple of str
+    p : ndarray
+        Estimates (every parameter of the refitted model).
+    std : ndarray
+        Standard errors (NaN when they could not be formed).
+    effect_parameters : tuple of str
+        The parameters of the added effect(s).
+    objective : float
+    n_data, n_estimated : int
+    chi2_per_dof : float
+    base_objective : float
+        J of the fit it is compared with; ``base_n_estimated`` its estimated quantities.
+    base_n_estimated : int
+    whiteness : dict
+        ``{channel: Ljung-Box p}``.
+    sizes : dict
+        Realistic magnitude of each effect parameter for this vehicle.
+    at_bound : tuple of str
+        Effect parameters at a bound.
+    plausible_coefficients : bool or None
+        The base coefficients pass :func:`~rocketid.diagnostics.plausibility.check_plausibility`
+        (None: not checked).
+    implausible : tuple of str
+        The failing plausibility checks.
+    identifiability : str
+        Empty when the added parameters are identifiable; otherwise what is not, and the
+        combination that is.
+    seconds : float
+    notes : tuple of str
+    """
+
+    effects: tuple
+    added: tuple
+    success: bool
+    message: str
+    gave_up: bool
+    parameter_names: tuple
+    p: np.ndarray
+    std: np.ndarray
+    effect_parameters: tuple
+    objective: float
+    n_data: int
+    n_estimated: int
+    chi2_per_dof: float
+    base_objective: float
+    base_n_estimated: int
+    whiteness: dict
+    sizes: dict
+    at_bound: tuple = ()
+    plausible_coefficients: bool | None = None
+    implausible: tuple = ()
+    identifiability: str = ""
+    seconds: float = 0.0
+    notes: tuple = ()
+    least: dict = field(default_factory=dict)
+
+    @property
+    def name(self) -> str:
+        return " + ".join(self.added)
+
+    @property
+    def lr_statistic(self) -> float:
+        return 2.0 * (self.base_objective - self.objective)
+
+    @property
+    def dof(self) -> int:
+        return int(self.n_estimated - self.base_n_estimated)
+
+    @property
+    def lr_p_value(self) -> float:
+        lr = self.lr_statistic
+        if not np.isfinite(lr) or self.dof <= 0:
+            return float("nan")
+        return 1.0 if lr <= 0 else float(stats.chi2.sf(lr, self.dof))
+
+    @property
+    def bic(self) -> tuple:
+        """(base, new) ``2 J + k ln n``."""
+        ln = math.log(max(self.n_data, 2))
+        return 2 * self.base_objective + self.base_n_estimated * ln, 2 * self.objective + self.n_estimated * ln
+
+    def estimate(self, name: str) -> tuple:
+        """``(value, std)`` of a parameter."""
+        i = self.parameter_names.index(name)
+        return float(self.p[i]), float(self.std[i])
+
+    def size_ratio(self) -> dict:
+        """``{parameter: |estimate| / realistic size}`` of the added parameters with a stated size."""
+        out = {}
+        for n in self.effect_parameters:
+            s = self.sizes.get(n)
+            if s:
+                out[n] = abs(self.estimate(n)[0]) / s
+        return out
+
+    def to_dict(self) -> dict:
+        return {"effects": list(self.effects), "added": list(self.added), "converged": bool(self.success),
+                "gave_up": bool(self.gave_up), "message": self.message, "chi2_per_dof": float(self.chi2_per_dof),
+                "bic": [float(b) for b in self.bic], "lr_statistic": float(self.lr_statistic),
+                "lr_p_value": float(self.lr_p_value), "dof": self.dof,
+                "estimates": {n: {"value": self.estimate(n)[0], "std": self.estimate(n)[1],
+                                  "realistic": self.sizes.get(n)} for n in self.effect_parameters},
+                "whiteness": {k: float(v) for k, v in self.whiteness.items()},
+                "plausible_coefficients": self.plausible_coefficients, "implausible": list(self.implausible),
+                "identifiability": self.identifiability, "seconds": float(self.seconds), "notes": list(self.notes)}
+
+
+def identifiability(names: Sequence[str], cov: np.ndarray, effect_parameters: Sequence[str],
+                    sizes: Mapping[str, float]) -> str:
+    """What of an added effect the data do not pin down, in the estimability analysis' terms.
+
+    The covariance of the effect's parameters, in units of their realistic sizes, is split
+    into eigen-directions: a direction whose standard error exceeds one realistic size is
+    not identifiable from these data (it trades off against the coefficients it correlates
+    with); the best-determined direction is the combination that is. Returns "" when every
+    direction is identifiable.
+    """
+    idx = [names.index(n) for n in effect_parameters]
+    scale = np.array([sizes.get(n) or 0.0 for n in effect_parameters])
+    if not idx or not np.all(scale > 0) or not np.all(np.isfinite(cov[np.ix_(idx, idx)])):
+        return ""
+    C = cov[np.ix_(idx, idx)] / np.outer(scale, scale)
+    w, V = np.linalg.eigh(C)
+    sd = np.sqrt(np.clip(w, 0.0, None))
+    if sd[-1] <= 1.0:
+        return ""
+    d = np.sqrt(np.clip(np.diag(cov), 1e-300, None))
+    corr = cov / np.outer(d, d)
+    others = [i for i in range(len(names)) if i not in idx]
+    worst = V[:, -1]
+    trade = ""
+    if others:
+        # correlation of the poorly determined combination with each coefficient
+        u = worst / scale
+        cu = cov[np.ix_(idx, others)].T @ u
+        su = math.sqrt(max(float(u @ cov[np.ix_(idx, idx)] @ u), 1e-300))
+        r = cu / (su * d[others])
+        j = int(np.argmax(np.abs(r)))
+        trade = f", trading off against {names[others[j]]} (correlation {r[j]:+.2f})"
+
+    def combo(v):
+        v = v / np.max(np.abs(v))
+        return " ".join(f"{c:+.2f} {n}/{s:g}" for c, n, s in zip(v, effect_parameters, scale) if abs(c) >= 0.05)
+
+    bad = int(np.sum(sd > 1.0))
+    good = sd[0]
+    if len(idx) == 1:
+        return (f"{effect_parameters[0]} is not identifiable from these data: its standard error is {sd[0]:.2g} "
+                f"realistic sizes{trade}")
+    return (f"{bad} of {len(idx)} directions of {', '.join(effect_parameters)} are not identifiable from these data "
+            f"(standard error up to {sd[-1]:.2g} realistic sizes, along {combo(worst)}{trade}); the identifiable "
+            f"combination is {combo(V[:, 0])} (standard error {good:.2g} realistic sizes)")
+
+
+def summarize_refit(new: EstimationResult, base_objective: float, base_n_estimated: int, effects: Sequence[Effect],
+                    added: Sequence[str], sizes: Mapping[str, float], *, level: float = 0.05,
+                    base_parameters: Sequence[str] = (), seconds: float = 0.0, notes: Sequence[str] = (),
+                    least: Mapping[str, float] | None = None) -> Refit:
+    """The :class:`Refit` of a fitted model with ``effects``: whiteness per channel, standard
+    errors, the base coefficients' plausibility, the added parameters' identifiability."""
+    from .plausibility import check_plausibility
+
+    names = tuple(new.spec.parameter_names)
+    notes = list(notes)
+    gave_up = (not new.success) and "wall" in new.message.lower() and "time" in new.message.lower()
+    added_set = set(added)
+    declared = tuple(n for n in names if n not in set(base_parameters))
+    eff_params = tuple(n for e in effects if e.name in added_set for n in declared if n in _declared_by(e, declared))
+    if not eff_params:
+        eff_params = declared
+    std = np.full(len(names), np.nan)
+    ident, plaus, failing = "", None, ()
+    try:
+        unc = uncertainty(new)
+        std = np.asarray(unc.standard_errors, float)
+        ident = identifiability(list(names), np.asarray(unc.parameter_covariance), eff_params, sizes)
+        try:
+            pl = check_plausibility(new, uncertainty=unc, level=level, realistic=dict(sizes))
+            base_flags = [f for f in pl.flagged(severity="fail") if not set(f.parameters) & set(declared)]
+            plaus = not base_flags
+            failing = tuple(f"{f.code}: {f.message}" for f in base_flags)
+        except RocketidError as exc:
+            notes.append(f"the plausibility check failed: {exc}")
+    except (SensitivityError, RocketidError, np.linalg.LinAlgError) as exc:
+        notes.append(f"no standard errors: {exc}")
+    white = {}
+    for ch, r in new.residuals.items():
+        try:
+            white[ch] = float(ljung_box(r)[1])
+        except RocketidError:
+            white[ch] = float("nan")
+    bound = tuple(str(s) for s, _ in new.active_bounds() if str(s) in eff_params)
+    return Refit(effects=tuple(e.name for e in effects), added=tuple(added), success=bool(new.success),
+                 message=new.message, gave_up=bool(gave_up), parameter_names=names, p=np.asarray(new.p, float),
+                 std=std, effect_parameters=eff_params, objective=float(new.objective), n_data=int(new.n_data),
+                 n_estimated=int(new.n_estimated), chi2_per_dof=float(new.chi2_per_dof),
+                 base_objective=float(base_objective), base_n_estimated=int(base_n_estimated), whiteness=white,
+                 sizes={k: float(v) for k, v in sizes.items() if k in eff_params}, at_bound=bound,
+                 plausible_coefficients=plaus, implausible=failing, identifiability=ident, seconds=float(seconds),
+                 notes=tuple(notes), least={k: float(v) for k, v in (least or {}).items() if k in eff_params})
+
+
+def _declared_by(effect: Effect, declared: Sequence[str]) -> set:
+    names = set(effect.parameter_names) | set(effect.realistic)
+    hit = {n for n in declared if n in names}
+    if hit:
+        return hit
+    return set()
+
+
+@dataclass(frozen=True)
+class RefitTask:
+    """What one refit needs: the model without effects, the data, the mesh, the effects and a start.
+
+    Attributes
+    ----------
+    base_spec : ModelSpec
+        The user's model (no effect added).
+    data : Measurements
+    mesh : Mesh
+    effects : tuple of Effect
+        All effects of the refitted model (the ones added so far, then the new one).
+    added : tuple of str
+    start : dict
+        Starting values by parameter name (the current fit's estimates, the contender's start).
+    sizes : dict
+        Realistic sizes of the added parameters.
+    base_objective : float
+    base_n_estimated : int
+    base_parameters : tuple of str
+        The parameters of the current model (the new ones are the added effect's).
+    options : dict
+    timeout : float
+    level : float
+    band_upper : float
+        The noise band's chi2/dof: a warm-started refit that ends above it is refitted from the
+        model's own guesses (the base estimate may be distorted by the missing effect), and the
+        better of the two is kept.
+    """
+
+    base_spec: Any
+    data: Measurements
+    mesh: Any
+    effects: tuple
+    added: tuple
+    start: dict
+    sizes: dict
+    base_objective: float
+    base_n_estimated: int
+    base_parameters: tuple
+    options: dict
+    timeout: float
+    level: float = 0.05
+    band_upper: float = math.inf
+
+
+def refit_spec(task: RefitTask, start: Mapping | None = None):
+    """The model of a task, with its starting values (within bounds)."""
+    spec = with_effects(task.base_spec, list(task.effects))
+    guess = {}
+    for n, v in (task.start if start is None else start).items():
+        if n in spec.parameter_names:
+            ps = spec.parameter(n)
+            guess[n] = float(np.clip(v, ps.lower, ps.upper))
+    return spec.with_guess(guess) if guess else spec
+
+
+def run_refit(task: RefitTask) -> tuple[Refit, EstimationResult | None]:
+    """Do one refit in this process (IPOPT's wall-time limit as its guard)."""
+    t0 = time.perf_counter()
+    notes = []
+    try:
+        spec = refit_spec(task)
+        opts = {"max_wall_time": float(task.timeout)}
+        opts.update(task.options or {})
+        new = estimate(spec, task.data, mesh=task.mesh, options=opts)
+        if not (new.success and new.chi2_per_dof <= task.band_upper):
+            # warm start from a fit the missing effect distorted: also from the model's own guesses
+            cold = estimate(refit_spec(task, {}), task.data, mesh=task.mesh, options=opts)
+            if cold.success and (not new.success or cold.objective < new.objective):
+                notes.append(f"refitted from the model's guesses (chi2/dof {cold.chi2_per_dof:.4g}; from the current "
+                             f"estimate {new.chi2_per_dof:.4g})")
+                new = cold
+    except RocketidError as exc:
+        return _failed(task, f"the refit could not be made: {exc}", time.perf_counter() - t0), None
+    return summarize_refit(new, task.base_objective, task.base_n_estimated,
+                           [e for e in task.effects], task.added, task.sizes, level=task.level,
+                           base_parameters=task.base_parameters, seconds=time.perf_counter() - t0,
+                           notes=notes, least={k: v for e in task.effects if e.name in task.added
+                                               for k, v in e.least.items()}), new
+
+
+def _failed(task: RefitTask, message: str, seconds: float, gave_up: bool = False) -> Refit:
+    return Refit(effects=tuple(e.name for e in task.effects), added=tuple(task.added), success=False, message=message,
+                 gave_up=gave_up, parameter_names=(), p=np.zeros(0), std=np.zeros(0), effect_parameters=(),
+                 objective=float("nan"), n_data=0, n_estimated=0, chi2_per_dof=float("nan"),
+                 base_objective=task.base_objective, base_n_estimated=task.base_n_estimated, whiteness={},
+                 sizes=dict(task.sizes), seconds=seconds, notes=(message,))
+
+
+_TASKS: list = []   # read by forked workers (the tasks are not pickled: effects may be closures)
+
+
+def _child(index: int, conn) -> None:   # pragma: no cover - runs in a worker process
+    try:
+        refit, _ = run_refit(_TASKS[index])
+        conn.send(refit)
+    except BaseException as exc:   # noqa: BLE001 - report anything to the parent
+        conn.send(_failed(_TASKS[index], f"the refit failed in its worker: {type(exc).__name__}: {exc}", 0.0))
+    finally:
+        conn.close()
+
+
+def refit_all(tasks: Sequence[RefitTask], *, workers: int | None = None) -> tuple[Refit, ...]:
+    """Run every refit, ``workers`` at a time in forked worker processes, each under its
+    task's time limit: a worker that exceeds it (plus a grace for the set-up) is stopped and
+    its refit reported as given up, with the time. One worker (or no ``fork``) runs them
+    here, in turn, with IPOPT's wall-time limit as the guard.
+
+    Returns
+    -------
+    tuple of Refit
+        In the order of ``tasks``.
+    """
+    import multiprocessing as mp
+    import os
+
+    tasks = list(tasks)
+    if not tasks:
+        return ()
+    if workers is None:
+        workers = min(2, os.cpu_count() or 1)
+    if workers <= 1 or len(tasks) == 1 or "fork" not in mp.get_all_start_methods():
+        return tuple(run_refit(t)[0] for t in tasks)
+    from multiprocessing.connection import wait
+
+    global _TASKS
+    _TASKS = tasks
+    ctx = mp.get_context("fork")
+    results: list = [None] * len(tasks)
+    pending = list(range(len(tasks)))
+    running: dict = {}
+    try:
+        while pending or running:
+            while pending and len(running) < workers:
+                i = pending.pop(0)
+                recv, send = ctx.Pipe(duplex=False)
+                proc = ctx.Process(target=_child, args=(i, send), daemon=True)
+                proc.start()
+                send.close()
+                # the limit covers the solve; set-up (code generation on a cold cache) gets as long again
+                running[recv] = (i, proc, time.perf_counter(), 2.0 * tasks[i].timeout + 30.0)
+            ready = wait(list(running), timeout=1.0)
+            for conn in ready:
+                i, proc, start, limit = running.pop(conn)
+                try:
+                    results[i] = conn.recv()
+                except EOFError:
+                    results[i] = _failed(tasks[i], f"the refit's worker ended without a result (exit code "
+                                                   f"{proc.exitcode})", time.perf_counter() - start)
+                conn.close()
+                proc.join(5.0)
+            now = time.perf_counter()
+            for conn, (i, proc, start, limit) in list(running.items()):
+                if now - start > limit:
+                    proc.terminate()
+                    proc.join(5.0)
+                    conn.close()
+                    running.pop(conn)
+                    results[i] = _failed(tasks[i], f"gave up after {now - start:.0f} s (time limit {limit:.0f} s)",
+                                         now - start, gave_up=True)
+    finally:
+        for conn, (i, proc, start, limit) in running.items():
+            proc.terminate()
+            proc.join(5.0)
+        _TASKS = []
+    return tuple(results)

@@ -76,7 +76,7 @@ PAGE = Template("""<!DOCTYPE html>
 <main>
 <h1>$title</h1>
 <p class="meta">$meta</p>
-<nav><a href="#compare">1 Compare</a><a href="#locate">2 Locate</a><a href="#plausibility">3 Plausibility</a><a href="#candidates">4 Candidates</a><a href="#confirm">5 Confirmation</a><a href="#history">6 History</a><a href="#fit">Fit</a></nav>
+<nav><a href="#compare">1 Compare</a><a href="#locate">2 Locate</a><a href="#plausibility">3 Plausibility</a><a href="#candidates">4 Candidates</a><a href="#steps">4b Stepwise search</a><a href="#confirm">5 Confirmation</a><a href="#history">6 History</a><a href="#fit">Fit</a></nav>
 <div class="verdict $verdict_class"><strong>Verdict</strong><ul>$verdict</ul></div>
 $notes
 <h2 id="compare">1 Compare: measured against model</h2>
@@ -87,6 +87,8 @@ $locate
 $plausibility
 <h2 id="candidates">4 Candidate effects, ranked by the score test</h2>
 $candidates
+<h2 id="steps">4b Stepwise search: every contender refitted, accepted only when it explains</h2>
+$steps
 <h2 id="confirm">5 Confirmation by refitting</h2>
 $confirm
 <h2 id="history">6 History: the error as effects are added</h2>
@@ -421,6 +423,44 @@ def _confirm_section(report, figs: _Figures) -> str:
     return "\n".join(parts)
 
 
+def _steps_section(report, figs: _Figures) -> str:
+    steps = getattr(report, "steps", ())
+    final = getattr(report, "final", None)
+    parts = []
+    if final is not None:
+        cls = "ok" if final.verdict in ("explained", "nothing missing") else "fail"
+        parts.append(f'<p>Final verdict: <span class="{cls}">{_e(final.verdict)}</span>. {_e(final.explanation)}</p>')
+    if not steps:
+        parts.append("<p>No stepwise search was run (rank only, or the discovery failed: see the notes).</p>")
+        return "\n".join(parts)
+    band = report.discovery.band
+    parts.append(f"<p>Each contender is added to the model and refitted. <strong>Accepted</strong>: converged, "
+                 f"LR-significant (Bonferroni over the contenders), BIC lower, chi2/dof inside the noise band "
+                 f"(&le; {band.upper:.4g}: {band.dof} dof, discretization {_num(band.discretization, '.3g')}), residuals "
+                 "white (Ljung-Box, Holm over the channels, p &ge; 0.001), plausible coefficients and an effect size "
+                 "within 5 realistic sizes for this vehicle. <strong>Admissible</strong>: all but the noise and "
+                 "whiteness (a step toward the explanation). Highlighted: the refit taken at each step.</p>")
+    for s in steps:
+        rows, cls = [], []
+        for a in s.acceptances:
+            r = a.refit
+            b0, b1 = r.bic if r.success else (float("nan"), float("nan"))
+            est = "; ".join(f"{n} = {r.estimate(n)[0]:.4g} +- {r.estimate(n)[1]:.2g}" for n in r.effect_parameters)
+            state = ('<span class="ok">accepted</span>' if a.accepted else
+                     ('<span class="warn">admissible</span>' if a.admissible else '<span class="fail">rejected</span>'))
+            rows.append([r.name, ("html", state), _num(r.chi2_per_dof, ".4g"), f"{b1 - b0:+.5g}",
+                         _num(r.lr_p_value, ".2g"), est or "-", a.reason() or "-"])
+            cls.append("sig" if s.chosen is a else "")
+        parts.append(f"<h3>Step {s.number}: {_e(s.why)}</h3>")
+        if s.dropped:
+            parts.append(f"<p>The backward check dropped {_e(', '.join(s.dropped))}.</p>")
+        parts.append(html_table(["effect", "verdict", "chi2/dof", "delta BIC", "LR p", "estimate", "why not accepted"],
+                                rows, left=1, row_classes=cls, text_cols=(5, 6)))
+        if s.fit is not None:
+            parts.append(f"<p>After step {s.number}: {_e(', '.join(s.effects))}, chi2/dof {s.fit.chi2_per_dof:.4g}.</p>")
+    return "\n".join(parts)
+
+
 def _history_section(report, figs: _Figures) -> str:
     h = report.history
     if h is None:
@@ -442,8 +482,8 @@ def _history_section(report, figs: _Figures) -> str:
                 plt.close(res)
             if path.is_file():
                 parts.append(f'<figure><img alt="history residuals" src="{data_uri(path.read_bytes())}">'
-                             "<figcaption>Residuals of the base model and of the best refit: samples and 1 s moving "
-                             "average.</figcaption></figure>")
+                             "<figcaption>Residuals of the base model and after each step of the stepwise search: "
+                             "samples and 1 s moving average.</figcaption></figure>")
                 figs.files.append(path)
         except Exception as exc:  # noqa: BLE001 - a report must not fail on one plot
             parts.append(f"<p class=\"warn\">history plot unavailable: {_e(exc)}</p>")
@@ -471,6 +511,7 @@ def render_html(report, figures_folder: Path | None = None) -> tuple[str, list[P
         verdict_class="bad" if report.fails else "good", verdict=verdict, notes=notes_html,
         compare=_compare_section(report.comparison, figs), locate=_locate_section(report.location, figs),
         plausibility=_plausibility_section(report.plausibility, figs), candidates=_candidates_section(report, figs),
+        steps=_steps_section(report, figs),
         confirm=_confirm_section(report, figs), history=_history_section(report, figs),
         fit_summary=_e(str(fit.summary())),
         footer=_e(f"Made by rocketid {_version()} on {_dt.datetime.now().strftime('%Y-%m-%d %H:%M')}; "

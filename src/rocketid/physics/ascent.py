@@ -54,7 +54,10 @@ class FlightConditions:
 def ascent_states(m: Model, initial=(0.0, 0.0, 0.0, math.pi / 2)) -> AscentStates:
     """Declare x, h, v, theta with their initial values."""
     x0, h0, v0, th0 = initial
-    return AscentStates(m.state("x", x0), m.state("h", h0), m.state("v", v0), m.state("theta", th0))
+    st = AscentStates(m.state("x", x0), m.state("h", h0), m.state("v", v0), m.state("theta", th0))
+    for role, sym in (("downrange", st.x), ("altitude", st.h), ("speed", st.v), ("flight_path_angle", st.theta)):
+        m.declare_role(role, sym)
+    return st
 
 
 def flight_conditions(m: Model, st: AscentStates, *, atmosphere: str = "yang1983",
@@ -74,6 +77,9 @@ def flight_conditions(m: Model, st: AscentStates, *, atmosphere: str = "yang1983
     qbar = m.define("qbar", rho * st.v ** 2 / 2)
     sound = m.define("a_sound", us76_speed_of_sound(st.h))
     mach = m.define("mach", st.v / sound)
+    for role, sym in (("density", rho), ("gravity", g), ("dynamic_pressure", qbar), ("sound_speed", sound),
+                      ("mach", mach)):
+        m.declare_role(role, sym)
     return FlightConditions(rho, g, qbar, mach)
 
 
@@ -101,6 +107,11 @@ def ascent_dynamics(m: Model, st: AscentStates, fc: FlightConditions, *, thrust,
                     radius: float = EARTH_RADIUS) -> AscentForces:
     """Declare the equations (7.1) on ``m`` (theta in v-multiplied implicit form).
 
+    Every symbol gets its physical role (:data:`rocketid.model.ROLES`): the
+    states, the flight condition, thrust, mass, the thrust direction, the drag
+    and lift coefficients and forces, the attack angle (``alpha`` as given: an
+    input symbol or an expression) and the reference area.
+
     The force terms become named definitions -- ``thrust``, ``mass``,
     ``alpha_thrust`` (thrust direction relative to the velocity, = alpha),
     ``cd``, ``cl``, ``drag = qbar Sm cd``, ``lift = qbar Sm cl`` -- so that a
@@ -125,4 +136,9 @@ def ascent_dynamics(m: Model, st: AscentStates, fc: FlightConditions, *, thrust,
     m.implicit({
         th: v * m.der(th) - (T * sp.sin(aT) / M + L / M - fc.g * sp.cos(th) + v ** 2 * sp.cos(th) / (Re + h)),
     })
+    for role, sym in (("thrust", T), ("mass", M), ("thrust_direction", aT), ("drag_coefficient", CD),
+                      ("lift_coefficient", CL), ("drag", D), ("lift", L), ("attack_angle", sp.sympify(alpha))):
+        m.declare_role(role, sym)
+    if isinstance(area, sp.Symbol):
+        m.declare_role("reference_area", area)
     return AscentForces(T, M, aT, CD, CL, D, L)

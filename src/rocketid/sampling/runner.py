@@ -40,10 +40,11 @@ from ..estimability import Estimability, analyze, estimate_q1
 from ..solve import EstimationResult, Prepared
 from ..summary import Section, Summary, Table, Text
 from .checkpoint import RunState, checkpoint_path, read_checkpoint, write_checkpoint
-from .criterion import TERM_NAMES, criterion_of
+from .criterion import TERM_NAMES
 from .executors import make_executor
+from .scheduler import Batch, Scheduler
 from .settings import SamplingSettings
-from .worker import DrawOutcome, Recipe, install
+from .worker import DrawOutcome, Recipe, draw_outcome, install
 
 __all__ = ["SamplingProblem", "prepare_sampling", "sample", "RunResult", "SamplingResult"]
 
@@ -108,13 +109,7 @@ def prepare_sampling(prepared: Prepared, p0: Sequence[float] | Mapping | None = 
                             f"{settings.threshold:g}): there is no q2 to sample; estimate all parameters directly")
     q2_ref = est.q2_of(p0)
     ref = estimate_q1(prepared, est, q2_ref, options=settings.ipopt_options)
-    crit = criterion_of(ref) if ref.success else None
-    eta = crit.eta if crit is not None else math.nan
-    moments = (crit.s1, crit.k1, crit.s2, crit.k2) if crit is not None else (math.nan,) * 4
-    outcome = DrawOutcome(0, 0, bool(ref.success and math.isfinite(eta)), int(ref.status), ref.message, float(eta),
-                          tuple(map(float, moments)), float(ref.objective), int(ref.iterations),
-                          tuple(map(float, ref.p)), tuple(map(float, q2_ref)), tuple(map(float, p0)),
-                          float(ref.timings.get("solve_s", math.nan)))
+    outcome = draw_outcome(0, 0, ref, q2_ref, p0, ref.timings.get("solve_s", math.nan))
     recipe = Recipe.make(prepared, settings, est, ref, q2_ref)
     return SamplingProblem(prepared, p0, settings, est, ref, outcome, recipe, time.perf_counter() - t0)
 
@@ -445,6 +440,37 @@ def sample(prepared: Prepared | SamplingProblem, *, p0: Sequence[float] | Mappin
         raise SettingsError("settings differ from the SamplingProblem's in what draws depend on (scaling, threshold, "
                             "distribution, np, IPOPT options); prepare the problem with these settings")
     settings = settings or problem.settings
+    seeds = _checked_seeds(seeds)
+    states = _run_states(problem.recipe, settings, seeds, checkpoint_dir, resume)
+    ctx = install(problem.recipe, problem.prepared) if executor == "serial" else None
+    t0 = time.perf_counter()
+    ex = make_executor(executor, problem.recipe, ctx, workers=workers, client=client, address=address)
+    sched = Scheduler(states, n_iter=settings.n_iter, max_draws=settings.max_draws, batch_size=settings.batch_size,
+                      max_inflight=2 * ex.workers if ex.speculative else 1, speculative=ex.speculative)
+    bars = _Progress(_auto_progress() if progress is None else bool(progress), states, settings.n_iter,
+                     settings.max_draws)
+
+    def save(st: RunState) -> None:
+        if checkpoint_dir is not None:
+            write_checkpoint(checkpoint_dir, st, token=problem.recipe.token, settings_key=settings.key(),
+                             n_iter=settings.n_iter)
+
+    try:
+        timing = _drive(sched, ex, bars, save, callback, t0)
+    except BaseException:
+        ex.close(cancel=True)
+        bars.close()
+        raise
+    ex.close()
+    bars.close()
+    return SamplingResult(settings, problem.estimability, problem.reference_outcome,
+                          tuple(RunResult.from_state(st) for st in states), ex.name, ex.workers,
+                          time.perf_counter() - t0, problem.setup_s, sched.n_evaluated, sched.n_wasted,
+                          sched.n_cancelled, timing.worker_setup_s if executor != "serial" else (), timing.startup_s,
+                          problem.recipe.token, problem.prepared.spec.parameter_names)
+
+
+def _checked_seeds(seeds: Sequence[int]) -> list[int]:
     seeds = list(seeds)
     for s in seeds:
         if isinstance(s, bool) or not isinstance(s, (int, np.integer)) or s < 0:
@@ -453,12 +479,15 @@ def sample(prepared: Prepared | SamplingProblem, *, p0: Sequence[float] | Mappin
         raise SettingsError(f"seeds must be distinct, got {seeds}")
     if not seeds:
         raise SettingsError("give at least one seed")
-    seeds = [int(s) for s in seeds]
-    recipe = problem.recipe
-    key, n_iter, max_draws, B = settings.key(), settings.n_iter, settings.max_draws, settings.batch_size
+    return [int(s) for s in seeds]
 
-    # ---- run states: fresh or from checkpoints
-    states: dict[int, RunState] = {}
+
+def _run_states(recipe: Recipe, settings: SamplingSettings, seeds: list[int], checkpoint_dir, resume: bool
+                ) -> list[RunState]:
+    """One state per run: fresh, or continued from its checkpoint (``resume``); refuses to
+    overwrite a checkpoint of an unfinished run of the same problem without ``resume``."""
+    key, n_iter, max_draws = settings.key(), settings.n_iter, settings.max_draws
+    states = []
     for s in seeds:
         st = None
         if checkpoint_dir is not None:
@@ -478,106 +507,47 @@ def sample(prepared: Prepared | SamplingProblem, *, p0: Sequence[float] | Mappin
         st = st or RunState(s)
         if st.stopped_by is None and max_draws is not None and st.draws >= max_draws:
             st.stopped_by = "max_draws"
-        states[s] = st
+        states.append(st)
+    return states
 
-    ctx = install(recipe, problem.prepared) if executor == "serial" else None
-    t0 = time.perf_counter()
-    ex = make_executor(executor, recipe, ctx, workers=workers, client=client, address=address)
-    bars = _Progress(_auto_progress() if progress is None else bool(progress), list(states.values()), n_iter,
-                     max_draws)
-    order = {s: i for i, s in enumerate(seeds)}
-    pending: dict[int, dict[int, DrawOutcome]] = {s: {} for s in seeds}
-    next_submit = {s: states[s].next_draw for s in seeds}
-    inflight: dict[Any, tuple[int, int, int]] = {}
-    inflight_draws = {s: 0 for s in seeds}
-    active = [s for s in seeds if states[s].stopped_by is None]
-    n_evaluated = n_wasted = n_cancelled = 0
+
+@dataclass(frozen=True)
+class _Timing:
+    startup_s: float
+    worker_setup_s: tuple
+
+
+def _drive(sched: Scheduler, ex, bars: "_Progress", save: Callable[[RunState], None],
+           callback: Callable[[int, int], None] | None, t0: float) -> _Timing:
+    """Run the scheduler on the executor until every run has stopped: submit what it hands
+    out, feed back what returns (in seed and draw order), cancel what it offers, checkpoint
+    and report every batch that moved a run."""
+    handles: dict[Any, Batch] = {}
     setup_by_pid: dict[int, float] = {}
     startup = math.nan
-    max_inflight = 1 if not ex.speculative else 2 * ex.workers
-    spec_batch = max(1, min(B, n_iter // 2))
-
-    def save(st: RunState) -> None:
-        if checkpoint_dir is not None:
-            write_checkpoint(checkpoint_dir, st, token=recipe.token, settings_key=key, n_iter=n_iter)
-
-    def stop_run(s: int) -> None:
-        nonlocal n_wasted, n_cancelled
-        active.remove(s)
-        n_wasted += len(pending[s])
-        pending[s].clear()
-        for h, (hs, k0, k1) in list(inflight.items()):
-            if hs == s and ex.cancel(h):
-                inflight.pop(h)
-                inflight_draws[s] -= k1 - k0
-                n_cancelled += k1 - k0
-
-    try:
-        while active or inflight:
-            # hand out work: certain work first, then (parallel only) speculative draws
-            while len(inflight) < max_inflight:
-                pick = None
-                certain = [s for s in active if next_submit[s] < states[s].certain_end(n_iter, max_draws)]
-                if certain:
-                    pick = min(certain, key=lambda s: (inflight_draws[s], order[s]))
-                    end = states[pick].certain_end(n_iter, max_draws)
-                elif ex.speculative:
-                    # small batches, at most about one batch ahead per run: bounded waste
-                    spec_ok = [s for s in active if (max_draws is None or next_submit[s] <= max_draws)
-                               and inflight_draws[s] < B]
-                    if spec_ok:
-                        pick = min(spec_ok, key=lambda s: (inflight_draws[s], order[s]))
-                        end = next_submit[pick] + spec_batch
-                        if max_draws is not None:
-                            end = min(end, max_draws + 1)
-                if pick is None:
-                    break
-                k0 = next_submit[pick]
-                k1 = min(k0 + B, end)
-                h = ex.submit(pick, k0, k1)
-                inflight[h] = (pick, k0, k1)
-                inflight_draws[pick] += k1 - k0
-                next_submit[pick] = k1
-            if not inflight:
-                break
-            done = ex.wait(list(inflight))
-            done.sort(key=lambda h: (order[inflight[h][0]], inflight[h][1]))
-            for h in done:
-                s, k0, k1 = inflight.pop(h)
-                inflight_draws[s] -= k1 - k0
-                res = ex.result(h)
-                if math.isnan(startup):
-                    startup = max(0.0, time.perf_counter() - t0 - res.wall_s)
-                n_evaluated += len(res.outcomes)
-                setup_by_pid.setdefault(res.pid, res.setup_s)
-                if s not in active:
-                    n_wasted += len(res.outcomes)
-                    bars.evaluated(len(res.outcomes), len(seeds) - len(active), len(seeds))
-                    continue
-                st = states[s]
-                for o in res.outcomes:
-                    pending[s][o.draw] = o
-                before = st.draws
-                while st.stopped_by is None and st.next_draw in pending[s]:
-                    st.process(pending[s].pop(st.next_draw), n_iter, max_draws)
-                if st.draws > before:
-                    save(st)
-                    bars.update(st, st.draws - before)
-                    if st.stopped_by is not None:
-                        stop_run(s)
-                bars.evaluated(len(res.outcomes), len(seeds) - len(active), len(seeds))
-                if st.draws > before and callback is not None:
-                    callback(s, st.draws)
-    except BaseException:
-        ex.close(cancel=True)
-        bars.close()
-        raise
-    ex.close()
-    bars.close()
-    wall = time.perf_counter() - t0
-    est = problem.estimability
-    return SamplingResult(settings, est, problem.reference_outcome,
-                          tuple(RunResult.from_state(states[s]) for s in seeds), ex.name, ex.workers, wall,
-                          problem.setup_s, n_evaluated, n_wasted, n_cancelled,
-                          tuple(setup_by_pid[p] for p in sorted(setup_by_pid)) if executor != "serial" else (),
-                          0.0 if math.isnan(startup) else startup, recipe.token, problem.prepared.spec.parameter_names)
+    n_runs = len(sched.states)
+    while True:
+        for b in sched.hand_out():
+            handles[ex.submit(b.seed, b.k0, b.k1)] = b
+        if not handles:
+            break
+        done = sorted(ex.wait(list(handles)), key=lambda h: sched.sort_key(handles[h]))
+        for h in done:
+            res = ex.result(h)
+            if math.isnan(startup):
+                startup = max(0.0, time.perf_counter() - t0 - res.wall_s)
+            setup_by_pid.setdefault(res.pid, res.setup_s)
+            got = sched.receive(handles.pop(h), res.outcomes)
+            for b in got.to_cancel:
+                hb = next(k for k, v in handles.items() if v == b)
+                if hb not in done and ex.cancel(hb):  # one that has finished comes back as waste
+                    handles.pop(hb)
+                    sched.cancelled(b)
+            st = sched.states[got.seed]
+            if got.processed:
+                save(st)
+                bars.update(st, got.processed)
+            bars.evaluated(len(res.outcomes), n_runs - len(sched.active), n_runs)
+            if got.processed and callback is not None:
+                callback(got.seed, st.draws)
+    return _Timing(0.0 if math.isnan(startup) else startup, tuple(setup_by_pid[p] for p in sorted(setup_by_pid)))

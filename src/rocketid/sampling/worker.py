@@ -39,7 +39,7 @@ from ..data import Measurements
 from ..errors import RocketidError
 from ..estimability import Estimability, estimate_q1
 from ..model import ModelSpec
-from ..solve import EstimationResult, NLPSolution, Prepared, prepare
+from ..solve import EstimationResult, NLPSolution, Prepared, prepare, result_of
 from .criterion import criterion_of
 from .settings import SamplingSettings
 
@@ -242,15 +242,8 @@ class WorkerContext:
         est = recipe.estimability
         tf = est.transform(recipe.reference_q2)
         nlp = prepared.nlp.with_transform(tf)
-        # build the (lazily built) Hessian structure once here: every draw's
-        # re-offset copy (CollocationNLP.with_offset) then shares it
-        nlp.hessianstructure()
-        nlp.jacobianstructure()
         sol = recipe.reference
-        ref = EstimationResult(success=sol.success, status=sol.status, message=sol.message,
-                               p=recipe.reference_p, objective=sol.objective, iterations=sol.iterations, x=sol.x,
-                               solution=sol, prepared=replace(prepared, nlp=nlp),
-                               timings={"setup_s": 0.0, "solve_s": sol.solve_s})
+        ref = result_of(prepared, nlp, sol)
         return cls(recipe, prepared, ref, time.perf_counter() - t0, bool(prepared.codegen_cached), os.getpid())
 
 
@@ -277,26 +270,34 @@ def evaluate_draw(ctx: WorkerContext, seed: int, draw: int) -> DrawOutcome:
     t0 = time.perf_counter()
     p_trial = trial_parameters(recipe, seed, draw)
     q2 = est.q2_of(p_trial)
-    nan4 = (math.nan,) * 4
     try:
         fit = estimate_q1(ctx.prepared, est, q2, warm_start=ctx.reference, options=recipe.settings.ipopt_options)
     except _FAILURE_EXCEPTIONS as exc:
-        return DrawOutcome(int(seed), int(draw), False, None, f"{type(exc).__name__}: {exc}", math.nan, nan4,
-                           math.nan, 0, (math.nan,) * p_trial.size, tuple(map(float, q2)),
-                           tuple(map(float, p_trial)), time.perf_counter() - t0)
-    retried = any("repeated from a simulation" in n for n in fit.notes)
-    if fit.success:
-        crit = criterion_of(fit)
-        moments = (crit.s1, crit.k1, crit.s2, crit.k2)
-        eta = crit.eta
-        ok = math.isfinite(eta)
-        message = fit.message if ok else f"eta is not finite ({fit.message})"
-    else:
-        moments, eta, ok, message = nan4, math.nan, False, fit.message
-    return DrawOutcome(int(seed), int(draw), bool(ok), int(fit.status), message, float(eta),
-                       tuple(map(float, moments)), float(fit.objective), int(fit.iterations),
-                       tuple(map(float, fit.p)), tuple(map(float, q2)), tuple(map(float, p_trial)),
-                       time.perf_counter() - t0, retried)
+        return draw_outcome(seed, draw, None, q2, p_trial, time.perf_counter() - t0,
+                            error=f"{type(exc).__name__}: {exc}")
+    return draw_outcome(seed, draw, fit, q2, p_trial, time.perf_counter() - t0)
+
+
+def draw_outcome(seed: int, draw: int, fit: EstimationResult | None, q2, p_trial, solve_s: float, *,
+                 error: str = "") -> DrawOutcome:
+    """The :class:`DrawOutcome` of a (7.9) fit (steps 6-7: eta of its residuals), or of a
+    solve that raised (``fit`` None, ``error`` the reason)."""
+    eta, moments, message = math.nan, (math.nan,) * 4, error
+    if fit is not None:
+        message = fit.message
+        if fit.success:
+            crit = criterion_of(fit)
+            eta, moments = crit.eta, (crit.s1, crit.k1, crit.s2, crit.k2)
+            if not math.isfinite(eta):
+                message = f"eta is not finite ({fit.message})"
+    ok = fit is not None and fit.success and math.isfinite(eta)
+    n_p = len(p_trial)
+    return DrawOutcome(int(seed), int(draw), bool(ok), None if fit is None else int(fit.status), message, float(eta),
+                       tuple(map(float, moments)), math.nan if fit is None else float(fit.objective),
+                       0 if fit is None else int(fit.iterations),
+                       (math.nan,) * n_p if fit is None else tuple(map(float, fit.p)),
+                       tuple(map(float, q2)), tuple(map(float, p_trial)), float(solve_s),
+                       fit is not None and fit.retried)
 
 
 # ---------------------------------------------------------------------------

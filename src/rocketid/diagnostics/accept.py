@@ -1,0 +1,252 @@
+"""Step 3 of the discovery -- accept: does a refit explain the data?
+
+::
+
+    screen -> refit -> accept -> step -> report
+
+A likelihood-ratio test only says that an effect *helps*; a confident wrong
+answer comes from taking the best helper for the explanation. An effect is
+**accepted** (it explains the data) when its refit
+
+1. **converged** (IPOPT, within its time limit);
+2. is **significant**: the LR test ``2 (J_before - J_after) ~ chi2(dof)`` below
+   the level divided by the number of contenders refitted (Bonferroni), and BIC
+   fell;
+3. **reaches the noise**: chi2/dof inside the :class:`NoiseBand`, computed from
+   the degrees of freedom (the 99.9 % point of chi2(dof)/dof) plus the
+   discretization error measured on clean data -- the collocation against the
+   high-accuracy simulation of the fitted model itself;
+4. leaves residuals **no less white than clean data would**: the Ljung-Box p of
+   every channel, Holm-corrected over the channels, above :data:`WHITE_LEVEL`
+   (at 100 Hz a correct model's residuals pass it; a single channel's uncorrected
+   p = 0.012 does not fail a clean fit);
+5. keeps the **base coefficients plausible** (the plausibility checks);
+6. has a **plausible size**: every added parameter within :data:`SIZE_FACTOR` times
+   its realistic size *for this vehicle* (a fraction of its thrust, mass flow,
+   speed; :meth:`~rocketid.diagnostics.effects.Effect.sizes`), not below the least
+   its physics allows (:attr:`~rocketid.diagnostics.effects.Effect.least`: Earth's
+   rotation), and not held at a bound.
+
+A refit that passes 1, 2, 5 and 6 but not 3-4 is **admissible**: it is a step
+toward the explanation (the stepwise search adds it and looks for the rest) but
+is never called explained or confirmed.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Mapping, Sequence
+
+import numpy as np
+from scipy import stats
+
+from ..solve import EstimationResult
+from .refit import Refit
+
+__all__ = ["Check", "Acceptance", "NoiseBand", "noise_band", "accept", "whiteness_ok", "fits_to_noise",
+           "WHITE_LEVEL", "SIZE_FACTOR", "BAND_LEVEL"]
+
+WHITE_LEVEL = 0.001
+"""Holm-corrected Ljung-Box p (over the channels) below which residuals are not white."""
+
+SIZE_FACTOR = 5.0
+"""An added parameter beyond this many realistic sizes is implausible."""
+
+BAND_LEVEL = 0.001
+"""Upper tail of chi2(dof)/dof that bounds the noise band."""
+
+
+@dataclass(frozen=True)
+class NoiseBand:
+    """chi2/dof that a correct model reaches on these data.
+
+    Attributes
+    ----------
+    upper : float
+        ``chi2.isf(BAND_LEVEL, dof) / dof + D / dof``.
+    dof : int
+    discretization : float
+        ``D = sum((collocation - simulation)^2 / sigma^2)`` at the base fit: what the
+        discretization alone adds to ``2 J`` on clean data (NaN when it could not be measured).
+    note : str
+    """
+
+    upper: float
+    dof: int
+    discretization: float
+    note: str = ""
+
+    def contains(self, chi2_per_dof: float) -> bool:
+        return bool(np.isfinite(chi2_per_dof) and chi2_per_dof <= self.upper)
+
+    def to_dict(self) -> dict:
+        return {"upper": float(self.upper), "dof": int(self.dof), "discretization": float(self.discretization),
+                "note": self.note}
+
+
+def noise_band(fit: EstimationResult, *, timeout: float = 60.0) -> NoiseBand:
+    """The noise band of ``fit``'s data, with the discretization error measured by simulating the
+    fitted model at its estimate with the high-accuracy integrator (under a time limit)."""
+    from ..simulate import simulate
+
+    dof = max(1, fit.n_data - fit.n_estimated)
+    base = float(stats.chi2.isf(BAND_LEVEL, dof) / dof)
+    meas = fit.prepared.measurements
+    times = np.unique(np.concatenate([c.times for c in meas.channels]))
+    note = ""
+    D = math.nan
+    try:
+        traj = simulate(fit.spec, fit.p, times, rtol=1e-10, atol=1e-10, max_wall_time=timeout)
+        if traj.success:
+            out = traj.outputs()
+            sig = dict(zip(fit.nlp.channel_names, fit.nlp.channel_sigmas))
+            D = float(sum(np.sum(((fit.predictions[c.name] - np.interp(c.times, times, out[c.name])) / sig[c.name]) ** 2)
+                          for c in meas.channels))
+        else:
+            note = f"the discretization error could not be measured ({traj.message}); the band holds none"
+    except Exception as exc:  # noqa: BLE001 - the band stays usable without it
+        note = f"the discretization error could not be measured ({exc}); the band holds none"
+    extra = D / dof if np.isfinite(D) else 0.0
+    return NoiseBand(base + extra, dof, D, note)
+
+
+def holm_min(p: Sequence[float]) -> float:
+    """The smallest Holm-adjusted p-value of a family (= min over i of (m - i) p_(i), capped at 1)."""
+    p = np.sort(np.asarray([x for x in p if np.isfinite(x)], float))
+    if p.size == 0:
+        return math.nan
+    return float(min(1.0, np.min((p.size - np.arange(p.size)) * p)))
+
+
+def whiteness_ok(pvalues: Mapping[str, float]) -> tuple[bool, str]:
+    """Residuals no less white than clean data would leave: Holm over channels at :data:`WHITE_LEVEL`."""
+    adj = holm_min(list(pvalues.values()))
+    if not np.isfinite(adj):
+        return False, "no whiteness test"
+    worst = min(pvalues, key=lambda k: pvalues[k] if np.isfinite(pvalues[k]) else -1)
+    ok = adj >= WHITE_LEVEL
+    return ok, (f"Ljung-Box p, Holm-corrected over {len(pvalues)} channels: {adj:.2g} "
+                f"({'>=' if ok else '<'} {WHITE_LEVEL:g}; lowest channel {worst}, p = {pvalues[worst]:.2g})")
+
+
+def fits_to_noise(fit: EstimationResult, band: NoiseBand) -> tuple[bool, str]:
+    """A fit reaches the noise: chi2/dof inside the band and residuals white (module notes)."""
+    from .refit import ljung_box
+    white = {ch: float(ljung_box(r)[1]) for ch, r in fit.residuals.items()}
+    ok_w, why_w = whiteness_ok(white)
+    ok_c = band.contains(fit.chi2_per_dof)
+    return ok_w and ok_c, (f"chi2/dof {fit.chi2_per_dof:.4g} {'inside' if ok_c else 'above'} the noise band "
+                           f"(<= {band.upper:.4g}); {why_w}")
+
+
+@dataclass(frozen=True)
+class Check:
+    """One criterion of the acceptance test."""
+
+    name: str
+    passed: bool
+    detail: str
+
+    def to_dict(self) -> dict:
+        return {"passed": bool(self.passed), "detail": self.detail}
+
+
+#: The checks an admissible step needs (a step toward the explanation).
+ADMISSIBLE = ("converged", "significant", "coefficients", "size")
+#: The checks of an explanation: every one.
+ALL = ("converged", "significant", "noise", "white", "coefficients", "size")
+
+
+@dataclass(frozen=True)
+class Acceptance:
+    """The acceptance test of one refit.
+
+    Attributes
+    ----------
+    refit : Refit
+    checks : tuple of Check
+        In the order of :data:`ALL`.
+    """
+
+    refit: Refit
+    checks: tuple
+
+    def check(self, name: str) -> Check:
+        return next(c for c in self.checks if c.name == name)
+
+    @property
+    def accepted(self) -> bool:
+        """Every check passed: the effect explains the data."""
+        return all(c.passed for c in self.checks)
+
+    @property
+    def admissible(self) -> bool:
+        """Converged, significant, plausible coefficients and size: a step toward the explanation."""
+        return all(self.check(n).passed for n in ADMISSIBLE)
+
+    @property
+    def failed(self) -> list[str]:
+        return [c.name for c in self.checks if not c.passed]
+
+    def reason(self) -> str:
+        """Why it is not accepted (empty when it is)."""
+        return "; ".join(f"{c.name}: {c.detail}" for c in self.checks if not c.passed)
+
+    def to_dict(self) -> dict:
+        return {"accepted": self.accepted, "admissible": self.admissible,
+                "checks": {c.name: c.to_dict() for c in self.checks}}
+
+
+def accept(refit: Refit, band: NoiseBand, *, level: float = 0.05, n_tests: int = 1) -> Acceptance:
+    """The acceptance test of ``refit`` (module notes).
+
+    Parameters
+    ----------
+    refit : Refit
+    band : NoiseBand
+        The noise band of the data.
+    level : float
+        Family-wise level of the LR tests.
+    n_tests : int
+        Number of contenders refitted at this step (Bonferroni).
+    """
+    checks = []
+    if refit.gave_up:
+        checks.append(Check("converged", False, refit.message))
+    elif not refit.success:
+        checks.append(Check("converged", False, f"the refit did not converge ({refit.message})"))
+    else:
+        checks.append(Check("converged", True, f"converged in {refit.seconds:.1f} s"))
+    lr, p = refit.lr_statistic, refit.lr_p_value
+    b0, b1 = refit.bic if refit.success else (math.nan, math.nan)
+    alpha = level / max(1, int(n_tests))
+    sig = bool(np.isfinite(p) and p < alpha and b1 < b0)
+    checks.append(Check("significant", sig, f"LR {lr:.4g} on {refit.dof} dof, p = {p:.2g} "
+                                            f"({'<' if np.isfinite(p) and p < alpha else '>='} {alpha:.2g}); "
+                                            f"BIC {b0:.6g} -> {b1:.6g}"))
+    inside = band.contains(refit.chi2_per_dof)
+    checks.append(Check("noise", inside, f"chi2/dof {refit.chi2_per_dof:.4g} {'inside' if inside else 'above'} the "
+                                         f"noise band (<= {band.upper:.4g})"))
+    ok_w, why_w = whiteness_ok(refit.whiteness) if refit.whiteness else (False, "no residuals")
+    checks.append(Check("white", ok_w, why_w))
+    if refit.plausible_coefficients is None:
+        checks.append(Check("coefficients", True, "not checked"))
+    else:
+        checks.append(Check("coefficients", bool(refit.plausible_coefficients),
+                            "plausible" if refit.plausible_coefficients else "; ".join(refit.implausible[:3])))
+    ratios = refit.size_ratio() if refit.success else {}
+    big = {k: r for k, r in ratios.items() if r > SIZE_FACTOR}
+    small = {k: m for k, m in refit.least.items() if refit.success and abs(refit.estimate(k)[0]) < m}
+    bound = list(refit.at_bound)
+    if big or bound or small:
+        bits = [f"{k} = {refit.estimate(k)[0]:.4g} is {r:.1f} times its realistic size {refit.sizes[k]:.3g}"
+                for k, r in big.items()]
+        bits += [f"{k} = {refit.estimate(k)[0]:.3g} is below {m:g}, the least its physics allows" for k, m in small.items()]
+        bits += [f"{k} is held at a bound" for k in bound]
+        checks.append(Check("size", False, "; ".join(bits)))
+    else:
+        worst = max(ratios.items(), key=lambda kv: kv[1]) if ratios else None
+        checks.append(Check("size", True, "no realistic size stated" if worst is None else
+                            f"largest {worst[0]}: {worst[1]:.2g} of its realistic size"))
+    return Acceptance(refit, tuple(checks))

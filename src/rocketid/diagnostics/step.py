@@ -1,0 +1,380 @@
+"""Step 4 of the discovery -- step: add effects one at a time until the model reaches the noise.
+
+::
+
+    screen -> refit -> accept -> step -> report
+
+Forward selection with a backward check, capped at ``max_effects``:
+
+1. screen the candidates at the current fit (:func:`~rocketid.diagnostics.screen.screen`);
+2. refit every contender, the effects chosen so far plus it, in parallel
+   (:func:`~rocketid.diagnostics.refit.refit_all`);
+3. test each (:func:`~rocketid.diagnostics.accept.accept`); choose by BIC among the
+   accepted (they explain the data) or, when none is, among the admissible ones (a
+   step toward the explanation; a plausible effect always beats an implausible one,
+   which is never chosen);
+4. when the chosen effect leaves a residual and has more flexible shapes (a wind with a
+   surface value and more basis functions, a density profile on more knots, a thrust
+   error in time), refit those and keep the shape with the lowest BIC (the knot count
+   chosen by BIC);
+5. backward check: from the second step on, refit without each earlier effect; an effect
+   whose removal lowers BIC no longer helps and is dropped;
+6. stop when the model reaches the noise, nothing admissible is left, or at the cap.
+
+Each step is an immutable :class:`Step`; the whole search a :class:`Discovery`, whose
+:attr:`~Discovery.verdict` is one of ``"nothing missing"``, ``"explained"``,
+``"partly explained"`` or ``"not explained by the catalogue"``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from ..errors import RocketidError
+from ..solve import EstimationResult, estimate
+from .accept import Acceptance, NoiseBand, accept, fits_to_noise
+from .effects import Effect, Vehicle, with_effects
+from .refit import REFIT_TIMEOUT, Refit, RefitTask, refit_all
+from .screen import Contender, Screen, screen, vehicle_of
+
+__all__ = ["Step", "Discovery", "discover", "VERDICTS", "MAX_EFFECTS"]
+
+MAX_EFFECTS = 3
+"""Default cap of the stepwise search."""
+
+BIC_TIE = 10.0
+"""Accepted refits whose BIC lie within this of the lowest are not told apart by BIC (Kass and Raftery's
+"very strong" evidence starts at 10): the hold-out prediction decides when it is decisive
+(:data:`HOLDOUT_DECISIVE`); otherwise no effect is taken and the verdict names the rivals."""
+
+HOLDOUT_DECISIVE = 0.5
+"""The best hold-out prediction error must be at most this share of the next one to decide a BIC tie."""
+
+VERDICTS = ("nothing missing", "explained", "partly explained", "not explained by the catalogue")
+
+
+@dataclass(frozen=True)
+class Step:
+    """One step of the stepwise search.
+
+    Attributes
+    ----------
+    number : int
+        1 for the first effect added.
+    screen : Screen
+        The ranking at the fit before the step, and its contenders.
+    acceptances : tuple of Acceptance
+        Every contender's refit and its acceptance test (and the refined shapes').
+    chosen : Acceptance or None
+        The refit taken (None: the search stopped here).
+    why : str
+    dropped : tuple of str
+        Effects dropped by the backward check.
+    effects : tuple of str
+        The model's effects after the step.
+    fit : EstimationResult or None
+        The fit after the step.
+    """
+
+    number: int
+    screen: Screen
+    acceptances: tuple
+    chosen: Acceptance | None
+    why: str
+    dropped: tuple = ()
+    effects: tuple = ()
+    fit: EstimationResult | None = field(default=None, repr=False)
+
+    def to_dict(self) -> dict:
+        return {"number": self.number, "contenders": list(self.screen.names),
+                "refits": [dict(a.refit.to_dict(), **a.to_dict()) for a in self.acceptances],
+                "chosen": None if self.chosen is None else self.chosen.refit.name, "why": self.why,
+                "dropped": list(self.dropped), "effects": list(self.effects),
+                "chi2_per_dof": None if self.fit is None else float(self.fit.chi2_per_dof)}
+
+
+@dataclass(frozen=True)
+class Discovery:
+    """The stepwise search: its steps, the final model and the verdict.
+
+    Attributes
+    ----------
+    base_fit : EstimationResult
+    band : NoiseBand
+    vehicle : Vehicle
+    steps : tuple of Step
+    effects : tuple of Effect
+        The final model's effects, in the order added.
+    fit : EstimationResult
+        The final fit (the base fit when nothing was added).
+    refit : Refit or None
+        The final model's refit summary (standard errors, identifiability).
+    fits_to_noise : bool
+    noise_detail : str
+    verdict : str
+        One of :data:`VERDICTS`.
+    notes : tuple of str
+    timings : dict
+    ambiguous : str
+        Non-empty when the search stopped at rivals the data cannot tell apart (which, and why).
+    """
+
+    base_fit: EstimationResult
+    band: NoiseBand
+    vehicle: Vehicle
+    steps: tuple
+    effects: tuple
+    fit: EstimationResult
+    refit: Refit | None
+    fits_to_noise: bool
+    noise_detail: str
+    verdict: str
+    notes: tuple = ()
+    timings: dict = field(default_factory=dict)
+    ambiguous: str = ""
+
+    @property
+    def effect_names(self) -> tuple:
+        return tuple(e.name for e in self.effects)
+
+
+def _task(base_spec, fit: EstimationResult, effects: Sequence[Effect], added: Sequence[str], start: Mapping,
+          vehicle: Vehicle, *, base: EstimationResult, options, timeout, level, band_upper=math.inf) -> RefitTask:
+    sizes = {}
+    for e in effects:
+        if e.name in added:
+            sizes.update({k: v for k, v in e.sizes(vehicle).items() if math.isfinite(v) and v > 0})
+    st = {n: float(v) for n, v in zip(fit.spec.parameter_names, fit.p)}
+    st.update({k: float(v) for k, v in start.items()})
+    return RefitTask(base_spec=base_spec, data=fit.prepared.measurements, mesh=fit.prepared.transcription.mesh,
+                     effects=tuple(effects), added=tuple(added), start=st, sizes=sizes,
+                     base_objective=float(base.objective), base_n_estimated=int(base.n_estimated),
+                     base_parameters=tuple(base.spec.parameter_names), options=dict(options or {}),
+                     timeout=float(timeout), level=float(level), band_upper=float(band_upper))
+
+
+def _choose(accs: Sequence[Acceptance]) -> tuple[int | None, str]:
+    acc = [i for i, a in enumerate(accs) if a.accepted]
+    if acc:
+        i = min(acc, key=lambda j: accs[j].refit.bic[1])
+        return i, f"the lowest BIC of the {len(acc)} refit(s) that reach the noise with plausible sizes"
+    adm = [i for i, a in enumerate(accs) if a.admissible]
+    if adm:
+        i = min(adm, key=lambda j: accs[j].refit.bic[1])
+        return i, (f"none reaches the noise; the lowest BIC of the {len(adm)} significant refit(s) with plausible "
+                   "sizes and coefficients")
+    return None, "no refit is significant with a plausible size and plausible coefficients"
+
+
+def _tie_break(accs, i, fit, chosen_effects, contenders_effects, holdout, level, options, timeout) -> tuple:
+    """Among accepted refits within :data:`BIC_TIE` of the chosen one, the best hold-out prediction.
+
+    Returns ``(index, note)``; the note names the rivals (empty when there are none). The index is
+    None when the rivals cannot be told apart (no hold-out, or a hold-out that is not decisive)."""
+    from .refit import confirm
+    if i is None or not accs[i].accepted:
+        return i, ""
+    lo = accs[i].refit.bic[1]
+    tied = [j for j, a in enumerate(accs) if a.accepted and j < len(contenders_effects) and a.refit.bic[1] <= lo + BIC_TIE]
+    if len(tied) < 2:
+        return i, ""
+    names = ", ".join(accs[j].refit.name for j in tied)
+    if holdout is None:
+        return None, f"{names} reach the noise with BIC within {BIC_TIE:g} of each other: the data cannot tell them apart"
+    score = {}
+    for j in tied:
+        r = accs[j].refit
+        guess = dict(zip(r.parameter_names, (float(v) for v in r.p)))
+        try:
+            c = confirm(fit, list(chosen_effects) + [contenders_effects[j]], guess=guess, holdout=holdout, level=level,
+                        options=options, timeout=timeout)
+        except RocketidError:
+            continue
+        if c.holdout_rms:
+            sig = dict(zip(c.fit.nlp.channel_names, (float(x) for x in c.fit.nlp.channel_sigmas)))
+            score[j] = float(np.mean([(b / sig.get(k, 1.0)) ** 2 for k, (_, b) in c.holdout_rms.items()]))
+    if len(score) < 2:
+        return None, (f"{names} reach the noise with BIC within {BIC_TIE:g} of each other: the data cannot tell "
+                      "them apart")
+    order = sorted(score, key=score.get)
+    txt = ", ".join(f"{accs[j].refit.name} {score[j]:.3g}" for j in order)
+    if score[order[0]] > HOLDOUT_DECISIVE * score[order[1]]:
+        return None, (f"{names} reach the noise with BIC within {BIC_TIE:g} of each other and predict the hold-out "
+                      f"alike (mean squared prediction error / sigma^2: {txt}): the data cannot tell them apart")
+    best = order[0]
+    return best, (f"{names} reach the noise with BIC within {BIC_TIE:g} of each other; the hold-out prediction "
+                  f"(mean squared prediction error / sigma^2: {txt}) prefers {accs[best].refit.name}")
+
+
+def _holm(white: Mapping[str, float]) -> float:
+    from .accept import holm_min
+    v = holm_min(list(white.values()))
+    return v if np.isfinite(v) else 0.0
+
+
+def _fit_of(base_spec, effects: Sequence[Effect], refit: Refit, data, mesh, options) -> EstimationResult:
+    """The chosen model's fit in this process, started from the worker's estimate."""
+    spec = with_effects(base_spec, list(effects))
+    guess = {}
+    for n, v in zip(refit.parameter_names, refit.p):
+        ps = spec.parameter(n)
+        guess[n] = float(np.clip(v, ps.lower, ps.upper))
+    return estimate(spec, data, guess=guess, mesh=mesh, options=options)
+
+
+def discover(fit: EstimationResult, candidates: Sequence[Effect], *, level: float = 0.05,
+             max_effects: int = MAX_EFFECTS, workers: int | None = None, timeout: float = REFIT_TIMEOUT,
+             options: Mapping[str, Any] | None = None, band: NoiseBand | None = None,
+             refine: bool = True, holdout: Any = "auto") -> Discovery:
+    """Find the effects ``fit``'s model misses, stepwise (module notes).
+
+    Parameters
+    ----------
+    fit : EstimationResult
+        The base fit (the user's model, no effect added).
+    candidates : sequence of Effect
+    level : float
+        Level of the score test and (Bonferroni over the contenders) of the LR tests.
+    max_effects : int
+        Cap of the forward selection.
+    workers : int, optional
+        Parallel refit processes.
+    timeout : float
+        Seconds per refit.
+    options : mapping, optional
+        IPOPT options of the refits.
+    band : NoiseBand, optional
+        Default: :func:`~rocketid.diagnostics.accept.noise_band` of ``fit``.
+    refine : bool
+        Try the more flexible shapes of a chosen effect that leaves a residual.
+    holdout : "auto", (float, float) or None
+        The hold-out window that decides between accepted refits within :data:`BIC_TIE`.
+    """
+    from .accept import noise_band
+
+    t_start = time.perf_counter()
+    base_spec = fit.spec
+    band = band if band is not None else noise_band(fit)
+    vehicle = vehicle_of(fit)
+    notes = [band.note] if band.note else []
+    current, chosen_effects, last_refit = fit, [], None
+    steps = []
+    ambiguous = ""
+    ok, detail = fits_to_noise(fit, band)
+    for number in range(1, max_effects + 1):
+        if number > 1 and ok:
+            break
+        remaining = [e for e in candidates if e.name not in {c.name for c in chosen_effects}]
+        scr = screen(current, remaining, level=level, vehicle=vehicle)
+        if not scr.contenders:
+            steps.append(Step(number, scr, (), None, "; ".join(scr.notes) or "no contender", (),
+                              tuple(e.name for e in chosen_effects), None))
+            break
+        tasks = [_task(base_spec, current, chosen_effects + [c.effect], (c.effect.name,), c.start, vehicle,
+                       base=current, options=options, timeout=timeout, level=level, band_upper=band.upper) for c in scr.contenders]
+        refits = refit_all(tasks, workers=workers)
+        accs = [accept(r, band, level=level, n_tests=len(tasks)) for r in refits]
+        i, why = _choose(accs)
+        if i is None and refine:
+            # nothing admissible: the right family may need another shape (a surface wind, a jet off the
+            # basis); refine the families of the two refits that lowered J most
+            helped = sorted((j for j, a in enumerate(accs) if a.refit.success and a.check("significant").passed
+                             and scr.contenders[j].effect.refinements(vehicle)), key=lambda j: accs[j].refit.objective)
+            variants = [v for j in helped[:2] for v in scr.contenders[j].effect.refinements(vehicle)]
+            if variants:
+                vt = [_task(base_spec, current, chosen_effects + [v], (v.name,), {}, vehicle, base=current,
+                            options=options, timeout=timeout, level=level, band_upper=band.upper) for v in variants]
+                va = [accept(r, band, level=level, n_tests=len(tasks) + len(vt)) for r in refit_all(vt, workers=workers)]
+                j, why_v = _choose(va)
+                accs += va
+                scr = Screen(scr.ranking, scr.contenders + tuple(Contender(v, "a refined shape") for v in variants),
+                             scr.notes)
+                if j is not None:
+                    i, why = len(accs) - len(va) + j, f"refined shape {variants[j].name}: {why_v}"
+        if i is None:
+            steps.append(Step(number, scr, tuple(accs), None, why, (), tuple(e.name for e in chosen_effects), None))
+            break
+        i, tie = _tie_break(accs, i, current, chosen_effects, [c.effect for c in scr.contenders], holdout, level,
+                            options, timeout)
+        if tie:
+            why = f"{why}; {tie}"
+            notes.append(f"step {number}: {tie}")
+        if i is None:
+            ambiguous = tie
+            steps.append(Step(number, scr, tuple(accs), None, why, (), tuple(e.name for e in chosen_effects), None))
+            break
+        effect = scr.contenders[i].effect
+        pick = accs[i]
+        # shape refinement: a chosen effect that leaves a residual, with more flexible shapes
+        snug = pick.accepted and pick.refit.chi2_per_dof <= 1.0 + math.sqrt(2.0 / max(1, band.dof)) and \
+            _holm(pick.refit.whiteness) >= 0.05
+        if refine and not snug and effect.refinements(vehicle):
+            variants = effect.refinements(vehicle)
+            vt = [_task(base_spec, current, chosen_effects + [v], (v.name,), {}, vehicle, base=current,
+                        options=options, timeout=timeout, level=level, band_upper=band.upper) for v in variants]
+            vr = refit_all(vt, workers=workers)
+            va = [accept(r, band, level=level, n_tests=len(tasks) + len(vt)) for r in vr]
+            accs += va
+            j, why_v = _choose([pick] + va)
+            if j is not None and j > 0 and va[j - 1].refit.bic[1] < pick.refit.bic[1] - (BIC_TIE if pick.accepted else 0):
+                effect, pick = variants[j - 1], va[j - 1]
+                why = f"{why}; refined to {effect.name} ({why_v})"
+        new_effects = chosen_effects + [effect]
+        dropped = []
+        # backward check: an earlier effect whose removal lowers BIC no longer helps
+        if len(new_effects) > 1 and pick.refit.success:
+            bt = []
+            for k, e in enumerate(new_effects[:-1]):
+                rest = [x for x in new_effects if x is not e]
+                bt.append((e, _task(base_spec, current, rest, (effect.name,), {}, vehicle, base=current,
+                                    options=options, timeout=timeout, level=level, band_upper=band.upper)))
+            br = refit_all([t for _, t in bt], workers=workers)
+            for (e, _), r in zip(bt, br):
+                if r.success and r.bic[1] < pick.refit.bic[1]:
+                    dropped.append(e.name)
+            if dropped:
+                new_effects = [e for e in new_effects if e.name not in dropped]
+                notes.append(f"step {number}: the backward check dropped {', '.join(dropped)} (BIC lower without it)")
+        try:
+            new_fit = _fit_of(base_spec, new_effects, pick.refit, current.prepared.measurements,
+                              current.prepared.transcription.mesh, options) if not dropped else None
+            if new_fit is None:
+                # refit the reduced set in this process
+                rt = _task(base_spec, current, new_effects, (effect.name,), {}, vehicle, base=current,
+                           options=options, timeout=timeout, level=level, band_upper=band.upper)
+                r = refit_all([rt], workers=1)[0]
+                pick = accept(r, band, level=level, n_tests=1)
+                new_fit = _fit_of(base_spec, new_effects, r, current.prepared.measurements,
+                                  current.prepared.transcription.mesh, options)
+        except RocketidError as exc:
+            notes.append(f"step {number}: the chosen model could not be fitted here ({exc}); the search stops")
+            steps.append(Step(number, scr, tuple(accs), None, why, tuple(dropped),
+                              tuple(e.name for e in chosen_effects), None))
+            break
+        chosen_effects = new_effects
+        current, last_refit = new_fit, pick.refit
+        ok, detail = fits_to_noise(current, band)
+        steps.append(Step(number, scr, tuple(accs), pick, why, tuple(dropped), tuple(e.name for e in chosen_effects),
+                          current))
+    base_ok, _ = fits_to_noise(fit, band)
+    if ambiguous:
+        notes.append(f"ambiguous: {ambiguous}")
+    if not chosen_effects:
+        verdict = "nothing missing" if base_ok and not ambiguous else "not explained by the catalogue"
+    elif ok:
+        verdict = "explained"
+    else:
+        verdict = "partly explained"
+    if verdict == "explained" and last_refit is not None:
+        ratios = last_refit.size_ratio()
+        if any(r > 5.0 for r in ratios.values()):
+            verdict = "partly explained"
+    if ambiguous and verdict == "explained":
+        verdict = "partly explained"
+    return Discovery(fit, band, vehicle, tuple(steps), tuple(chosen_effects), current, last_refit, bool(ok), detail,
+                     verdict, tuple(notes), {"discover_s": time.perf_counter() - t_start}, ambiguous)

@@ -1,0 +1,125 @@
+"""The acceptance rule of the discovery (issue 8, item 2), on Refit values made by hand.
+
+The rule is a pure function of a refit's numbers, so these tests need no solver: an
+LR-significant effect that leaves chi2/dof far above the noise band is not accepted (it is
+at most a step toward the explanation), an implausible size loses to a plausible rival even
+with a lower BIC, and whiteness is judged over the channels together (a clean fit whose
+lowest channel has an uncorrected Ljung-Box p of 0.012 still reaches the noise).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from rocketid.diagnostics.accept import (SIZE_FACTOR, WHITE_LEVEL, NoiseBand, accept, holm_min, whiteness_ok)
+from rocketid.diagnostics.refit import Refit
+from rocketid.diagnostics.step import _choose
+
+N_DATA = 19800
+DOF = N_DATA - 9
+BAND = NoiseBand(upper=float(stats.chi2.isf(1e-3, DOF) / DOF) + 0.002, dof=DOF, discretization=20.0)
+WHITE = {"x": 0.4, "h": 0.7, "v": 0.2}
+
+
+def refit(name, chi2, *, value=0.02, size=0.02, success=True, white=WHITE, base_chi2=40.0, plausible=True,
+          at_bound=(), gave_up=False, message="Optimal Solution Found."):
+    """A refit of the base model (8 estimated) with one effect parameter ``p_<name>``."""
+    J = chi2 * (N_DATA - 9) / 2
+    J0 = base_chi2 * (N_DATA - 8) / 2
+    names = ("CD", f"p_{name}")
+    return Refit(effects=(name,), added=(name,), success=success, message=message, gave_up=gave_up,
+                 parameter_names=names, p=np.array([0.3, value]), std=np.array([0.01, abs(value) / 100]),
+                 effect_parameters=(f"p_{name}",), objective=J, n_data=N_DATA, n_estimated=9, chi2_per_dof=chi2,
+                 base_objective=J0, base_n_estimated=8, whiteness=dict(white), sizes={f"p_{name}": size},
+                 at_bound=tuple(at_bound), plausible_coefficients=plausible,
+                 implausible=() if plausible else ("at-bound: CD = 0.01 is at its lower bound",))
+
+
+def test_a_significant_effect_far_from_the_noise_is_not_accepted():
+    """The report's 'Refit with time_offset (confirmed): chi2/dof 9.44 (was 36.95)': the LR test is
+    overwhelming, yet the model is far from the noise -- admissible at most, never accepted."""
+    a = accept(refit("time_offset", 9.44, value=0.01, size=0.01, base_chi2=36.95,
+                     white={"x": 0.0, "h": 0.0, "v": 1e-9}), BAND)
+    assert a.check("significant").passed and a.check("size").passed
+    assert not a.check("noise").passed and not a.check("white").passed
+    assert not a.accepted and a.admissible
+    assert "above the noise band" in a.reason()
+
+
+def test_an_effect_that_reaches_the_noise_is_accepted():
+    a = accept(refit("thrust_level", 0.9917), BAND)
+    assert a.accepted, a.reason()
+    assert a.reason() == ""
+
+
+def test_an_implausible_size_is_not_accepted_and_loses_to_a_plausible_rival():
+    """A 12 % mass-flow error fits slightly better than the true back-pressure; beyond 5 realistic
+    sizes it is implausible, so the plausible rival is chosen although its BIC is higher."""
+    wrong = accept(refit("mass_flow", 0.9915, value=0.12, size=0.02), BAND)
+    right = accept(refit("back_pressure", 0.9917, value=0.6, size=0.6), BAND)
+    assert wrong.refit.bic[1] < right.refit.bic[1]
+    assert not wrong.accepted and not wrong.admissible
+    assert not wrong.check("size").passed and f"{0.12 / 0.02:.1f} times" in wrong.check("size").detail
+    assert right.accepted
+    i, why = _choose([wrong, right])
+    assert i == 1 and "reach the noise" in why
+    # alone, the implausible refit is never chosen, not even as a step
+    assert _choose([wrong]) == (None, "no refit is significant with a plausible size and plausible coefficients")
+
+
+def test_size_limit_is_five_realistic_sizes():
+    assert SIZE_FACTOR == 5.0
+    assert accept(refit("e", 0.992, value=0.099, size=0.02), BAND).check("size").passed
+    assert not accept(refit("e", 0.992, value=-0.101, size=0.02), BAND).check("size").passed
+
+
+def test_an_effect_held_at_a_bound_is_not_plausible():
+    a = accept(refit("back_pressure", 4.63, value=0.0, size=0.6, at_bound=("p_back_pressure",), base_chi2=4.63), BAND)
+    assert not a.check("size").passed and "held at a bound" in a.check("size").detail
+    assert not a.check("significant").passed      # no improvement: LR 0
+    assert not a.admissible
+
+
+def test_a_refit_that_gave_up_or_did_not_converge_is_not_accepted():
+    a = accept(refit("wind", 0.99, success=False, gave_up=True, message="gave up after 180 s"), BAND)
+    assert not a.check("converged").passed and "gave up" in a.check("converged").detail
+    b = accept(refit("wind", 0.99, success=False, message="Maximum Number of Iterations Exceeded."), BAND)
+    assert not b.accepted and "did not converge" in b.check("converged").detail
+
+
+def test_implausible_base_coefficients_block_acceptance():
+    a = accept(refit("density", 0.995, plausible=False), BAND)
+    assert not a.accepted and not a.admissible and "at-bound" in a.check("coefficients").detail
+
+
+def test_the_lr_test_is_corrected_for_the_contenders_refitted():
+    """A small improvement that is significant alone (p = 0.01) is not with 10 contenders."""
+    lr = stats.chi2.isf(0.01, 1)
+    base_chi2 = (2 * (0.9917 * (N_DATA - 9) / 2) + lr) / (N_DATA - 8)
+    # BIC would rise anyway for so small an LR; the Bonferroni level is what the test checks
+    r = refit("bias_v", 0.9917, base_chi2=base_chi2, value=0.1, size=0.5)
+    assert math.isclose(r.lr_p_value, 0.01, rel_tol=1e-6)
+    assert "p = 0.01 (>= 0.005)" in accept(r, BAND, n_tests=10).check("significant").detail
+    assert "p = 0.01 (< 0.05)" in accept(r, BAND, n_tests=1).check("significant").detail
+
+
+def test_whiteness_is_judged_over_the_channels():
+    """Issue 8: a clean fit at chi2/dof 0.995 was headlined 'does not fit to the noise' from one
+    channel's uncorrected p = 0.012. Holm over three channels: 3 x 0.012 = 0.036 >= 0.001."""
+    ok, why = whiteness_ok({"x": 0.012, "h": 0.5, "v": 0.3})
+    assert ok and "0.036" in why
+    assert accept(refit("e", 0.995, white={"x": 0.012, "h": 0.5, "v": 0.3}), BAND).check("white").passed
+    ok, why = whiteness_ok({"x": 1e-5, "h": 0.5, "v": 0.3})
+    assert not ok and "lowest channel x" in why
+    assert holm_min([0.01, 0.2, 0.03]) == pytest.approx(0.03)
+    assert WHITE_LEVEL == 0.001
+
+
+def test_the_noise_band_follows_the_dof_and_the_discretization():
+    band = NoiseBand(upper=float(stats.chi2.isf(1e-3, DOF) / DOF), dof=DOF, discretization=0.0)
+    assert band.contains(1.0) and band.contains(1.03) and not band.contains(1.04)
+    assert not band.contains(float("nan"))
