@@ -128,7 +128,10 @@ def main(argv=None) -> int:
         if args.json:
             args.json.write_text(json.dumps({"commit": head, "records": records}, indent=1, default=str))
     stamp = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
-    md = (f"Study of commit {head}, {stamp}, {platform.machine()}; {len(records)} cases in "
+    import rocketid
+    where = Path(rocketid.__file__).resolve().parents[1]
+    code = "this checkout" if where == ROOT / "src" else f"rocketid from {where}"
+    md = (f"Study of commit {head} ({code}), {stamp}, {platform.machine()}; {len(records)} cases in "
           f"{time.perf_counter() - t0:.0f} s.\n\n{summary(records)}\n\n{table(records)}\n")
     print(md)
     if args.md:
