@@ -95,6 +95,8 @@ def main(argv=None) -> int:
     ap.add_argument("--group", choices=sorted(GROUPS), action="append", help="only these groups")
     ap.add_argument("--md", type=Path, help="write the Markdown table here")
     ap.add_argument("--json", type=Path, help="write the records here")
+    ap.add_argument("--rescore", type=Path, help="no diagnosis: re-score the final models stored in this JSON "
+                    "(written by --json) with the current scoring, and write the table")
     ap.add_argument("--docs", type=Path, help="replace the study table in this Markdown file (between the markers "
                     "<!-- study-table:start --> and <!-- study-table:end -->)")
     args = ap.parse_args(argv)
@@ -114,6 +116,14 @@ def main(argv=None) -> int:
         head = "?"
     records = []
     t0 = time.perf_counter()
+    if args.rescore:
+        stored = json.loads(args.rescore.read_text())
+        head, records = stored["commit"], stored["records"]
+        for r in records:
+            if r["source"] != "error":
+                r["score"] = H.score(C.BY_ID[r["case"]], r["final"])
+        todo = []
+        elapsed = sum(r["seconds"] for r in records if r["seconds"] == r["seconds"])
     for case in todo:
         try:
             rec = H.run_case(case)
@@ -126,19 +136,29 @@ def main(argv=None) -> int:
               f"{rec['base']['chi2_per_dof']:.4f} -> {f['chi2_per_dof']:.4f}, pass {rec['score']['passed']}, "
               f"{rec['seconds']:.0f} s", flush=True)
         if args.json:
-            args.json.write_text(json.dumps({"commit": head, "records": records}, indent=1, default=str))
+            args.json.write_text(json.dumps({"commit": head, "rocketid": _code(), "records": records}, indent=1,
+                                            default=str))
     stamp = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
-    import rocketid
-    where = Path(rocketid.__file__).resolve().parents[1]
-    code = "this checkout" if where == ROOT / "src" else f"rocketid from {where}"
+    code = _code()
+    if args.rescore:
+        code = f"{stored.get('rocketid', '?')}; re-scored from {args.rescore.name}"
+    else:
+        elapsed = time.perf_counter() - t0
     md = (f"Study of commit {head} ({code}), {stamp}, {platform.machine()}; {len(records)} cases in "
-          f"{time.perf_counter() - t0:.0f} s.\n\n{summary(records)}\n\n{table(records)}\n")
+          f"{elapsed:.0f} s.\n\n{summary(records)}\n\n{table(records)}\n")
     print(md)
     if args.md:
         args.md.write_text(md)
     if args.docs:
         replace_table(args.docs, md)
     return 0
+
+
+def _code() -> str:
+    """Which rocketid ran: this checkout's src, or another path."""
+    import rocketid
+    where = Path(rocketid.__file__).resolve().parents[1]
+    return "this checkout" if where == ROOT / "src" else f"rocketid from {where}"
 
 
 START, END = "<!-- study-table:start -->", "<!-- study-table:end -->"

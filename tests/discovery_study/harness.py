@@ -159,12 +159,19 @@ def variant_final_of(report) -> dict | None:
     return _final_dict(var.final, "final of the Mach-indexed variant")
 
 
+#: refined or alternative forms the diagnosis may report for a catalogue effect (same physics)
+ALIASES = {"thrust_level": ("thrust_profile",)}
+
+
 def _matches(found: str, true: str) -> bool:
     """A final effect stands for a true one: the same catalogue name, or a refined variant of it
-    (``wind_refined``, ``wind (6 knots)``, ``thrust_level[t]`` ...)."""
+    (``wind_surface_8``, ``density_6``, ``back_pressure_vacuum``, a thrust error in time
+    ``thrust_profile_3`` for a thrust-level error ...)."""
     f = found.strip()
-    return f == true or f.startswith(true + "_") or f.startswith(true + " ") or f.startswith(true + "[") \
-        or f.startswith(true + "(")
+    for name in (true, *ALIASES.get(true, ())):
+        if f == name or any(f.startswith(name + sep) for sep in ("_", " ", "[", "(")):
+            return True
+    return False
 
 
 def score(case: Case, final: dict) -> dict:
