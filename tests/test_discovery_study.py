@@ -133,6 +133,16 @@ def _explain(rec: dict) -> str:
             f"wrong {s['wrong']}; {rec['seconds']:.0f} s; {f['api']}")
 
 
+_RECORDS: dict[str, dict] = {}
+
+
+def record(case_id: str) -> dict:
+    """The case's diagnosis, run once per test session."""
+    if case_id not in _RECORDS:
+        _RECORDS[case_id] = H.run_case(C.BY_ID[case_id])
+    return _RECORDS[case_id]
+
+
 def check_case(rec: dict) -> None:
     s = rec["score"]
     # never a wrong effect called explained
@@ -152,10 +162,29 @@ def test_fast_case_on_a_coarse_mesh():
     check_case(rec)
 
 
+#: Cases the diagnosis did not pass when the study was last run (``benchmarks/discovery_study.py``),
+#: each with its measured failure. They stay real assertions: xfail, not strict, so that a fix
+#: shows as XPASS.
+KNOWN_FAILURES: dict[str, str] = {}
+
+
+def _cases(cases):
+    return [pytest.param(c.id, marks=pytest.mark.xfail(reason=KNOWN_FAILURES[c.id], strict=False))
+            if c.id in KNOWN_FAILURES else c.id for c in cases]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case_id", _cases(C.SINGLE + C.PAIRS))
+def test_hidden_effect_case(case_id):
+    check_case(record(case_id))
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("case_id", [c.id for c in C.SINGLE + C.PAIRS])
-def test_hidden_effect_case(case_id):
-    check_case(H.run_case(C.BY_ID[case_id]))
+def test_no_wrong_effect_is_called_explained(case_id):
+    """Never xfail: whatever the diagnosis misses, it must not call a wrong effect explained."""
+    rec = record(case_id)
+    assert not rec["score"]["wrong_explained"], _explain(rec)
 
 
 @pytest.mark.slow
