@@ -298,6 +298,9 @@ def test_cli_diagnose(bp_csv, tmp_path):
     (["--model", "nope"], "unknown model 'nope'"),
     (["--window", "-3"], "--window"),
     (["--sigma", "q=1"], "'q' is not one of x, h, v"),
+    (["--holdout", "45:10"], "--holdout START:END needs END > START"),
+    (["--holdout", "half"], "--holdout must be auto, none or START:END"),
+    (["--refit-timeout", "0"], "--refit-timeout"),
 ])
 def test_cli_diagnose_bad_input(bp_csv, tmp_path, args, message):
     res = _runner().invoke(main, ["diagnose", str(bp_csv), "--out", str(tmp_path / "r"), *args])
@@ -309,3 +312,27 @@ def test_cli_diagnose_bad_input(bp_csv, tmp_path, args, message):
 def test_cli_diagnose_missing_file(tmp_path):
     res = _runner().invoke(main, ["diagnose", str(tmp_path / "none.csv"), "--out", str(tmp_path / "r")])
     assert res.exit_code == 2 and "does not exist" in res.stderr
+
+
+def test_diagnosis_json_holds_the_final_model(report):
+    """Issue 8: diagnosis.json gains "final" (effects in the order added, every parameter's value and
+    std, chi2/dof, fits_to_noise, the verdict) and the stepwise path; the HTML shows the steps."""
+    rep, out = report
+    d = json.loads((out / "diagnosis.json").read_text())
+    final = d["final"]
+    assert final["effects"] == ["back_pressure_vacuum"] and final["verdict"] == "explained"
+    assert final["fits_to_noise"] is True and final["chi2_per_dof"] < 1.05
+    a_e = final["parameters"]["A_e_vac"]
+    assert abs(a_e["value"] - 0.1) < 3 * a_e["std"] and set(final["parameters"]) == set(rep.final.fit.spec.parameter_names)
+    assert d["steps"][0]["chosen"] == "back_pressure_vacuum"
+    assert all(set(r["checks"]) == {"converged", "significant", "noise", "white", "coefficients", "size"}
+               for r in d["steps"][0]["refits"])
+    page = (out / "report.html").read_text()
+    assert "Stepwise search" in page and "accepted" in page and "Final verdict" in page
+
+
+def test_diagnose_refuses_a_bad_holdout(bp_data):
+    with pytest.raises(SettingsError, match="holdout"):
+        diagnose(bp_data, "ra66m", holdout=(40.0, 10.0))
+    with pytest.raises(SettingsError, match="max_effects"):
+        diagnose(bp_data, "ra66m", max_effects=0)

@@ -990,7 +990,10 @@ class Model:
             families=tuple(self._families), definitions=tuple(self._definitions),
             equations=tuple(self._equations[s.symbol] for s in self._states),
             outputs=tuple(self._outputs), description=self.description, _builder=self.copy(),
-            roles=tuple(self._roles.items()), tables=tuple(self._tables),
+            roles=tuple(self._roles.items()),
+            # a table's variable gets its role also when the role is declared after the table
+            tables=tuple(replace(tb, variable_role=next((r for r, e in self._roles.items() if e == tb.variable),
+                                                        tb.variable_role)) for tb in self._tables),
         )
         _check_symbols(spec)
         check_guess(spec)

@@ -20,7 +20,10 @@ answer comes from taking the best helper for the explanation. An effect is
    every channel, Holm-corrected over the channels, above :data:`WHITE_LEVEL`
    (at 100 Hz a correct model's residuals pass it; a single channel's uncorrected
    p = 0.012 does not fail a clean fit);
-5. keeps the **base coefficients plausible** (the plausibility checks);
+5. keeps the **base coefficients plausible** (the plausibility checks; and when the fit
+   before it was already inside the noise band, no coefficient moves by more than
+   :data:`SHIFT_LIMIT` -- a small improvement bought by redrawing the drag table is not an
+   explanation);
 6. has a **plausible size**: every added parameter within :data:`SIZE_FACTOR` times
    its realistic size *for this vehicle* (a fraction of its thrust, mass flow,
    speed; :meth:`~rocketid.diagnostics.effects.Effect.sizes`), not below the least
@@ -55,6 +58,10 @@ SIZE_FACTOR = 5.0
 
 BAND_LEVEL = 0.001
 """Upper tail of chi2(dof)/dof that bounds the noise band."""
+
+SHIFT_LIMIT = 0.2
+"""When the fit before the refit is already inside the noise band, an effect that moves a base
+coefficient by more than this share is standing in for a change of the coefficients."""
 
 
 @dataclass(frozen=True)
@@ -230,11 +237,17 @@ def accept(refit: Refit, band: NoiseBand, *, level: float = 0.05, n_tests: int =
                                          f"noise band (<= {band.upper:.4g})"))
     ok_w, why_w = whiteness_ok(refit.whiteness) if refit.whiteness else (False, "no residuals")
     checks.append(Check("white", ok_w, why_w))
-    if refit.plausible_coefficients is None:
-        checks.append(Check("coefficients", True, "not checked"))
+    moved, shift = refit.coefficient_shift() if refit.success else ("", 0.0)
+    settled = band.contains(refit.base_chi2_per_dof)
+    if refit.plausible_coefficients is False:
+        checks.append(Check("coefficients", False, "; ".join(refit.implausible[:3])))
+    elif settled and shift > SHIFT_LIMIT:
+        checks.append(Check("coefficients", False, f"{moved} moves by {100 * shift:.0f} % from a fit that was already "
+                                                   f"inside the noise band (chi2/dof {refit.base_chi2_per_dof:.4g}): the "
+                                                   "effect stands in for a change of the coefficients"))
     else:
-        checks.append(Check("coefficients", bool(refit.plausible_coefficients),
-                            "plausible" if refit.plausible_coefficients else "; ".join(refit.implausible[:3])))
+        checks.append(Check("coefficients", True, "not checked" if refit.plausible_coefficients is None else
+                            f"plausible (largest change {moved or '-'} {100 * shift:.0f} %)"))
     ratios = refit.size_ratio() if refit.success else {}
     big = {k: r for k, r in ratios.items() if r > SIZE_FACTOR}
     small = {k: m for k, m in refit.least.items() if refit.success and abs(refit.estimate(k)[0]) < m}

@@ -53,9 +53,12 @@ from .compare import Comparison, compare
 __all__ = ["Phase", "WindowTable", "Cusum", "Finding", "Location", "locate", "flight_conditions", "flight_phases",
            "CONDITIONS", "MIN_WINDOW_SAMPLES", "MIN_WINDOWS"]
 
-#: Flight conditions looked up by name in the model: (label, unit, scale to the unit).
+#: Flight conditions, found through the model's physical roles (:data:`rocketid.model.ROLES`):
+#: key -> (label, unit, scale to the unit).
 CONDITIONS = {"h": ("altitude", "km", 1e-3), "v": ("speed", "m/s", 1.0), "mach": ("Mach", "", 1.0),
               "qbar": ("q", "kPa", 1e-3)}
+#: The role of each condition key (and of the attack angle ``alpha``).
+CONDITION_ROLES = {"h": "altitude", "v": "speed", "mach": "mach", "qbar": "dynamic_pressure", "alpha": "attack_angle"}
 #: Fewest samples a window may hold, and fewest windows a channel needs.
 MIN_WINDOW_SAMPLES = 20
 MIN_WINDOWS = 4
@@ -69,27 +72,33 @@ MAXQ_FRACTION = 0.9
 
 
 def flight_conditions(fit: EstimationResult, times) -> dict[str, np.ndarray]:
-    """The flight conditions the model defines, along the fitted trajectory.
+    """The flight conditions the model declares, along the fitted trajectory.
 
-    Returns ``{name: values at times}`` for those of ``h``, ``v`` (states),
-    ``mach``, ``qbar`` (definitions) and ``alpha`` (input) that the model has.
+    Returns ``{key: values at times}`` for the keys of :data:`CONDITION_ROLES` whose role
+    (altitude, speed, Mach, dynamic pressure, attack angle) the model declares; a model
+    without a role does not get that condition (:func:`missing_conditions` says which).
     """
     spec = fit.spec
     times = np.asarray(times, float)
     states = fit.states_at(times)
-    state_names = [str(s) for s in spec.state_symbols]
-    defs = {str(d): d for d, _ in spec.definitions}
     out = {}
-    for name in CONDITIONS:
-        if name in state_names:
-            out[name] = states[:, state_names.index(name)].copy()
-        elif name in defs:
+    for key, role in CONDITION_ROLES.items():
+        expr = spec.role(role)
+        if expr is None:
+            continue
+        if expr in spec.state_symbols:
+            out[key] = states[:, spec.state_symbols.index(expr)].copy()
+        elif expr in spec.input_symbols:
+            out[key] = spec.input_values(times)[:, spec.input_symbols.index(expr)]
+        else:
             with np.errstate(all="ignore"):
-                out[name] = evaluate_along(spec, defs[name], times, states, fit.p)
-    inputs = [str(u) for u in spec.input_symbols]
-    if "alpha" in inputs:
-        out["alpha"] = spec.input_values(times)[:, inputs.index("alpha")]
+                out[key] = evaluate_along(spec, spec.expand(expr), times, states, fit.p)
     return out
+
+
+def missing_conditions(spec) -> list[str]:
+    """The roles of :data:`CONDITION_ROLES` that ``spec`` does not declare."""
+    return [role for role in CONDITION_ROLES.values() if spec.role(role) is None]
 
 
 @dataclass(frozen=True)
@@ -658,12 +667,18 @@ def locate(fit: EstimationResult, comparison: Comparison | None = None, *, windo
                      "findings name time windows only")
     conds = {k: v for k, v in conds.items() if np.all(np.isfinite(v))}
     alpha_bps = ()
+    alpha = fit.spec.role("attack_angle")
     for u in fit.spec.inputs:
-        if str(u.symbol) == "alpha":
+        if alpha is not None and u.symbol in alpha.free_symbols:
             alpha_bps = tuple(u.breakpoints)
     phases = flight_phases(tg, conds, alpha_breakpoints=alpha_bps)
+    missing = missing_conditions(fit.spec)
     if not any(k in conds for k in ("h", "mach", "qbar")):
-        notes.append(f"model {fit.spec.name!r} defines none of h, mach, qbar: findings name time windows only")
+        notes.append(f"model {fit.spec.name!r} declares none of the roles altitude, mach, dynamic_pressure: findings "
+                     "name time windows only (declare them with m.declare_role)")
+    elif missing:
+        notes.append(f"model {fit.spec.name!r} declares no {', '.join(missing)} role: the location cannot use "
+                     f"{'it' if len(missing) == 1 else 'them'} (declare with m.declare_role)")
     # per-phase statistics
     phase_rows = []
     for p in phases:

@@ -401,13 +401,19 @@ def check_plausibility(fit: EstimationResult, *, uncertainty=None, level: float 
             flags.append(Flag("undetermined", "info", (n,), f"{n} = {v:.4g} has a standard error {s:.3g} larger than "
                               "itself: the data hardly determine it"))
     mach_checks = []
-    defs = {str(d): d for d, _ in spec.definitions}
-    drag_fams = [f for f in spec.families if _kind(str(f.knots[0])) == "drag" or str(f.symbol).upper().startswith("CD")]
-    if drag_fams and "mach" not in defs:
-        notes.append(f"model {spec.name!r} defines no 'mach': the time-knot drag cannot be checked against Mach")
+    cd_role = spec.role("drag_coefficient")
+    if cd_role is not None:
+        used = spec.expand(cd_role).free_symbols
+        drag_fams = [f for f in spec.families if f.symbol in used]
+    else:
+        drag_fams = [f for f in spec.families if _kind(str(f.knots[0])) == "drag" or str(f.symbol).upper().startswith("CD")]
+    mach = spec.role("mach")
+    if drag_fams and mach is None:
+        notes.append(f"model {spec.name!r} declares no 'mach' role: the time-knot drag cannot be checked against Mach "
+                     "(declare it with m.declare_role('mach', symbol))")
     elif drag_fams:
         for fam in drag_fams:
-            mc = _mach_check(fit, fam, defs["mach"], se, cov, mach_degree, mach_tolerance, transonic)
+            mc = _mach_check(fit, fam, mach, se, cov, mach_degree, mach_tolerance, transonic)
             if mc is None:
                 notes.append(f"{fam.symbol}: too few distinct knots (or Mach numbers) for the Mach-consistency check")
                 continue

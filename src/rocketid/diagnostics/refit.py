@@ -468,7 +468,9 @@ def _acceptance(fit: EstimationResult, new: EstimationResult, effects: Sequence[
             sizes.update({k: v for k, v in e.sizes(vehicle).items() if math.isfinite(v) and v > 0})
         r = summarize_refit(new, fit.objective, fit.n_estimated, effects, tuple(e.name for e in effects), sizes,
                             level=level, base_parameters=base_spec.parameter_names,
-                            least={k: v for e in effects for k, v in e.least.items()})
+                            least={k: v for e in effects for k, v in e.least.items()},
+                            base_values=dict(zip(fit.spec.parameter_names, (float(v) for v in fit.p))),
+                            base_chi2_per_dof=fit.chi2_per_dof)
         dof = max(1, new.n_data - new.n_estimated)
         upper = float(stats.chi2.isf(BAND_LEVEL, dof) / dof) + (D / dof if np.isfinite(D) else 0.0)
         return accept(r, NoiseBand(upper, dof, D), level=level)
@@ -555,6 +557,8 @@ class Refit:
     seconds: float = 0.0
     notes: tuple = ()
     least: dict = field(default_factory=dict)
+    base_values: dict = field(default_factory=dict)
+    base_chi2_per_dof: float = float("nan")
 
     @property
     def name(self) -> str:
@@ -585,6 +589,17 @@ class Refit:
         """``(value, std)`` of a parameter."""
         i = self.parameter_names.index(name)
         return float(self.p[i]), float(self.std[i])
+
+    def coefficient_shift(self) -> tuple[str, float]:
+        """The base coefficient that moved most from the fit before the refit, and its relative change."""
+        worst = ("", 0.0)
+        for n, v0 in self.base_values.items():
+            if n in self.parameter_names and n not in self.effect_parameters:
+                v = self.estimate(n)[0]
+                rel = abs(v - v0) / max(abs(v0), 1e-12)
+                if rel > worst[1]:
+                    worst = (n, rel)
+        return worst
 
     def size_ratio(self) -> dict:
         """``{parameter: |estimate| / realistic size}`` of the added parameters with a stated size."""
@@ -657,7 +672,8 @@ def identifiability(names: Sequence[str], cov: np.ndarray, effect_parameters: Se
 def summarize_refit(new: EstimationResult, base_objective: float, base_n_estimated: int, effects: Sequence[Effect],
                     added: Sequence[str], sizes: Mapping[str, float], *, level: float = 0.05,
                     base_parameters: Sequence[str] = (), seconds: float = 0.0, notes: Sequence[str] = (),
-                    least: Mapping[str, float] | None = None) -> Refit:
+                    least: Mapping[str, float] | None = None, base_values: Mapping[str, float] | None = None,
+                    base_chi2_per_dof: float = float("nan")) -> Refit:
     """The :class:`Refit` of a fitted model with ``effects``: whiteness per channel, standard
     errors, the base coefficients' plausibility, the added parameters' identifiability."""
     from .plausibility import check_plausibility
@@ -699,7 +715,9 @@ def summarize_refit(new: EstimationResult, base_objective: float, base_n_estimat
                  base_objective=float(base_objective), base_n_estimated=int(base_n_estimated), whiteness=white,
                  sizes={k: float(v) for k, v in sizes.items() if k in eff_params}, at_bound=bound,
                  plausible_coefficients=plaus, implausible=failing, identifiability=ident, seconds=float(seconds),
-                 notes=tuple(notes), least={k: float(v) for k, v in (least or {}).items() if k in eff_params})
+                 notes=tuple(notes), least={k: float(v) for k, v in (least or {}).items() if k in eff_params},
+                 base_values={k: float(v) for k, v in (base_values or {}).items()},
+                 base_chi2_per_dof=float(base_chi2_per_dof))
 
 
 def _declared_by(effect: Effect, declared: Sequence[str]) -> set:
@@ -738,6 +756,9 @@ class RefitTask:
         The noise band's chi2/dof: a warm-started refit that ends above it is refitted from the
         model's own guesses (the base estimate may be distorted by the missing effect), and the
         better of the two is kept.
+    base_values : dict
+        The estimates of the fit before the refit, by name.
+    base_chi2_per_dof : float
     """
 
     base_spec: Any
@@ -754,6 +775,8 @@ class RefitTask:
     timeout: float
     level: float = 0.05
     band_upper: float = math.inf
+    base_values: dict = field(default_factory=dict)
+    base_chi2_per_dof: float = float("nan")
 
 
 def refit_spec(task: RefitTask, start: Mapping | None = None):
@@ -789,7 +812,8 @@ def run_refit(task: RefitTask) -> tuple[Refit, EstimationResult | None]:
                            [e for e in task.effects], task.added, task.sizes, level=task.level,
                            base_parameters=task.base_parameters, seconds=time.perf_counter() - t0,
                            notes=notes, least={k: v for e in task.effects if e.name in task.added
-                                               for k, v in e.least.items()}), new
+                                               for k, v in e.least.items()},
+                           base_values=task.base_values, base_chi2_per_dof=task.base_chi2_per_dof), new
 
 
 def _failed(task: RefitTask, message: str, seconds: float, gave_up: bool = False) -> Refit:

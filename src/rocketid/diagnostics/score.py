@@ -48,7 +48,6 @@ Notation
 
 from __future__ import annotations
 
-import re
 import time
 from dataclasses import dataclass, field
 from typing import Iterable, Sequence
@@ -80,9 +79,10 @@ DETECTABLE = 25.0
 PARTLY_ABSORBED = 0.5
 """Share above which the note says the effect is partly absorbed (and biases those estimates)."""
 
-_DEFINITION_WORDS = {"cd": "the drag estimate", "cl": "the lift estimate", "drag": "the drag estimate",
-                     "lift": "the lift estimate", "thrust": "the thrust estimate", "mass": "the mass estimate",
-                     "rho": "the density estimate", "alpha_thrust": "the thrust-direction estimate"}
+_ROLE_WORDS = {"drag_coefficient": "the drag estimate", "lift_coefficient": "the lift estimate",
+               "drag": "the drag estimate", "lift": "the lift estimate", "thrust": "the thrust estimate",
+               "mass": "the mass estimate", "density": "the density estimate",
+               "thrust_direction": "the thrust-direction estimate"}
 
 
 @dataclass(frozen=True)
@@ -404,11 +404,12 @@ def augment(fit: EstimationResult, candidates: Iterable[Effect | str] | None = N
 def _families(spec: ModelSpec, names: Sequence[str]) -> list[tuple[str, list[int]]]:
     """Group estimated parameters into families: ``(label, indices)``.
 
-    Knots of a time family are ``<F>(t)``; table knots ``<name>_<j>`` are
-    ``<name>(M)`` when their definition uses Mach, else ``<name>(..)``.
+    Knots of a time family are ``<F>(t)``; knots of a table (:attr:`ModelSpec.tables`) are
+    ``<name>(M)`` when its variable plays the Mach role, ``<name>(q)`` the dynamic pressure,
+    else ``<name>(..)``; every other parameter is its own family.
     """
+    short = {"mach": "M", "dynamic_pressure": "q", "attack_angle": "alpha"}
     fam_of: dict[str, str] = {}
-    mach = next((d for d, _ in spec.definitions if str(d) == "mach"), None)
     for ps in spec.parameters:
         n = str(ps.symbol)
         if n not in names:
@@ -416,12 +417,9 @@ def _families(spec: ModelSpec, names: Sequence[str]) -> list[tuple[str, list[int
         if ps.family is not None:
             fam_of[n] = f"{ps.family}(t)"
             continue
-        mt = re.fullmatch(r"(.+)_(\d+)", n)
-        siblings = [q for q in names if mt and re.fullmatch(re.escape(mt.group(1)) + r"_\d+", q)]
-        if mt and len(siblings) >= 2:
-            uses_mach = any(ps.symbol in e.free_symbols and mach is not None and mach in e.free_symbols
-                            for _, e in spec.definitions)
-            fam_of[n] = f"{mt.group(1)}({'M' if uses_mach else '..'})"
+        tb = spec.table_of(ps.symbol)
+        if tb is not None and sum(str(k) in names for k in tb.parameters) >= 2:
+            fam_of[n] = f"{tb.name}({short.get(tb.variable_role, '..')})"
         else:
             fam_of[n] = n
     out: dict[str, list[int]] = {}
@@ -431,13 +429,14 @@ def _families(spec: ModelSpec, names: Sequence[str]) -> list[tuple[str, list[int
 
 
 def _meaning(spec: ModelSpec, members: Sequence[str]) -> str:
-    """Which estimate a family feeds ("the drag estimate")."""
+    """Which estimate a family feeds ("the drag estimate"), through the model's roles."""
     by_name = {str(p.symbol): p for p in spec.parameters}
     syms = {by_name[n].symbol for n in members}
     fams = {by_name[n].family for n in members} - {None}
+    role_of = {expr: role for role, expr in spec.roles}
     for d, e in spec.definitions:
-        if (syms | fams) & e.free_symbols and str(d) in _DEFINITION_WORDS:
-            return _DEFINITION_WORDS[str(d)]
+        if (syms | fams) & e.free_symbols and role_of.get(d) in _ROLE_WORDS:
+            return _ROLE_WORDS[role_of[d]]
     return "the estimates of " + ", ".join(members)
 
 

@@ -55,6 +55,10 @@ BIC_TIE = 10.0
 HOLDOUT_DECISIVE = 0.5
 """The best hold-out prediction error must be at most this share of the next one to decide a BIC tie."""
 
+HOLDOUT_USEFUL = 25.0
+"""... and itself at most this (mean squared prediction error / sigma^2, a 5-sigma RMS): a prediction
+thousands of sigma^2 off decides nothing."""
+
 VERDICTS = ("nothing missing", "explained", "partly explained", "not explained by the catalogue")
 
 
@@ -155,6 +159,8 @@ def _task(base_spec, fit: EstimationResult, effects: Sequence[Effect], added: Se
                      effects=tuple(effects), added=tuple(added), start=st, sizes=sizes,
                      base_objective=float(base.objective), base_n_estimated=int(base.n_estimated),
                      base_parameters=tuple(base.spec.parameter_names), options=dict(options or {}),
+                     base_values={n: float(v) for n, v in zip(base.spec.parameter_names, base.p)},
+                     base_chi2_per_dof=float(base.chi2_per_dof),
                      timeout=float(timeout), level=float(level), band_upper=float(band_upper))
 
 
@@ -203,7 +209,7 @@ def _tie_break(accs, i, fit, chosen_effects, contenders_effects, holdout, level,
                       "them apart")
     order = sorted(score, key=score.get)
     txt = ", ".join(f"{accs[j].refit.name} {score[j]:.3g}" for j in order)
-    if score[order[0]] > HOLDOUT_DECISIVE * score[order[1]]:
+    if score[order[0]] > HOLDOUT_DECISIVE * score[order[1]] or score[order[0]] > HOLDOUT_USEFUL:
         return None, (f"{names} reach the noise with BIC within {BIC_TIE:g} of each other and predict the hold-out "
                       f"alike (mean squared prediction error / sigma^2: {txt}): the data cannot tell them apart")
     best = order[0]
@@ -365,7 +371,7 @@ def discover(fit: EstimationResult, candidates: Sequence[Effect], *, level: floa
     if ambiguous:
         notes.append(f"ambiguous: {ambiguous}")
     if not chosen_effects:
-        verdict = "nothing missing" if base_ok and not ambiguous else "not explained by the catalogue"
+        verdict = "nothing missing" if base_ok else "not explained by the catalogue"
     elif ok:
         verdict = "explained"
     else:
