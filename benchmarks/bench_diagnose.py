@@ -57,7 +57,7 @@ def _data(model: str, out: Path) -> Path:
 def _run(csv: Path, model: str, cache: str, out: Path) -> tuple[float, str]:
     env = dict(os.environ, ROCKETID_CACHE_DIR=cache)
     t0 = time.perf_counter()
-    res = subprocess.run([sys.executable, "-m", "rocketid", "diagnose", str(csv), "--out", str(out),
+    res = subprocess.run([sys.executable, "-c", "from rocketid.cli import main; main()", "diagnose", str(csv), "--out", str(out),
                           "--model", model], env=env, capture_output=True, text=True)
     dt = time.perf_counter() - t0
     if res.returncode not in (0, 1):

@@ -68,7 +68,7 @@ def test_an_implausible_size_is_not_accepted_and_loses_to_a_plausible_rival():
     i, why = _choose([wrong, right])
     assert i == 1 and "reach the noise" in why
     # alone, the implausible refit is never chosen, not even as a step
-    assert _choose([wrong]) == (None, "no refit is significant with a plausible size and plausible coefficients")
+    assert _choose([wrong]) == (None, "no refit is significant with a plausible size")
 
 
 def test_size_limit_is_five_realistic_sizes():
@@ -92,8 +92,14 @@ def test_a_refit_that_gave_up_or_did_not_converge_is_not_accepted():
 
 
 def test_implausible_base_coefficients_block_acceptance():
+    """... but not a step: while another effect is still missing, it distorts the coefficients."""
     a = accept(refit("density", 0.995, plausible=False), BAND)
-    assert not a.accepted and not a.admissible and "at-bound" in a.check("coefficients").detail
+    assert not a.accepted and a.admissible and "at-bound" in a.check("coefficients").detail
+    # a step with plausible coefficients is preferred to one without, whatever their BIC
+    b = accept(refit("thrust_level", 1.4, value=0.02, size=0.02), BAND)
+    c = accept(refit("bias_h", 1.3, value=5.0, size=5.0, plausible=False), BAND)
+    assert b.admissible and c.admissible and c.refit.bic[1] < b.refit.bic[1]
+    assert _choose([c, b])[0] == 1
 
 
 def test_the_lr_test_is_corrected_for_the_contenders_refitted():

@@ -30,9 +30,11 @@ answer comes from taking the best helper for the explanation. An effect is
    its physics allows (:attr:`~rocketid.diagnostics.effects.Effect.least`: Earth's
    rotation), and not held at a bound.
 
-A refit that passes 1, 2, 5 and 6 but not 3-4 is **admissible**: it is a step
-toward the explanation (the stepwise search adds it and looks for the rest) but
-is never called explained or confirmed.
+A refit that passes 1, 2 and 6 is **admissible**: it is a step toward the
+explanation (the stepwise search adds it and looks for the rest: while another
+effect is still missing, chi2/dof, whiteness and the coefficients may all still
+be off) but it is never called explained or confirmed; the final model must pass
+every check.
 """
 
 from __future__ import annotations
@@ -159,8 +161,9 @@ class Check:
         return {"passed": bool(self.passed), "detail": self.detail}
 
 
-#: The checks an admissible step needs (a step toward the explanation).
-ADMISSIBLE = ("converged", "significant", "coefficients", "size")
+#: The checks an admissible step needs (a step toward the explanation). The coefficients are not
+#: among them: while another effect is still missing it distorts them; the final model must pass.
+ADMISSIBLE = ("converged", "significant", "size")
 #: The checks of an explanation: every one.
 ALL = ("converged", "significant", "noise", "white", "coefficients", "size")
 
@@ -189,7 +192,8 @@ class Acceptance:
 
     @property
     def admissible(self) -> bool:
-        """Converged, significant, plausible coefficients and size: a step toward the explanation."""
+        """Converged, significant and a plausible size: a step toward the explanation (the
+        coefficients may still be distorted by another missing effect)."""
         return all(self.check(n).passed for n in ADMISSIBLE)
 
     @property
