@@ -1,4 +1,4 @@
-"""Shared RA-66 fixtures (METHOD.md section 2), built once per test session.
+"""Shared RA-66 fixtures (docs/reference-cases.md), built once per test session.
 
 ``ra66_spec``       the reference model (CD0..CD6, CL)
 ``ra66_p_true``     the true parameter vector, shape (8,)

@@ -22,6 +22,7 @@ SRC = Path(__file__).resolve().parents[1] / "src" / PACKAGE
 #: collocation it checks (it uses only errors, data and model).
 LAYERS: list[tuple[str, ...]] = [
     ("errors",),
+    ("output",),         # atomic writes and output locations: every file rocketid writes
     ("summary",),        # the Summary value every stage's results render (text, HTML)
     ("data",),
     ("model",),

@@ -7,7 +7,10 @@
 
 Exit codes: 0 success; 1 the command ran but its result is not valid (IPOPT
 did not converge: the JSON is still written); 2 bad input (a missing file or
-column, a malformed ``NAME=VALUE``, an unknown option). Every
+column, a malformed ``NAME=VALUE``, an unknown option, an output location
+that cannot be written: checked before any work); 130 interrupted (Ctrl-C;
+"continue with --resume" where a command resumes), 143 terminated (SIGTERM).
+Every file is written atomically (:mod:`rocketid.output`). Every
 :class:`~rocketid.errors.RocketidError` and every usage error is reported as
 one ``Error: ...`` line on stderr; ``--verbose`` shows the traceback instead.
 
@@ -42,19 +45,23 @@ from __future__ import annotations
 
 import difflib
 import importlib
-import json
 import math
 import os
 import pkgutil
+import signal
 import sys
+import threading
 import time
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import click
 import numpy as np
 
+from . import output
 from .cases.registry import BUILTIN_MODELS, ModelSource, load_model
+from .collocation.radau import MAX_DEGREE
 from .data import Measurements, read_csv
 from .errors import RocketidError, SettingsError
 from .model import ModelSpec, check_guess
@@ -68,6 +75,8 @@ __all__ = [
 
 EXIT_OK, EXIT_NOT_CONVERGED, EXIT_BAD_INPUT = 0, 1, 2
 _VERBOSE = "rocketid.verbose"
+_COMMAND = "rocketid.command"
+EXIT_INTERRUPTED = 130  # 128 + SIGINT; SIGTERM gives 143
 
 
 # ---------------------------------------------------------------------------
@@ -192,14 +201,9 @@ def make_mesh(spec: ModelSpec, n_elements: int | None = None, K: int = 4):
 
 
 def write_json(path: str | os.PathLike, payload: Mapping) -> Path:
-    """Write ``payload`` as indented JSON, creating parent folders."""
-    path = Path(path)
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(payload, indent=2) + "\n")
-    except OSError as exc:
-        raise SettingsError(f"cannot write {str(path)!r}: {exc.strerror or exc}") from None
-    return path
+    """Write ``payload`` as indented JSON atomically, creating parent folders
+    (:func:`rocketid.output.write_json`: NaN and infinity are refused)."""
+    return output.write_json(path, payload)
 
 
 # ---------------------------------------------------------------------------
@@ -258,11 +262,54 @@ def data_options(f):
                      help="Noise standard deviation of an output (repeatable; default: the model's)."),
         click.option("--elements", "n_elements", type=click.IntRange(min=1), default=None, metavar="N",
                      help="About N finite elements (default: elements of about 1 s)."),
-        click.option("--K", "K", type=click.IntRange(min=1), default=4, show_default=True, metavar="K",
-                     help="Radau collocation points per element."),
+        click.option("--K", "K", type=click.IntRange(1, MAX_DEGREE), default=4, show_default=True, metavar="K",
+                     help=f"Radau collocation points per element (1-{MAX_DEGREE})."),
     ]):
         f = opt(f)
     return f
+
+
+#: Memory of the built NLP per finite element at K = 4 (MB), and the process's base (MB): measured on
+#: RA-66 with ``benchmarks``-style runs of prepare() (272 MB at 5000 elements, 613 MB at 20000).
+NLP_MB_PER_ELEMENT, BASE_MB = 0.025, 120.0
+
+
+def expected_memory_mb(mesh) -> float:
+    """Rough memory (MB) of the process once the NLP is built on ``mesh`` (IPOPT needs more)."""
+    return BASE_MB + NLP_MB_PER_ELEMENT * mesh.n_elements * (mesh.K + 1) / 5
+
+
+def mesh_size_warning(spec: ModelSpec, mesh, data: Measurements) -> str | None:
+    """A warning when ``mesh`` is far finer than the data resolve: more collocation points
+    than distinct sample times and over ten times the default mesh's elements."""
+    from .solve import default_mesh
+
+    points = mesh.n_elements * mesh.K
+    n_times = np.unique(np.concatenate([c.times for c in data.channels])).size
+    default = default_mesh(spec, K=mesh.K).n_elements
+    if points <= n_times or mesh.n_elements <= 10 * default:
+        return None
+    return (f"Warning: {mesh.n_elements} elements x K = {mesh.K} give {points} collocation points for {n_times} "
+            f"sample times, far finer than the data resolve (the default mesh has {default} elements). Expect "
+            f"about {expected_memory_mb(mesh):.0f} MB to build the NLP, several times that while IPOPT factorizes, "
+            "and a long solve; use fewer --elements")
+
+
+def prepare_verbosely(spec: ModelSpec, data: Measurements, mesh):
+    """:func:`rocketid.solve.prepare` with progress lines (code generation, NLP size) and
+    :func:`mesh_size_warning` (always shown) before the work."""
+    from .solve import prepare
+
+    warning = mesh_size_warning(spec, mesh, data)
+    if warning:
+        click.echo(warning, err=True)
+    status(f"building the NLP on {mesh.describe()} (about {expected_memory_mb(mesh):.0f} MB; the model's code is "
+           "generated on first use and cached)")
+    t0 = time.perf_counter()
+    prepared = prepare(spec, data, mesh=mesh)
+    status(f"built the NLP in {time.perf_counter() - t0:.2f} s ({prepared.nlp.n} variables, code "
+           f"{'from the cache' if prepared.codegen_cached else 'generated'})")
+    return prepared
 
 
 def fit_inputs(spec: ModelSpec, data_file, *, guesses, columns, time_column, sigmas, n_elements, K):
@@ -299,6 +346,29 @@ def _one_line(text: str) -> str:
     return " ".join(str(text).split())
 
 
+class Interrupted(KeyboardInterrupt):
+    """SIGTERM, raised like Ctrl-C so that the same clean-up runs (exit code 128 + 15)."""
+
+    signum = signal.SIGTERM
+
+
+@contextmanager
+def _terminate_as_interrupt():
+    """While a command runs, SIGTERM raises :class:`Interrupted` in the main thread:
+    worker pools are shut down and temporary files removed as on Ctrl-C."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum, frame):
+        raise Interrupted()
+    previous = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
 class RocketidGroup(click.Group):
     """A click group that loads commands lazily and turns errors into one line."""
 
@@ -326,9 +396,22 @@ class RocketidGroup(click.Group):
             raise click.ClickException(f"{module_name} does not define a click command {attr or 'command'!r}")
         return cmd
 
+    def resolve_command(self, ctx, args):
+        name, cmd, rest = super().resolve_command(ctx, args)
+        ctx.meta[_COMMAND] = cmd
+        return name, cmd, rest
+
     def invoke(self, ctx):
         try:
-            return super().invoke(ctx)
+            with _terminate_as_interrupt():
+                return super().invoke(ctx)
+        except KeyboardInterrupt as exc:
+            signum = getattr(exc, "signum", signal.SIGINT)
+            cmd = ctx.meta.get(_COMMAND)
+            resumable = cmd is not None and any(p.name == "resume" for p in cmd.params)
+            click.echo("\nError: interrupted" + ("; continue with --resume" if resumable else
+                                                 "; nothing was written in part"), err=True)
+            ctx.exit(128 + int(signum))
         except RocketidError as exc:
             if _verbose(ctx):
                 raise
@@ -355,7 +438,8 @@ def main():
     """rocketid: aerodynamic coefficients of launch vehicles from trajectory data.
 
     Run `rocketid COMMAND --help` for a command's options. Exit codes: 0 success,
-    1 the solver did not converge (results still written), 2 bad input.
+    1 the solver did not converge (results still written), 2 bad input,
+    130 interrupted (Ctrl-C), 143 terminated (SIGTERM).
     """
 
 
@@ -368,7 +452,8 @@ def main():
 @click.option("--out", "out", required=True, type=click.Path(dir_okay=False), metavar="DATA.csv",
               help="CSV file to write (columns t and one per output).")
 @model_option
-@click.option("--seed", default=0, show_default=True, type=int, help="Seed of the measurement noise.")
+@click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0),
+              help="Seed of the measurement noise (a non-negative integer).")
 @click.option("--no-noise", is_flag=True, help="Write the noise-free outputs.")
 @click.option("--param", "params", multiple=True, type=NameValue(float), metavar="NAME=VALUE",
               help="Override a true parameter value (repeatable), e.g. --param CL=0.12.")
@@ -381,6 +466,7 @@ def simulate_command(out, model, seed, no_noise, params):
     """
     from .simulate import simulate_measurements
 
+    output.check_file(out, "--out")
     src = load_model(model)
     spec = src.spec
     overrides = assignments(params, "--param")
@@ -388,10 +474,7 @@ def simulate_command(out, model, seed, no_noise, params):
     t0 = time.perf_counter()
     data = simulate_measurements(spec, p, src.times, seed=seed, noise=not no_noise)
     status(f"simulated {spec.name} in {time.perf_counter() - t0:.2f} s")
-    try:
-        path = data.to_csv(out)
-    except OSError as exc:
-        raise SettingsError(f"cannot write {out!r}: {exc.strerror or exc}") from None
+    path = data.to_csv(out)  # atomic: an interrupted write leaves the previous file or none
     noise = "noise-free" if no_noise else f"noise seed {seed}"
     click.echo(f"wrote {data.channels[0].times.size} samples of {', '.join(data.names)} ({noise}) to {path}")
 
@@ -419,16 +502,20 @@ def estimate_command(data_file, model, columns, time_column, sigmas, n_elements,
     objective, iterations, timings, ...). Exit code 1 when IPOPT did not
     converge (the JSON is still written).
     """
-    from .solve import estimate
+    from .solve import check_determined, estimate
 
     options = ipopt_options(ipopt)
+    if out is not None:
+        output.check_file(out, "--out")
     src = load_model(model)
     spec = src.spec
     guess, mesh, data = fit_inputs(spec, data_file, guesses=guesses, columns=columns, time_column=time_column,
                                    sigmas=sigmas, n_elements=n_elements, K=K)
-    status(f"read {data.n_samples} values of {', '.join(data.names)} from {data_file}; "
-           f"building and solving the NLP on {mesh.describe()}")
-    result = estimate(spec, data, guess=guess, mesh=mesh, options=options)
+    status(f"read {data.n_samples} values of {', '.join(data.names)} from {data_file}")
+    check_determined(spec, data)
+    prepared = prepare_verbosely(spec, data, mesh)
+    status("solving with IPOPT")
+    result = estimate(spec, data, guess=guess, prepared=prepared, options=options)
     click.echo(result.summary().text())
     if out is not None:
         path = write_json(out, result.to_dict())

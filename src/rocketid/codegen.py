@@ -38,6 +38,7 @@ import sympy as sp
 from sympy.printing.numpy import NumPyPrinter
 
 from .model import ModelSpec
+from .output import write_text
 from .symbolic import SymbolicModel, derive
 
 __all__ = ["GeneratedModel", "OutputFunction", "generate", "generate_source", "cache_dir"]
@@ -267,11 +268,7 @@ class GeneratedModel:
 
     def write(self, folder: str | os.PathLike) -> Path:
         """Write the generated source into ``folder``; returns the file path."""
-        folder = Path(folder)
-        folder.mkdir(parents=True, exist_ok=True)
-        target = folder / self.path.name
-        target.write_text(self.source)
-        return target
+        return write_text(Path(folder) / self.path.name, self.source)
 
     def print(self) -> None:
         """Print the generated source."""
@@ -308,9 +305,6 @@ def generate(spec: ModelSpec, *, use_cache: bool = True) -> GeneratedModel:
         module = sys.modules.get(modname) or _load(path, modname)
         return GeneratedModel(source, path, module, True)
     source = generate_source(derive(spec), spec.name)
-    folder.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(f".tmp{os.getpid()}")
-    tmp.write_text(source)
-    os.replace(tmp, path)  # atomic: concurrent processes never read half a file
+    write_text(path, source)  # atomic: concurrent processes never read half a file
     module = _load(path, modname)
     return GeneratedModel(source, path, module, False)

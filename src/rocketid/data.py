@@ -10,6 +10,7 @@ columns are named like the model's outputs unless mapped otherwise.
 from __future__ import annotations
 
 import csv
+import io
 import math
 import os
 from dataclasses import dataclass
@@ -19,8 +20,14 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from .errors import DataError
+from .output import write_csv
 
-__all__ = ["Channel", "Measurements", "read_csv"]
+__all__ = ["Channel", "Measurements", "read_csv", "MAX_VALUE", "SIGMA_RANGE"]
+
+#: Largest magnitude of a measured value: squares of larger values overflow a double.
+MAX_VALUE = 1e150
+#: Noise standard deviations whose weight 1/sigma^2 is a normal, finite double.
+SIGMA_RANGE = (1e-150, 1e150)
 
 
 @dataclass(frozen=True)
@@ -58,6 +65,11 @@ class Channel:
         if bad.size:
             raise DataError(f"channel {self.name!r}: value is NaN or infinite at t = {t[bad[0]]:g} "
                             f"(sample {bad[0]}, {bad.size} in all); remove those rows or fill them")
+        bad = np.flatnonzero(np.abs(y) > MAX_VALUE)
+        if bad.size:
+            raise DataError(f"channel {self.name!r}: value {y[bad[0]]:g} at t = {t[bad[0]]:g} is out of scale "
+                            f"(|value| > {MAX_VALUE:g}: its square overflows in a least-squares fit); check the "
+                            "units of the data")
         dt = np.diff(t)
         if np.any(dt == 0):
             i = int(np.flatnonzero(dt == 0)[0])
@@ -74,6 +86,10 @@ class Channel:
                 raise DataError(f"channel {self.name!r}: sigma must be a number, got {self.sigma!r}") from None
             if not (sigma > 0 and math.isfinite(sigma)):
                 raise DataError(f"channel {self.name!r}: sigma must be positive and finite, got {self.sigma}")
+            if not (SIGMA_RANGE[0] <= sigma <= SIGMA_RANGE[1]):
+                raise DataError(f"channel {self.name!r}: sigma = {sigma:g} is out of scale (the weight 1/sigma^2 "
+                                f"must be a finite positive number: {SIGMA_RANGE[0]:g} <= sigma <= "
+                                f"{SIGMA_RANGE[1]:g}); check its units")
             object.__setattr__(self, "sigma", sigma)
         t.flags.writeable = False
         y.flags.writeable = False
@@ -149,15 +165,8 @@ class Measurements:
         for c in self.channels[1:]:
             if c.times.shape != t0.shape or np.any(c.times != t0):
                 raise DataError("to_csv needs channels with common sample times; write channels separately")
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        with open(path, "w", newline="") as fh:
-            w = csv.writer(fh)
-            w.writerow(["t", *self.names])
-            cols = [t0] + [c.values for c in self.channels]
-            for row in zip(*cols):
-                w.writerow([repr(float(v)) for v in row])
-        return path
+        cols = [t0] + [c.values for c in self.channels]
+        return write_csv(path, ["t", *self.names], ([repr(float(v)) for v in row] for row in zip(*cols)))
 
 
 def read_csv(path: str | os.PathLike, channels: Sequence[str] = ("x", "h", "v"), *,
@@ -187,31 +196,85 @@ def read_csv(path: str | os.PathLike, channels: Sequence[str] = ("x", "h", "v"),
         Missing file or columns, non-numeric cells, NaN, unsorted or duplicate times.
     """
     path = Path(path)
+    if path.is_dir():
+        raise DataError(f"data file {str(path)!r} is a folder; give a CSV file")
     if not path.is_file():
         raise DataError(f"data file {str(path)!r} does not exist")
     column_map = dict(column_map or {})
-    with open(path, newline="") as fh:
-        reader = csv.reader(fh)
-        try:
-            header = [h.strip() for h in next(reader)]
-        except StopIteration:
-            raise DataError(f"{path}: the file is empty; expected a header row with {time_column}, "
-                            f"{', '.join(channels)}") from None
-        rows = [r for r in reader if any(cell.strip() for cell in r)]
+    text = _decode(path)
+    first = next((line for line in text.splitlines() if line.strip()), "")
+    delimiter = _delimiter(first)
+    reader = csv.reader(io.StringIO(text, newline=""), delimiter=delimiter)
+    header = None
+    for r in reader:
+        if any(cell.strip() for cell in r):
+            header = [h.strip() for h in r]
+            break
+    if header is None:
+        raise DataError(f"{path}: the file is empty; expected a header row with {time_column}, "
+                        f"{', '.join(channels)}")
+    rows, lines = [], []
+    for r in reader:
+        if any(cell.strip() for cell in r):
+            rows.append(r)
+            lines.append(reader.line_num)
     wanted = {time_column: time_column, **{c: column_map.get(c, c) for c in channels}}
     missing = [col for col in wanted.values() if col not in header]
     if missing:
-        raise DataError(f"{path}: missing column(s) {', '.join(missing)}; the file has {', '.join(header)}. "
+        hint = ""
+        if delimiter == "," and len(header) == 1:
+            hint = " (the header has no commas: is the file separated by commas?)"
+        raise DataError(f"{path}: missing column(s) {', '.join(missing)}; the file has {', '.join(header)}{hint}. "
                         "Rename the columns or map them (CLI: --column NAME=COLUMN, API: column_map=)")
+    twice = sorted({col for col in wanted.values() if header.count(col) > 1})
+    if twice:
+        raise DataError(f"{path}: column(s) {', '.join(twice)} appear more than once in the header; rename or "
+                        "remove the extra column so that it is clear which one to read")
     idx = {key: header.index(col) for key, col in wanted.items()}
     data = {key: np.empty(len(rows)) for key in idx}
-    for i, r in enumerate(rows):
+    for i, (r, line) in enumerate(zip(rows, lines)):
+        if len(r) < len(header) and max(idx.values()) >= len(r):
+            raise DataError(f"{path}, line {line}: {len(r)} cells, but the header has {len(header)} columns; "
+                            "complete the row or remove it")
         for key, j in idx.items():
-            cell = r[j].strip() if j < len(r) else ""
+            cell = r[j].strip()
             try:
                 data[key][i] = float(cell) if cell else math.nan
             except ValueError:
-                raise DataError(f"{path}, line {i + 2}, column {wanted[key]!r}: {cell!r} is not a number") from None
+                hint = ("; decimal commas are not read: use a point (1.5, not 1,5)"
+                        if delimiter != "," and "," in cell else "")
+                raise DataError(f"{path}, line {line}, column {wanted[key]!r}: {cell!r} is not a number{hint}") from None
     if not rows:
         raise DataError(f"{path}: no data rows")
-    return Measurements.from_arrays(data[time_column], {c: data[c] for c in channels}, sigma)
+    try:
+        return Measurements.from_arrays(data[time_column], {c: data[c] for c in channels}, sigma)
+    except DataError as exc:
+        raise DataError(f"{path}: {exc}") from None
+
+
+def _decode(path: Path) -> str:
+    """The text of a CSV file: UTF-8 with or without a byte-order mark; anything else is refused."""
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise DataError(f"cannot read data file {str(path)!r}: {exc.strerror or exc}") from None
+    if raw.startswith((b"\xff\xfe", b"\xfe\xff")):
+        raise DataError(f"{path}: the file is UTF-16 text; save it as UTF-8 (with or without BOM)")
+    if b"\x00" in raw[:4096]:
+        raise DataError(f"{path}: the file is binary (it holds NUL bytes), not a CSV text file")
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = raw[:exc.start].count(b"\n") + 1
+        raise DataError(f"{path}: the file is not UTF-8 text (byte 0x{raw[exc.start]:02x} on line {line}; "
+                        "perhaps Latin-1 or Windows-1252); save it as UTF-8") from None
+
+
+def _delimiter(header_line: str) -> str:
+    """``,``; or ``;`` or a tab when the header has no comma but one of those."""
+    if "," in header_line:
+        return ","
+    for d in (";", "\t"):
+        if d in header_line:
+            return d
+    return ","

@@ -6,7 +6,7 @@ scaled reduced Hessian ``D H_r D = V diag(lambda_1 >= ... >= lambda_n) V^T``
 is decomposed; the transformed parameters are ``q = V^T D^-1 p`` and
 ``p = D V q = D V1 q1 + D V2 q2`` (7.8). The modified E-optimal criterion
 keeps ``np`` = the largest ``k`` with ``lambda_1 / lambda_k <= threshold``
-(METHOD.md section 4); ``q1`` (the first ``np`` directions) is estimated and
+(docs/estimability.md); ``q1`` (the first ``np`` directions) is estimated and
 ``q2`` fixed (7.9). The bounds on ``p`` become linear inequalities on ``q1``,
 handled exactly by IPOPT.
 
@@ -19,7 +19,6 @@ carry no statistical uncertainty, only the bias of their fixed values).
 from __future__ import annotations
 
 import enum
-import json
 import math
 import time
 from dataclasses import dataclass
@@ -176,10 +175,8 @@ class Estimability:
         }
 
     def to_json(self, path) -> Path:
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(self.to_dict(), indent=2))
-        return path
+        from .output import write_json
+        return write_json(path, self.to_dict())
 
     def plot(self, path=None):
         """Eigenvalue spectrum with the threshold, and the composition of each
@@ -205,7 +202,8 @@ class Estimability:
         fig.colorbar(im, ax=a2)
         fig.tight_layout()
         if path is not None:
-            fig.savefig(path, dpi=120)
+            from .output import save_figure
+            save_figure(fig, path, dpi=120)
         return fig
 
 

@@ -48,6 +48,7 @@ from typing import Iterable, Mapping, Sequence
 import numpy as np
 import sympy as sp
 
+from .data import SIGMA_RANGE
 from .errors import ModelError
 from .summary import Section, Summary, Text
 
@@ -393,9 +394,19 @@ class ModelSpec:
                 if sym not in index:
                     raise ModelError(f"{sym} is not an estimated parameter of model {self.name!r}; "
                                      f"its parameters are {', '.join(self.parameter_names)}")
-                p[index[sym]] = float(val)
+                try:
+                    p[index[sym]] = float(val)
+                except (TypeError, ValueError):
+                    raise ModelError(f"the value {val!r} of parameter {sym} is not a number") from None
             return p
-        p = np.asarray(values, dtype=float).ravel()
+        if isinstance(values, (str, bytes)):
+            raise ModelError(f"parameter values {values!r}: give a sequence of {len(self.parameters)} numbers or a "
+                             f"{{name: value}} mapping ({', '.join(self.parameter_names)})")
+        try:
+            p = np.asarray(values, dtype=float).ravel()
+        except (TypeError, ValueError):
+            raise ModelError(f"parameter values {values!r} are not numbers; give a sequence of "
+                             f"{len(self.parameters)} numbers or a {{name: value}} mapping") from None
         if p.shape != (len(self.parameters),):
             raise ModelError(f"parameter vector has {p.size} values; model {self.name!r} has "
                              f"{len(self.parameters)} ({', '.join(self.parameter_names)})")
@@ -936,6 +947,9 @@ class Model:
         sigma = _float(sigma, f"sigma of output {name}")
         if not (sigma > 0 and math.isfinite(sigma)):
             raise ModelError(f"sigma of output {name} must be positive and finite, got {sigma}")
+        if not SIGMA_RANGE[0] <= sigma <= SIGMA_RANGE[1]:
+            raise ModelError(f"sigma of output {name} = {sigma:g} is out of scale (the weight 1/sigma^2 must be a "
+                             f"finite positive number: {SIGMA_RANGE[0]:g} <= sigma <= {SIGMA_RANGE[1]:g})")
         self._outputs.append(OutputSpec(str(name), sp.sympify(expr), sigma))
 
     @property

@@ -4,7 +4,7 @@ This is the source of truth data. It shares nothing with the collocation
 code used to estimate: it integrates the model's equations, solved for the
 derivatives, with ``scipy.integrate.solve_ivp``.
 
-Two details make tight tolerances meaningful on ascent models (METHOD.md
+Two details make tight tolerances meaningful on ascent models (docs/design.md
 section 1):
 
 * the integrator works on deviations from the initial state, ``s - s(t0)``,
@@ -265,6 +265,8 @@ def simulate_measurements(spec: ModelSpec, p: Sequence[float] | Mapping | None =
     -------
     Measurements
     """
+    if seed is not None and (isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0):
+        raise SettingsError(f"seed must be a non-negative integer or None, got {seed!r}")
     traj = simulate(spec, p, times, rtol=rtol, atol=atol)
     if not traj.success:
         raise RocketidError(f"cannot make measurements: {traj.message}")

@@ -14,7 +14,6 @@ initialize the states from a simulation at the initial guess, solve.
 from __future__ import annotations
 
 import difflib
-import json
 import math
 import time
 import warnings
@@ -31,6 +30,7 @@ from .data import Measurements
 from .errors import DataError, ModelError, SettingsError, SolverError
 from .model import ModelSpec, check_guess
 from .nlp import CollocationNLP, build_nlp
+from .output import finite_or_none
 from .summary import Section, Summary, Table
 
 __all__ = ["IPOPT_OPTIONS", "check_ipopt_options", "NLPSolution", "solve_nlp", "EstimationResult",
@@ -241,7 +241,7 @@ def default_mesh(spec: ModelSpec, K: int = 4, element_length: float | None = Non
     Radau points; ``refine_first`` splits the first element geometrically.
 
     RA-66 gets 66 elements of 1 s with K = 4: the collocation error at the true
-    parameters is 1.6e-3 m, within METHOD.md's 0.01 m (K = 3 gives 0.045 m,
+    parameters is 1.6e-3 m, within the required 0.01 m (K = 3 gives 0.045 m,
     and grading the first element does not bring K = 3 under 0.01 m; see
     docs/accuracy.md).
     """
@@ -297,6 +297,9 @@ def prepare(spec: ModelSpec, data: Measurements, *, mesh: Mesh | None = None) ->
     if not isinstance(data, Measurements):
         raise DataError(f"expected Measurements (rocketid.data.read_csv or Measurements.from_arrays), got "
                         f"{type(data).__name__}")
+    if mesh is not None and not isinstance(mesh, Mesh):
+        raise SettingsError(f"mesh must be a Mesh (for example rocketid.default_mesh(spec, K=4)), got "
+                            f"{type(mesh).__name__} {mesh!r}")
     t0 = time.perf_counter()
     gen = generate(spec)
     mesh = mesh if mesh is not None else default_mesh(spec)
@@ -406,7 +409,8 @@ class EstimationResult:
     @cached_property
     def rms(self) -> dict[str, float]:
         """Root-mean-square residual per channel."""
-        return {k: float(np.sqrt(np.mean(r ** 2))) for k, r in self.residuals.items()}
+        with np.errstate(over="ignore", invalid="ignore"):
+            return {k: float(np.sqrt(np.mean(r ** 2))) for k, r in self.residuals.items()}
 
     def active_bounds(self, rtol: float = 1e-6) -> list[tuple[sp.Symbol, str]]:
         """Parameters at (or within ``rtol`` of the span of) a bound."""
@@ -452,17 +456,18 @@ class EstimationResult:
         return Summary(f"rocketid estimation: {self.spec.name}", (problem, solver, parameters, fit), notes)
 
     def to_dict(self) -> dict:
-        """A JSON-ready dictionary (``success``, ``parameters``, ``objective``, ...)."""
+        """A JSON-ready dictionary (``success``, ``parameters``, ``objective``, ...);
+        a number that is not finite is ``None`` (the notes say why)."""
         return {
             "model": self.spec.name,
             "success": bool(self.success),
             "status": self.status,
             "message": self.message,
-            "parameters": {str(k): float(v) for k, v in self.parameters.items()},
-            "objective": float(self.objective),
-            "chi2_per_dof": float(self.chi2_per_dof),
+            "parameters": {str(k): finite_or_none(v) for k, v in self.parameters.items()},
+            "objective": finite_or_none(self.objective),
+            "chi2_per_dof": finite_or_none(self.chi2_per_dof),
             "iterations": int(self.iterations),
-            "rms": self.rms,
+            "rms": {k: finite_or_none(v) for k, v in self.rms.items()},
             "n_data": int(self.n_data),
             "mesh": {"n_elements": int(self.prepared.transcription.mesh.n_elements),
                      "K": int(self.prepared.transcription.mesh.K)},
@@ -472,9 +477,8 @@ class EstimationResult:
 
     def to_json(self, path) -> None:
         """Write :meth:`to_dict` as JSON."""
-        from pathlib import Path
-        Path(path).parent.mkdir(parents=True, exist_ok=True)
-        Path(path).write_text(json.dumps(self.to_dict(), indent=2))
+        from .output import write_json
+        write_json(path, self.to_dict())
 
 
 def estimate(spec: ModelSpec, data: Measurements, *, guess: Mapping | Sequence[float] | None = None,
@@ -503,6 +507,7 @@ def estimate(spec: ModelSpec, data: Measurements, *, guess: Mapping | Sequence[f
         ``success`` is False (with a note) when IPOPT fails; never raises for
         a non-converged solve.
     """
+    check_determined(spec, data)
     if prepared is None:
         prepared = prepare(spec, data, mesh=mesh)
     nlp = prepared.nlp
@@ -567,11 +572,42 @@ def result_of(prepared: Prepared, nlp: CollocationNLP, sol: NLPSolution, *, setu
     """The :class:`EstimationResult` of a solution ``sol`` of ``nlp`` (no solve)."""
     notes = list(notes)
     finite = bool(np.all(np.isfinite(sol.x)))
+    objective = sol.objective
     if not finite:
         notes.append("the solver returned non-finite values")
+    elif sol.status == INVALID_NUMBER or not math.isfinite(objective):
+        with np.errstate(over="ignore", invalid="ignore"):
+            objective = float(nlp.objective(sol.x))  # IPOPT reports 0 when it met an invalid number
+        if not math.isfinite(objective):
+            finite = False
+            notes.append("the objective is not finite at the returned point: the data are far out of scale for the "
+                         "model and sigma (check the units of the data and of --sigma)")
     if prepared.nlp is not nlp:
         prepared = replace(prepared, nlp=nlp)
     return EstimationResult(
         success=sol.success and finite, status=sol.status, message=sol.message, p=nlp.layout.parameters(sol.x),
-        objective=sol.objective, iterations=sol.iterations, x=sol.x, solution=sol, prepared=prepared,
+        objective=objective, iterations=sol.iterations, x=sol.x, solution=sol, prepared=prepared,
         timings={"setup_s": setup_s, "solve_s": sol.solve_s}, notes=tuple(notes), retried=retried)
+
+
+#: IPOPT's status "Invalid_Number_Detected" (NaN or infinity from the NLP's functions).
+INVALID_NUMBER = -13
+
+
+def check_determined(spec: ModelSpec, data: Measurements) -> None:
+    """Refuse a fit with no more measured values than estimated parameters.
+
+    Raises
+    ------
+    DataError
+        The data's values of the model's outputs are at most the number of
+        parameters (the fit would pass through them, and chi2/dof is undefined).
+    """
+    if not isinstance(data, Measurements) or not isinstance(spec, ModelSpec):
+        return  # prepare() names the wrong type
+    n = sum(c.times.size for c in data.channels if c.name in spec.output_names)
+    n_p = len(spec.parameters)
+    if n <= n_p:
+        raise DataError(f"the data have {n} values of {', '.join(spec.output_names)} but model {spec.name!r} "
+                        f"estimates {n_p} parameters; a fit needs more values than parameters (give more samples "
+                        "or fewer parameters)")

@@ -23,7 +23,6 @@ The measurement noise is :func:`rocketid.simulate_measurements` with
 
 from __future__ import annotations
 
-import csv
 import json
 import math
 import time
@@ -36,6 +35,7 @@ import numpy as np
 
 from .cases import ra66, ra66_times, ra66_truth
 from .errors import SettingsError
+from .output import nulls_for_non_finite, save_figure, write_csv, write_json, write_text
 from .sampling import SamplingResult, SamplingSettings, prepare_sampling, sample
 from .simulate import simulate, simulate_measurements
 from .solve import prepare
@@ -44,7 +44,7 @@ from .summary import Table as SummaryTable
 
 __all__ = ["StudySettings", "StudyResult", "Table", "reproduce", "CHAPTER", "run_seeds"]
 
-#: The chapter's published figures (METHOD.md section 6).
+#: The chapter's published figures (section 7.3; docs/reproduction.md).
 CHAPTER = {
     "np": 5,
     "mean_estimates": {"CD0": 0.0184218, "CD1": 0.625591, "CD2": 0.463646, "CD3": 0.493976, "CD4": 0.508575,
@@ -154,14 +154,9 @@ class Table:
         raise KeyError(f"no row of {self.name} with {match}")
 
     def write_csv(self, path: str | Path) -> Path:
-        path = Path(path)
-        with path.open("w", newline="") as f:
-            w = csv.writer(f)
-            w.writerow(self.columns)
-            for r in self.rows:
-                w.writerow(["" if isinstance(v, float) and not math.isfinite(v) else
-                            (repr(float(v)) if isinstance(v, float) else v) for v in r])
-        return path
+        return write_csv(path, self.columns, (["" if isinstance(v, float) and not math.isfinite(v) else
+                                               (repr(float(v)) if isinstance(v, float) else v) for v in r]
+                                              for r in self.rows))
 
     def to_markdown(self, digits: int = 6) -> str:
         def fmt(v):
@@ -355,9 +350,10 @@ class StudyResult:
         out.mkdir(parents=True, exist_ok=True)
         files = [self.table_7_1.write_csv(out / "table_7_1.csv"), self.table_7_2.write_csv(out / "table_7_2.csv"),
                  self.table_7_3.write_csv(out / "table_7_3.csv")]
-        (out / "tables.md").write_text(self.to_markdown() + "\n")
-        (out / "summary.txt").write_text(self.summary().text() + "\n")
-        (out / "study.json").write_text(json.dumps(self.to_dict(), indent=1, default=float) + "\n")
+        write_text(out / "tables.md", self.to_markdown() + "\n")
+        write_text(out / "summary.txt", self.summary().text() + "\n")
+        write_json(out / "study.json", nulls_for_non_finite(json.loads(json.dumps(self.to_dict(), default=float))),
+                   indent=1)
         files += [out / "tables.md", out / "summary.txt", out / "study.json"]
         if plots:
             files += self.plot(out)
@@ -391,7 +387,7 @@ class StudyResult:
         fig.suptitle("RA-66: high-accuracy predictions with the estimates, minus the noise-free truth")
         fig.tight_layout()
         files.append(out / "predictions.png")
-        fig.savefig(files[-1], dpi=110)
+        save_figure(fig, files[-1], dpi=110)
         plt.close(fig)
 
         fig, ax = plt.subplots(figsize=(9, 5))
@@ -410,7 +406,7 @@ class StudyResult:
         ax.legend(fontsize=7, ncol=2)
         fig.tight_layout()
         files.append(out / "eta.png")
-        fig.savefig(files[-1], dpi=110)
+        save_figure(fig, files[-1], dpi=110)
         plt.close(fig)
         return files
 

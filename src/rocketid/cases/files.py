@@ -15,7 +15,7 @@ from types import ModuleType
 from ..errors import ModelError, RocketidError
 from ..model import Model, ModelSpec
 
-__all__ = ["load_model_file"]
+__all__ = ["load_model_file", "call_hook"]
 
 
 def _import(path: Path) -> ModuleType:
@@ -28,11 +28,29 @@ def _import(path: Path) -> ModuleType:
     try:
         spec.loader.exec_module(module)
     except RocketidError:
+        sys.modules.pop(name, None)
         raise
+    except SystemExit as exc:
+        sys.modules.pop(name, None)
+        raise ModelError(f"model file {str(path)!r} called sys.exit({exc.code!r}) while being imported; a model "
+                         "file must only define build_model() (move script code under "
+                         "`if __name__ == \"__main__\":`)") from None
     except Exception as exc:
         sys.modules.pop(name, None)
         raise ModelError(f"model file {str(path)!r} failed to import: {type(exc).__name__}: {exc}") from exc
     return module
+
+
+def call_hook(path: str | Path, module: ModuleType, name: str, *args):
+    """Call the model file's optional function ``name`` (``truth``, ``sample_times``),
+    turning its failure into a :class:`ModelError` that names the file and the function."""
+    try:
+        return getattr(module, name)(*args)
+    except RocketidError as exc:
+        raise type(exc)(f"model file {str(path)!r}: {name}(): {exc}") from None
+    except (Exception, SystemExit) as exc:
+        raise ModelError(f"model file {str(path)!r}: {name}() failed: {type(exc).__name__}: {exc}; fix the "
+                         "function or remove it to use the default") from exc
 
 
 def load_model_file(path: str | Path) -> tuple[ModelSpec, ModuleType]:
@@ -71,7 +89,7 @@ def load_model_file(path: str | Path) -> tuple[ModelSpec, ModuleType]:
             spec = spec.freeze()
     except RocketidError as exc:
         raise type(exc)(f"model file {key!r}: {exc}") from exc
-    except Exception as exc:
+    except (Exception, SystemExit) as exc:
         raise ModelError(f"model file {key!r}: build_model() failed: {type(exc).__name__}: {exc}") from exc
     if not isinstance(spec, ModelSpec):
         raise ModelError(f"model file {key!r}: build_model() returned {type(spec).__name__}, not a ModelSpec; "

@@ -1,4 +1,4 @@
-"""RA-66: the chapter's study as rocketid's reference case (METHOD.md section 2).
+"""RA-66: the chapter's study as rocketid's reference case (docs/reference-cases.md).
 
 The chapter gives no vehicle data; these are rocketid's:
 
@@ -99,7 +99,7 @@ def ra66(*, n_cd_segments: int = 6, atmosphere: str = "yang1983", sigma: float =
         CL = m.piecewise_linear("CL", [0.0, 66.0], RA66_P0[7], bounds=RA66_BOUNDS, ties=[(0, 1)], nominal=0.1)
         return CD, CL
 
-    return ra66_vehicle_model("RA-66", "the chapter's study (METHOD.md section 2)", ra66_alpha,
+    return ra66_vehicle_model("RA-66", "the chapter's study (docs/reference-cases.md)", ra66_alpha,
                               time_knot_coefficients, atmosphere=atmosphere, sigma=sigma).freeze()
 
 

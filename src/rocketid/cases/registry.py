@@ -14,9 +14,9 @@ from typing import Callable, Mapping
 
 import numpy as np
 
-from ..errors import ModelError
+from ..errors import ModelError, RocketidError
 from ..model import Model, ModelSpec
-from .files import load_model_file
+from .files import call_hook, load_model_file
 from .ra66 import ra66, ra66_times, ra66_truth
 from .ra66m import ra66m, ra66m_truth
 
@@ -106,9 +106,19 @@ def load_model(name_or_path: str | Path) -> ModelSource:
     spec, module = load_model_file(key)
     truth = spec.guess
     if callable(getattr(module, "truth", None)):
-        truth = spec.parameter_vector(module.truth(spec))
+        value = call_hook(key, module, "truth", spec)
+        try:
+            truth = spec.parameter_vector(value)
+        except RocketidError as exc:
+            raise ModelError(f"model file {key!r}: truth(spec) returned an unusable value: {exc}") from None
     if callable(getattr(module, "sample_times", None)):
-        times = np.asarray(module.sample_times(), dtype=float).ravel()
+        value = call_hook(key, module, "sample_times")
+        try:
+            times = np.asarray(value, dtype=float).ravel()
+        except (TypeError, ValueError):
+            raise ModelError(f"model file {key!r}: sample_times() must return numbers, got {value!r:.60}") from None
+        if times.size == 0 or not np.all(np.isfinite(times)) or np.any(np.diff(times) <= 0):
+            raise ModelError(f"model file {key!r}: sample_times() must return finite, strictly increasing times")
     else:
         times = np.linspace(spec.t0, spec.tf, 1001)
     return ModelSource(spec, key, truth, times)

@@ -361,8 +361,15 @@ def transcribe(spec: ModelSpec, measurements: Measurements, mesh: Mesh) -> Trans
                             "drop the output") from None
         ts = ch.times
         if ts[0] < spec.t0 - 1e-12 or ts[-1] > spec.tf + 1e-12:
-            raise DataError(f"channel {o.name!r}: samples from t = {ts[0]:g} to {ts[-1]:g} lie outside the "
-                            f"model's horizon [{spec.t0:g}, {spec.tf:g}]; trim the data or extend the horizon")
+            before = ts[ts < spec.t0 - 1e-12]
+            after = ts[ts > spec.tf + 1e-12]
+            where = []
+            if before.size:
+                where.append(f"{before.size} before t0 = {spec.t0:g} (from t = {before[0]:g})")
+            if after.size:
+                where.append(f"{after.size} after tf = {spec.tf:g} (from t = {after[0]:g})")
+            raise DataError(f"channel {o.name!r}: {' and '.join(where)} of {ts.size} samples lie outside the "
+                            f"model's horizon [{spec.t0:g}, {spec.tf:g}]; remove those rows or extend the horizon")
         n = ts.size
         S = _interp_matrix(mesh, layout, ts, False).tocoo()
         dS = _interp_matrix(mesh, layout, ts, True).tocoo()

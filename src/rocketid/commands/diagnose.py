@@ -25,8 +25,9 @@ import time
 
 import click
 
-from ..cli import EXIT_NOT_CONVERGED, NameValue, assignments, model_option, status, verbose_option
+from ..cli import EXIT_NOT_CONVERGED, NameValue, assignments, model_option, read_data, status, verbose_option
 from ..errors import SettingsError
+from ..output import check_folder, folder_lock
 
 __all__ = ["command"]
 
@@ -52,12 +53,14 @@ __all__ = ["command"]
               help="Give up a refit or hold-out prediction after this long (it is reported as given up).")
 @click.option("--window", type=float, default=None, metavar="SECONDS",
               help="Window length of the located statistics (default: the flight's span / 22).")
+@click.option("--column", "columns", multiple=True, type=NameValue(str, "CSV column name"),
+              metavar="NAME=CSVCOL", help="Read output NAME from column CSVCOL (repeatable).")
 @click.option("--time-column", default="t", show_default=True, help="Name of the time column.")
 @click.option("--sigma", "sigmas", multiple=True, type=NameValue(float), metavar="NAME=VALUE",
               help="Noise standard deviation of an output (repeatable; default: the model's).")
 @verbose_option
 def command(data_file, out, model, level, confirm_top, holdout, max_effects, workers, refit_timeout, window,
-            time_column, sigmas):
+            columns, time_column, sigmas):
     """Fit a model to DATA.csv and diagnose what it misses; write DIR/report.html.
 
     The report compares each channel with the model, locates where the
@@ -65,7 +68,6 @@ def command(data_file, out, model, level, confirm_top, holdout, max_effects, wor
     checks the coefficients' plausibility, ranks candidate physical effects by
     the score test and confirms the leaders by refitting.
     """
-    from ..data import read_csv
     from ..diagnostics.api import diagnose, resolve_model
 
     if not 0 < level < 1:
@@ -75,16 +77,18 @@ def command(data_file, out, model, level, confirm_top, holdout, max_effects, wor
     if not refit_timeout > 0:
         raise SettingsError(f"--refit-timeout must be a positive number of seconds, got {refit_timeout:g}")
     holdout = _holdout(holdout)
+    check_folder(out, "--out")  # before the work: a bad --out fails at once, not after the fits
     spec, label = resolve_model(model)
     sig = assignments(sigmas, "--sigma", allowed=list(spec.output_names))
-    data = read_csv(data_file, spec.output_names, time_column=time_column, sigma=sig)
-    status(f"read {data.n_samples} values of {', '.join(data.names)} from {data_file}; fitting {spec.name} and "
-           "diagnosing")
-    t0 = time.perf_counter()
-    report = diagnose(data, spec, level=level, confirm_top=confirm_top, window=window, holdout=holdout,
-                      max_effects=max_effects, workers=workers, refit_timeout=refit_timeout)
-    report = _relabel(report, label, str(data_file))
-    path = report.write(out)
+    data = read_data(data_file, spec, time_column=time_column, columns=assignments(columns, "--column"), sigma=sig)
+    with folder_lock(out):
+        status(f"read {data.n_samples} values of {', '.join(data.names)} from {data_file}; fitting {spec.name} and "
+               "diagnosing")
+        t0 = time.perf_counter()
+        report = diagnose(data, spec, level=level, confirm_top=confirm_top, window=window, holdout=holdout,
+                          max_effects=max_effects, workers=workers, refit_timeout=refit_timeout)
+        report = _relabel(report, label, str(data_file))
+        path = report.write(out)
     for line in report.verdict():
         click.echo(line)
     click.echo(f"wrote {path} and {path.parent / 'candidates.json'} ({time.perf_counter() - t0:.1f} s)")

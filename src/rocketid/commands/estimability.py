@@ -22,8 +22,9 @@ from dataclasses import replace
 import click
 
 from ..cli import (EXIT_NOT_CONVERGED, NameValue, data_options, fit_inputs, ipopt_options, load_model,
-                   model_option, status, verbose_option, write_json)
+                   model_option, prepare_verbosely, status, verbose_option, write_json)
 from ..errors import SettingsError
+from ..output import check_file
 
 __all__ = ["command"]
 
@@ -57,7 +58,7 @@ def command(data_file, model, scaling, threshold, n_estimated, at, guesses, colu
     """
     from ..estimability import analyze, select_np
     from ..sensitivity import sensitivity_at, sensitivity_of
-    from ..solve import estimate, prepare
+    from ..solve import estimate
 
     # every setting is checked before any work is done
     try:
@@ -65,6 +66,9 @@ def command(data_file, model, scaling, threshold, n_estimated, at, guesses, colu
     except SettingsError as exc:
         raise SettingsError(f"--threshold: {exc}") from None
     options = ipopt_options(ipopt)
+    check_file(out, "--out")
+    if plot is not None:
+        check_file(plot, "--plot")
     src = load_model(model)
     spec = src.spec
     n_p = len(spec.parameters)
@@ -76,7 +80,7 @@ def command(data_file, model, scaling, threshold, n_estimated, at, guesses, colu
     status(f"read {data.n_samples} values of {', '.join(data.names)} from {data_file}; collocating on "
            f"{mesh.describe()}")
     t0 = time.perf_counter()
-    prepared = prepare(spec, data, mesh=mesh)
+    prepared = prepare_verbosely(spec, data, mesh)
     extra_notes = []
     fit_info = None
     if at == "fit":

@@ -18,7 +18,10 @@ least-eta run), ``tables.md`` (the tables beside the chapter's),
 
 Exit codes: 0 success; 1 the study ran but a run (or the reference solve)
 has no valid result; 2 bad input (including unfinished checkpoints in DIR
-without ``--resume``).
+without ``--resume``, and DIR in use by another run: the folder is locked
+while a study writes there); 130 interrupted (Ctrl-C; 143 on SIGTERM): the
+checkpoints are kept, continue with ``--resume``. Worker processes end with
+the command, however it ends.
 """
 
 from __future__ import annotations
@@ -26,6 +29,7 @@ from __future__ import annotations
 import click
 
 from ..cli import EXIT_NOT_CONVERGED, status, verbose_option
+from ..output import folder_lock
 
 __all__ = ["command"]
 
@@ -80,9 +84,11 @@ def command(out, runs, n_iter, seed, data_seed, scaling, threshold, n_perturbati
     settings = StudySettings(runs=runs, n_iter=n_iter, seed=seed, data_seed=data_seed, scaling=scaling,
                              threshold=threshold, n_perturbations=n_perturbations, batch_size=batch_size,
                              max_draws=max_draws)
-    status(f"RA-66 study: {runs} runs, n_iter = {n_iter}, scaling {scaling}, executor {executor}; writing to {out}")
-    result = reproduce(out, settings=settings, executor=executor, workers=workers, address=address, resume=resume,
-                       progress=False if quiet else None, plots=not no_plots)
+    with folder_lock(out):  # a second run into DIR is refused with this one's PID
+        status(f"RA-66 study: {runs} runs, n_iter = {n_iter}, scaling {scaling}, executor {executor}; "
+               f"writing to {out}")
+        result = reproduce(out, settings=settings, executor=executor, workers=workers, address=address,
+                           resume=resume, progress=False if quiet else None, plots=not no_plots)
     click.echo(result.summary().text())
     click.echo(f"\nwrote {out}/table_7_1.csv, table_7_2.csv, table_7_3.csv, tables.md, study.json"
                + ("" if no_plots else ", predictions.png, eta.png"))

@@ -43,6 +43,7 @@ from typing import Mapping
 import numpy as np
 
 from ..errors import DataError, SettingsError
+from ..output import save_figure
 from ..solve import EstimationResult
 
 __all__ = ["LjungBox", "Normality", "Theil", "ChannelComparison", "Comparison", "compare", "ljung_box",
@@ -415,7 +416,7 @@ class Comparison:
                               f"{self.chi2_per_dof:.3g}, eta {self.eta:.3g})", fontsize=11)
         fig.tight_layout()
         if path is not None:
-            fig.savefig(path, dpi=110)
+            save_figure(fig, path, dpi=110)
         return fig
 
     def plot_autocorrelation(self, path=None, *, max_lag: float = 5.0):
@@ -439,7 +440,7 @@ class Comparison:
         ax.legend(fontsize=8)
         fig.tight_layout()
         if path is not None:
-            fig.savefig(path, dpi=110)
+            save_figure(fig, path, dpi=110)
         return fig
 
 

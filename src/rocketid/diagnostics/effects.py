@@ -27,7 +27,7 @@ Notation
 The lift-off fade. At a launch from rest the flight-path equation
 ``v dtheta/dt = N/m - g cos(theta)`` is singular: near ``t = 0`` every
 ``delta = theta - pi/2 = C t^(g/a) + (particular solution)`` solves it
-(METHOD.md section 1, ``g/a`` about 0.96). A normal force ``N`` that does not
+(docs/design.md, the problem: ``g/a`` about 0.96). A normal force ``N`` that does not
 vanish at lift-off (a thrust misalignment) has no bounded solution from
 ``theta(0) = 90 deg``, and one growing like ``t`` (Coriolis) leaves ``C`` to the
 discretization: the simulator and the collocation would each pick their own

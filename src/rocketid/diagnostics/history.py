@@ -7,14 +7,13 @@ of freedom, the statistic criterion eta (7.10), the RMS residual per channel
 and, against the previous revision on the same data, the likelihood-ratio
 test (when the new model nests the previous one) and the change of BIC.
 
-eta comes from :func:`rocketid.sampling.criterion.criterion_of` (METHOD.md
+eta comes from :func:`rocketid.sampling.criterion.criterion_of` (docs/sampling.md
 section 5). eta tests skewness and kurtosis, not whiteness: the table shows
 the Ljung-Box p-value of the worst channel beside it.
 """
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,6 +23,7 @@ import numpy as np
 from scipy import stats
 
 from ..errors import SettingsError
+from ..output import nulls_for_non_finite, save_figure, write_json
 from ..solve import EstimationResult
 from .refit import DEFAULT_LAGS, information_criteria, ljung_box
 
@@ -194,10 +194,7 @@ class ModelHistory:
         return {"revisions": [r.to_dict() for r in self.revisions], "lags": self.lags}
 
     def to_json(self, path) -> Path:
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(self.to_dict(), indent=2))
-        return path
+        return write_json(path, nulls_for_non_finite(self.to_dict()))
 
     def plot_residuals(self, path=None, *, revisions: Sequence[int] | None = None, window: float = 1.0):
         """Residuals against time, one panel per channel, before (first revision) and after
@@ -236,6 +233,5 @@ class ModelHistory:
         fig.suptitle("residuals (model - measurement): samples and " + f"{window:g} s moving average")
         fig.tight_layout()
         if path is not None:
-            Path(path).parent.mkdir(parents=True, exist_ok=True)
-            fig.savefig(path, dpi=110)
+            save_figure(fig, path, dpi=110)
         return fig

@@ -47,6 +47,7 @@ import numpy as np
 
 from ..errors import DataError, SettingsError
 from ..simulate import evaluate_along
+from ..output import save_figure
 from ..solve import EstimationResult
 from .compare import Comparison, compare
 
@@ -549,7 +550,7 @@ class Location:
                               f"{'s' if len(self.findings) != 1 else ''})", fontsize=11)
         fig.tight_layout()
         if path is not None:
-            fig.savefig(path, dpi=110)
+            save_figure(fig, path, dpi=110)
         return fig
 
 

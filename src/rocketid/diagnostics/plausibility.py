@@ -52,6 +52,7 @@ import numpy as np
 
 from ..errors import RocketidError, SettingsError
 from ..simulate import evaluate_along
+from ..output import save_figure
 from ..solve import EstimationResult
 
 __all__ = ["Flag", "MachConsistency", "Plausibility", "check_plausibility", "COEFFICIENT_RULES", "SEVERITIES"]
@@ -284,7 +285,7 @@ class Plausibility:
             ax.set_title(f"{self.model}: estimates between their bounds (red: flagged)", fontsize=10)
         fig.tight_layout()
         if path is not None:
-            fig.savefig(path, dpi=110)
+            save_figure(fig, path, dpi=110)
         return fig
 
 

@@ -839,7 +839,9 @@ def _failed(task: RefitTask, message: str, seconds: float, gave_up: bool = False
 _TASKS: list = []   # read by forked workers (the tasks are not pickled: effects may be closures)
 
 
-def _child(index: int, conn) -> None:   # pragma: no cover - runs in a worker process
+def _child(index: int, conn, parent_pid: int) -> None:   # pragma: no cover - runs in a worker process
+    from ..sampling.executors import die_with_parent
+    die_with_parent(parent_pid)  # a killed diagnose leaves no refit process behind
     try:
         refit, _ = run_refit(_TASKS[index])
         conn.send(refit)
@@ -883,7 +885,7 @@ def refit_all(tasks: Sequence[RefitTask], *, workers: int | None = None) -> tupl
             while pending and len(running) < workers:
                 i = pending.pop(0)
                 recv, send = ctx.Pipe(duplex=False)
-                proc = ctx.Process(target=_child, args=(i, send), daemon=True)
+                proc = ctx.Process(target=_child, args=(i, send, os.getpid()), daemon=True)
                 proc.start()
                 send.close()
                 # the limit covers the solve; set-up (code generation on a cold cache) gets as long again

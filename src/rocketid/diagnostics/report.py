@@ -25,6 +25,7 @@ from typing import Any, Iterable, Sequence
 import numpy as np
 
 from ..errors import SettingsError
+from ..output import nulls_for_non_finite, save_figure, write_bytes, write_json, write_text
 
 __all__ = ["write_report", "render_html", "figure_png", "data_uri", "html_table", "PAGE"]
 
@@ -191,9 +192,7 @@ class _Figures:
 
     def add_png(self, name: str, png: bytes, caption: str) -> str:
         if self.folder is not None:
-            self.folder.mkdir(parents=True, exist_ok=True)
-            path = self.folder / f"{name}.png"
-            path.write_bytes(png)
+            path = write_bytes(self.folder / f"{name}.png", png)
             self.files.append(path)
         return (f'<figure><img alt="{_e(caption)}" src="{data_uri(png)}">'
                 f"<figcaption>{_e(caption)}</figcaption></figure>")
@@ -473,11 +472,10 @@ def _history_section(report, figs: _Figures) -> str:
     if figs.folder is not None:
         path = figs.folder / "history.png"
         try:
-            figs.folder.mkdir(parents=True, exist_ok=True)
             res = h.plot_residuals(path)
             if res is not None and hasattr(res, "savefig"):
                 if not path.is_file():
-                    res.savefig(path, dpi=100)
+                    save_figure(res, path, dpi=100)
                 import matplotlib.pyplot as plt
                 plt.close(res)
             if path.is_file():
@@ -536,13 +534,16 @@ def write_report(report, out: str | Path) -> Path:
         raise SettingsError(f"cannot create the report folder {str(out)!r}: {exc.strerror or exc}") from None
     if not out.is_dir():
         raise SettingsError(f"{str(out)!r} is not a folder")
+    # everything is formed before the first file is replaced, and every file is written atomically
     page, _ = render_html(report, out / "figures")
-    path = out / "report.html"
-    path.write_text(page, encoding="utf-8")
-    (out / "candidates.json").write_text(json.dumps(report.candidates_payload(), indent=2, default=_json_default) + "\n")
-    (out / "diagnosis.json").write_text(json.dumps(report.to_dict(), indent=2, default=_json_default) + "\n")
-    (out / "summary.txt").write_text(report.summary() + "\n")
-    return path
+    payloads = {name: nulls_for_non_finite(json.loads(json.dumps(obj, default=_json_default)))
+                for name, obj in (("candidates.json", report.candidates_payload()),
+                                  ("diagnosis.json", report.to_dict()))}
+    summary = report.summary() + "\n"
+    for name, obj in payloads.items():
+        write_json(out / name, obj)
+    write_text(out / "summary.txt", summary)
+    return write_text(out / "report.html", page)
 
 
 def _json_default(o):

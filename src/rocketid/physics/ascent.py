@@ -9,7 +9,7 @@ h (altitude, m), v (speed, m/s), theta (flight-path angle, rad)::
     v dtheta/dt = P sin(alpha)/m + q Sm CL/m - g cos(theta) + v^2 cos(theta)/(Re+h)
 
 with q = rho v^2 / 2. The theta equation is declared in its v-multiplied
-form, which is regular at the launch from rest (METHOD.md section 1). Lift is
+form, which is regular at the launch from rest (docs/design.md, the problem). Lift is
 CL times dynamic pressure (the chapter's form: CL is not multiplied by alpha;
 an aerodynamic model that wants CL_alpha * alpha passes that as ``cl``).
 """

@@ -293,7 +293,7 @@ def us76_speed_of_sound(h) -> sp.Piecewise:
 
 # Yang (1983): rho / rho_SL = c * W^a per layer, W a function of H in km.
 _YANG_LAYERS = (
-    # (c, a, W(Hkm)) -- coefficients as in METHOD.md section 1 (typo-free)
+    # (c, a, W(Hkm)) -- coefficients of Yang 1983 without the typos of public copies
     (1.0, 4.2559, lambda Hk: sp.Max(1 - Hk / sp.Float(44.3308), sp.Float(_W_FLOOR))),
     (0.15898, 1.0, lambda Hk: sp.exp((sp.Float(14.9647) - Hk) / sp.Float(6.3416))),
     (0.032722, -35.1629, lambda Hk: 1 + (Hk - sp.Float(24.9021)) / sp.Float(221.552)),

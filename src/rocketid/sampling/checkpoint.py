@@ -23,14 +23,17 @@ from __future__ import annotations
 import json
 import math
 import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from ..errors import SettingsError
+from ..output import write_json
 from .worker import DrawOutcome
 
-__all__ = ["RunState", "checkpoint_path", "write_checkpoint", "read_checkpoint", "CHECKPOINT_VERSION"]
+__all__ = ["RunState", "checkpoint_path", "write_checkpoint", "read_checkpoint", "checkpoint_problem",
+           "CHECKPOINT_VERSION"]
 
 CHECKPOINT_VERSION = 1
 
@@ -144,6 +147,83 @@ class RunState:
         return longest
 
 
+def _is_int(v) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def _is_num(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def checkpoint_problem(d: object, seed: int) -> str | None:
+    """What is wrong with a checkpoint's content as a whole (None: a consistent run state).
+
+    Every field is checked for its type, and the fields against each other:
+    the history has one entry per draw, failures are exactly its nulls,
+    improvements are the draws where the running best fell, the best draw is
+    the last of them with the history's least eta, and ``since`` counts the
+    draws after it.
+    """
+    if not isinstance(d, dict):
+        return "not a JSON object"
+    need = {"n_iter": _is_int, "seed": _is_int, "draws": _is_int, "since": _is_int, "failures": list.__instancecheck__,
+            "history": list.__instancecheck__, "improvements": list.__instancecheck__, "best": lambda v: True}
+    for key, ok in need.items():
+        if key not in d:
+            return f"the field {key!r} is missing"
+        if not ok(d[key]):
+            return f"the field {key!r} has the wrong type ({type(d[key]).__name__})"
+    for key, ok in (("solve_s", _is_num), ("n_retried", _is_int), ("iterations", _is_int)):
+        if key in d and not ok(d[key]):
+            return f"the field {key!r} has the wrong type ({type(d[key]).__name__})"
+    if d.get("stopped_by") not in (None, "n_iter", "max_draws"):
+        return f"stopped_by is {d.get('stopped_by')!r}"
+    if d["seed"] != seed:
+        return f"it holds run {d['seed']}, not {seed}"
+    draws, history = d["draws"], d["history"]
+    if d["n_iter"] < 1 or draws < 0 or not 0 <= d["since"] <= draws:
+        return f"n_iter {d['n_iter']}, draws {draws} and since {d['since']} are out of range"
+    if len(history) != draws:
+        return f"{len(history)} history entries for {draws} draws"
+    if any(v is not None and not _is_num(v) for v in history):
+        return "the history holds values that are neither numbers nor null"
+    failed = [k for k, v in enumerate(history, 1) if v is None]
+    fails = d["failures"]
+    if (any(not (isinstance(f, list) and len(f) == 3 and _is_int(f[0])) for f in fails)
+            or [f[0] for f in fails] != failed):
+        return "the failures do not match the failed (null) draws of the history"
+    best_eta, improvements = math.inf, []
+    for k, v in enumerate(history, 1):
+        if v is not None and v < best_eta:
+            best_eta = v
+            improvements.append(k)
+    if d["improvements"] != improvements:
+        return "the improvements do not match the history"
+    best = d["best"]
+    if not improvements:
+        if best is not None:
+            return "a best draw in a run with no successful draw"
+        since = draws
+    else:
+        if not isinstance(best, dict):
+            return "the best draw is missing"
+        try:
+            outcome = DrawOutcome.from_dict(best)
+        except (KeyError, TypeError, ValueError) as exc:
+            return f"the best draw is malformed ({type(exc).__name__}: {exc})"
+        if outcome.draw != improvements[-1] or outcome.seed != seed or outcome.eta != best_eta:
+            return "the best draw is not the history's least eta"
+        if not (outcome.success and len(outcome.moments) == 4 and len(outcome.p) == len(outcome.p_trial) > 0
+                and all(v is not None for v in outcome.p) and np.all(np.isfinite(np.array(outcome.p, float)))):
+            return "the best draw has no valid estimate"
+        since = draws - improvements[-1]
+    if d["since"] != since:
+        return f"since is {d['since']}, the history gives {since}"
+    if d.get("stopped_by") == "n_iter" and since < d["n_iter"]:
+        return "stopped by n_iter before n_iter draws without improvement"
+    return None
+
+
 def checkpoint_path(directory: str | os.PathLike, seed: int) -> Path:
     """``DIR/checkpoints/run_<seed>.json``."""
     return Path(directory) / "checkpoints" / f"run_{int(seed)}.json"
@@ -153,23 +233,9 @@ def write_checkpoint(directory: str | os.PathLike, state: RunState, *, token: st
                      n_iter: int) -> Path:
     """Write ``state`` atomically (tmp file + ``os.replace``)."""
     path = checkpoint_path(directory, state.seed)
-    path.parent.mkdir(parents=True, exist_ok=True)
     payload = {"version": CHECKPOINT_VERSION, "token": token, "settings": settings_key, "n_iter": n_iter}
     payload.update(state.to_dict())
-    fd, tmp = tempfile.mkstemp(prefix=f".run_{state.seed}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as f:
-            json.dump(payload, f, allow_nan=False)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
-    return path
+    return write_json(path, payload, indent=None)
 
 
 def read_checkpoint(directory: str | os.PathLike, seed: int, *, token: str, settings_key: dict,
@@ -200,6 +266,10 @@ def read_checkpoint(directory: str | os.PathLike, seed: int, *, token: str, sett
     if d.get("settings") != settings_key:
         raise SettingsError(f"checkpoint {str(path)!r} was written with settings {d.get('settings')}, not "
                             f"{settings_key}; use the same settings or another output directory")
+    problem = checkpoint_problem(d, seed)
+    if problem:
+        raise SettingsError(f"checkpoint {str(path)!r} is not a consistent run state ({problem}); it was edited or "
+                            f"damaged: remove it to start run {seed} afresh")
     state = RunState.from_dict(d)
     old_n_iter = int(d["n_iter"])
     if n_iter != old_n_iter:

@@ -17,14 +17,53 @@ processes the outcomes in draw order.
 from __future__ import annotations
 
 import os
+import signal
+import sys
+import threading
+import time
 from typing import Any
 
 from ..errors import SettingsError, SolverError
 from .worker import BatchResult, Recipe, WorkerContext, evaluate_batch, install
 
-__all__ = ["EXECUTORS", "make_executor", "default_workers"]
+__all__ = ["EXECUTORS", "make_executor", "default_workers", "die_with_parent"]
 
 EXECUTORS = ("serial", "processes", "dask")
+
+
+def die_with_parent(parent_pid: int) -> None:
+    """Make this (worker) process end when ``parent_pid``, its parent, ends, however
+    the parent ends (``SIGKILL`` included), and leave Ctrl-C to the parent.
+
+    On Linux the kernel sends ``SIGKILL`` on the parent's death
+    (``prctl(PR_SET_PDEATHSIG)``); elsewhere a daemon thread polls the parent
+    once a second. A parent that died before this call ends the process at once.
+    """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent shuts the pool down on Ctrl-C
+    armed = False
+    if sys.platform.startswith("linux"):
+        try:
+            import ctypes
+            libc = ctypes.CDLL(None, use_errno=True)
+            PR_SET_PDEATHSIG = 1
+            armed = libc.prctl(PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0) == 0
+        except (OSError, AttributeError):  # pragma: no cover - no prctl
+            armed = False
+    if os.getppid() != parent_pid:
+        os._exit(1)
+    if not armed:  # pragma: no cover - not Linux
+        def watch():
+            while True:
+                time.sleep(1.0)
+                if os.getppid() != parent_pid:
+                    os._exit(1)
+        threading.Thread(target=watch, name="rocketid-parent-watch", daemon=True).start()
+
+
+def _start_worker(parent_pid: int, recipe: Recipe) -> None:
+    """Initializer of a pool process: tie it to its parent, then install the recipe."""
+    die_with_parent(parent_pid)
+    install(recipe)
 
 
 def default_workers() -> int:
@@ -81,7 +120,7 @@ class ProcessExecutor:
         self.workers = int(workers)
         self.token = recipe.token
         self.pool = cf.ProcessPoolExecutor(max_workers=self.workers, mp_context=mp.get_context("spawn"),
-                                           initializer=install, initargs=(recipe,))
+                                           initializer=_start_worker, initargs=(os.getpid(), recipe))
 
     def submit(self, seed: int, k0: int, k1: int):
         return self.pool.submit(evaluate_batch, self.token, seed, k0, k1)
@@ -139,22 +178,35 @@ class DaskExecutor:
             raise SettingsError("the dask cluster has no workers")
         self.workers = n
         self.recipe = client.scatter(recipe, broadcast=True, hash=False)
+        self._outstanding: set = set()
 
     def submit(self, seed: int, k0: int, k1: int):
-        return self.client.submit(evaluate_batch, self.recipe, seed, k0, k1, pure=False)
+        future = self.client.submit(evaluate_batch, self.recipe, seed, k0, k1, pure=False)
+        self._outstanding.add(future)
+        return future
 
     def wait(self, handles) -> list:
         done, _ = self._distributed.wait(list(handles), return_when="FIRST_COMPLETED")
         return list(done)
 
     def result(self, handle) -> BatchResult:
+        self._outstanding.discard(handle)
         return handle.result()
 
     def cancel(self, handle) -> bool:
-        handle.cancel()
-        return True
+        """False: a dask task may already run on a worker, and a cancel request does not
+        stop it. The coordinator then waits for its result and counts it as waste, so that
+        no task still runs when :func:`~rocketid.sampling.sample` returns (a task still
+        running while its cluster shut down made that shutdown fail now and then)."""
+        return False
 
     def close(self, cancel: bool = False) -> None:
+        if cancel and self._outstanding:
+            try:
+                self.client.cancel(list(self._outstanding), force=True)
+            except Exception:  # pragma: no cover - a closed or lost client
+                pass
+        self._outstanding.clear()
         try:
             self.recipe.release()  # the scattered recipe leaves the workers' memory
         except Exception:  # pragma: no cover - a closed or lost client
