@@ -68,7 +68,7 @@ def test_an_implausible_size_is_not_accepted_and_loses_to_a_plausible_rival():
     i, why = _choose([wrong, right])
     assert i == 1 and "reach the noise" in why
     # alone, the implausible refit is never chosen, not even as a step
-    assert _choose([wrong]) == (None, "no refit is significant with a plausible size and plausible coefficients")
+    assert _choose([wrong]) == (None, "no refit is significant with a plausible size")
 
 
 def test_size_limit_is_five_realistic_sizes():
@@ -92,8 +92,14 @@ def test_a_refit_that_gave_up_or_did_not_converge_is_not_accepted():
 
 
 def test_implausible_base_coefficients_block_acceptance():
+    """... but not a step: while another effect is still missing, it distorts the coefficients."""
     a = accept(refit("density", 0.995, plausible=False), BAND)
-    assert not a.accepted and not a.admissible and "at-bound" in a.check("coefficients").detail
+    assert not a.accepted and a.admissible and "at-bound" in a.check("coefficients").detail
+    # a step with plausible coefficients is preferred to one without, whatever their BIC
+    b = accept(refit("thrust_level", 1.4, value=0.02, size=0.02), BAND)
+    c = accept(refit("bias_h", 1.3, value=5.0, size=5.0, plausible=False), BAND)
+    assert b.admissible and c.admissible and c.refit.bic[1] < b.refit.bic[1]
+    assert _choose([c, b])[0] == 1
 
 
 def test_the_lr_test_is_corrected_for_the_contenders_refitted():
@@ -123,3 +129,19 @@ def test_the_noise_band_follows_the_dof_and_the_discretization():
     band = NoiseBand(upper=float(stats.chi2.isf(1e-3, DOF) / DOF), dof=DOF, discretization=0.0)
     assert band.contains(1.0) and band.contains(1.03) and not band.contains(1.04)
     assert not band.contains(float("nan"))
+
+
+def test_a_big_coefficient_shift_from_a_fit_at_the_noise_needs_a_clear_gain():
+    """From a base fit already inside the band, moving a coefficient by 50 % for a chi2/dof gain of
+    0.0015 (0.15 sd) is a change of the coefficients, not an explanation; the same move for a gain of
+    0.0086 (0.86 sd: the coefficients had absorbed the effect) is accepted."""
+    from dataclasses import replace
+    sd = math.sqrt(2 / DOF)
+    small = replace(refit("density", 0.9783, base_chi2=0.9798), base_values={"CD": 0.2},
+                    base_chi2_per_dof=0.9798)
+    a = accept(small, BAND)
+    assert not a.check("coefficients").passed and "moves by 50 %" in a.check("coefficients").detail
+    clear = replace(refit("back_pressure", 1.0065, value=0.4, size=0.4, base_chi2=1.0151), base_values={"CD": 0.2},
+                    base_chi2_per_dof=1.0151)
+    assert (1.0151 - 1.0065) > 0.5 * sd > (0.9798 - 0.9783)
+    assert accept(clear, BAND).accepted

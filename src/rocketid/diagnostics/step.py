@@ -170,11 +170,16 @@ def _choose(accs: Sequence[Acceptance]) -> tuple[int | None, str]:
         i = min(acc, key=lambda j: accs[j].refit.bic[1])
         return i, f"the lowest BIC of the {len(acc)} refit(s) that reach the noise with plausible sizes"
     adm = [i for i, a in enumerate(accs) if a.admissible]
+    good = [i for i in adm if accs[i].check("coefficients").passed]
+    if good:
+        i = min(good, key=lambda j: accs[j].refit.bic[1])
+        return i, (f"none reaches the noise; the lowest BIC of the {len(good)} significant refit(s) with plausible "
+                   "sizes and coefficients")
     if adm:
         i = min(adm, key=lambda j: accs[j].refit.bic[1])
         return i, (f"none reaches the noise; the lowest BIC of the {len(adm)} significant refit(s) with plausible "
-                   "sizes and coefficients")
-    return None, "no refit is significant with a plausible size and plausible coefficients"
+                   "sizes (the coefficients are still distorted: another effect may be missing)")
+    return None, "no refit is significant with a plausible size"
 
 
 def _tie_break(accs, i, fit, chosen_effects, contenders_effects, holdout, level, options, timeout) -> tuple:
