@@ -72,7 +72,7 @@ def table(records: list[dict]) -> str:
         f, s = r["final"], r["score"]
         found = " + ".join(f["effects"]) or "nothing"
         flag = "yes" if s["passed"] else ("**WRONG EXPLAINED**" if s["wrong_explained"] else "no")
-        rows.append(f"| {r['case']} | {r['vehicle']} | {r['truth']} | {found} | {r['base']['chi2_per_dof']:.4f} -> "
+        rows.append(f"| {r['case']}{r.get('run', '')} | {r['vehicle']} | {r['truth']} | {found} | {r['base']['chi2_per_dof']:.4f} -> "
                     f"{f['chi2_per_dof']:.4f} | {sizes_text(r)} | {f['verdict']} | {flag} | {r['seconds']:.0f} |")
     return "\n".join(rows)
 
@@ -97,6 +97,8 @@ def main(argv=None) -> int:
     ap.add_argument("--json", type=Path, help="write the records here")
     ap.add_argument("--rescore", type=Path, help="no diagnosis: re-score the final models stored in this JSON "
                     "(written by --json) with the current scoring, and write the table")
+    ap.add_argument("--update", type=Path, nargs="*", default=[], help="with --rescore: records of later runs "
+                    "(JSON) that replace the stored ones case by case; the table marks them")
     ap.add_argument("--docs", type=Path, help="replace the study table in this Markdown file (between the markers "
                     "<!-- study-table:start --> and <!-- study-table:end -->)")
     args = ap.parse_args(argv)
@@ -119,6 +121,13 @@ def main(argv=None) -> int:
     if args.rescore:
         stored = json.loads(args.rescore.read_text())
         head, records = stored["commit"], stored["records"]
+        for i, upd in enumerate(args.update, 1):
+            later = json.loads(upd.read_text())
+            mark = f" (re-run {i})" if len(args.update) > 1 else " (re-run)"
+            by_id = {r["case"]: dict(r, run=mark) for r in later["records"]}
+            records = [by_id.get(r["case"], r) for r in records]
+            stored["rocketid"] = (f"{stored.get('rocketid', '?')}; rows marked{mark}: "
+                                  f"{later.get('rocketid', '?')} (study commit {later['commit']})")
         for r in records:
             if r["source"] != "error":
                 r["score"] = H.score(C.BY_ID[r["case"]], r["final"])

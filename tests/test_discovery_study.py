@@ -162,30 +162,29 @@ def test_fast_case_on_a_coarse_mesh():
     check_case(rec)
 
 
-#: Cases the diagnosis did not pass when the study was last run (``benchmarks/discovery_study.py``
-#: on the decision of discovery commit abd18d9, landed on main in d68e1ac; 2026-11-23), each with its
-#: measured failure. They stay real assertions: xfail, not strict, so that a fix shows as XPASS.
+#: Cases the diagnosis did not pass when the study was last run (``benchmarks/discovery_study.py``:
+#: all cases on discovery commit abd18d9, the rows it got wrong and the RA-66M rows re-run on main
+#: e1788b4; 2026-11-23), each with its measured failure. They stay real assertions: xfail, not
+#: strict, so that a fix shows as XPASS.
 KNOWN_FAILURES: dict[str, str] = {
     "s30-wind": "partly explained: misalignment + wind + bias_x, chi2/dof 1.0471 (band 1.036), CL_alpha 0.22 "
                 "(truth 2.5): the 4-Gaussian wind basis trades against CL_alpha; a surface wind at the 5 m/s "
                 "release makes the base fit land at the bounds (chi2/dof 1.1e5)",
     "s30-density": "not explained by the catalogue: density, wind and misalignment reach the noise with BIC "
                    "within 10 and predict the hold-out alike (base chi2/dof 1.0151: at the edge of visibility)",
-    "m-back_pressure": "WRONG EXPLAINED: transonic_drag (dCD 0.018, 9 % of realistic), chi2/dof 1.0135, every "
-                       "CD_M 35-63 % below the truth; the base fit absorbs the altitude thrust into CD(M) "
-                       "(chi2/dof 1.0151) and a refit that moves CD by > 20 % from a base at the noise is "
-                       "refused, so the true back_pressure (1.0065 on discovery 17e2ef4) is not accepted",
-    "m-transonic_drag": "partly explained: thrust_level + transonic_drag + time_offset, chi2/dof 1.0177 "
-                        "(band 1.032): a drag rise between the CD(M) knots needs CD(M) on more knots",
+    "m-transonic_drag": "WRONG EXPLAINED on e1788b4: thrust_profile_5 + density_6, chi2/dof 1.0079, with CD_M_0 "
+                        "at its bound 0.01, CD_M_3 1.12 (truth 0.55), CL_alpha 3.10 (2.5); on abd18d9 'partly "
+                        "explained' (thrust_level + transonic_drag + time_offset, 1.0177). A drag rise between "
+                        "the CD(M) knots needs CD(M) on more knots",
     "m-mass_flow": "nothing missing: a 1.5 % mass-flow error is absorbed by CD(M) (base chi2/dof 0.9836, "
                    "CD_M_0 0.270 vs 0.30)",
     "s30-back_pressure+wind": "partly explained: misalignment + back_pressure + wind, chi2/dof 1.0669 (the "
-                              "wind as in s30-wind)",
+                              "wind as in s30-wind; abd18d9)",
     "m-thrust_level+density": "thrust_level found (chi2/dof 1.0108), the density profile not added: on RA-66M "
                               "CD(M) absorbs it (alone: base chi2/dof 0.980)",
 }
-#: the one case where the diagnosis called a wrong effect explained in that run
-KNOWN_WRONG = {"m-back_pressure": KNOWN_FAILURES["m-back_pressure"]}
+#: the case where the diagnosis called a wrong effect explained in the last run
+KNOWN_WRONG = {"m-transonic_drag": KNOWN_FAILURES["m-transonic_drag"]}
 
 
 def _cases(cases):
