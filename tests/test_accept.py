@@ -145,3 +145,24 @@ def test_a_big_coefficient_shift_from_a_fit_at_the_noise_needs_a_clear_gain():
                     base_chi2_per_dof=1.0151)
     assert (1.0151 - 1.0065) > 0.5 * sd > (0.9798 - 0.9783)
     assert accept(clear, BAND).accepted
+
+
+def test_identifiability_names_the_direction_that_trades_off_against_a_coefficient():
+    """Issue 8, item 8: a profile whose combination trades off against a coefficient is reported as
+    not identifiable, with the coefficient and the combination that is identifiable."""
+    from rocketid.diagnostics.refit import identifiability
+    names = ["CL_alpha", "w1", "w2"]
+    # w1 - w2 is pinned (std 0.1 m/s), w1 + w2 is not (std 300 m/s) and moves with CL_alpha
+    V = np.array([[1.0, 1.0], [1.0, -1.0]]) / np.sqrt(2)
+    C_w = V @ np.diag([300.0 ** 2, 0.1 ** 2]) @ V.T
+    cov = np.zeros((3, 3))
+    cov[1:, 1:] = C_w
+    cov[0, 0] = 0.05 ** 2
+    cov[0, 1:] = cov[1:, 0] = 0.9 * 0.05 * 300.0 / np.sqrt(2)
+    text = identifiability(names, cov, ["w1", "w2"], {"w1": 30.0, "w2": 30.0})
+    assert text.startswith("1 of 2 directions of w1, w2 are not identifiable")
+    assert "trading off against CL_alpha (correlation +0.90)" in text
+    ident = text.split("the identifiable combination is ")[1]
+    assert ident.startswith(("+1.00 w1/30 -1.00 w2/30", "-1.00 w1/30 +1.00 w2/30"))   # w1 - w2, either sign
+    # well determined: nothing to say
+    assert identifiability(names, np.diag([0.05 ** 2, 1.0, 1.0]), ["w1", "w2"], {"w1": 30.0, "w2": 30.0}) == ""
