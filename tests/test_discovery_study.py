@@ -17,7 +17,7 @@ effect.
 The normal suite checks the study's instruments (the pressure table, the truth models against the
 vehicles' estimation models, the user's vehicle fitting clean data to the noise; about 35 s);
 the diagnosis cases take 0.5-3 min each and are ``slow`` (``pytest -m slow``), the quickest being
-``test_fast_case_on_a_coarse_mesh``.
+``test_quick_case``.
 """
 
 from __future__ import annotations
@@ -155,11 +155,13 @@ def check_case(rec: dict) -> None:
 
 
 @pytest.mark.slow
-def test_fast_case_on_a_coarse_mesh():
-    """One case in the normal suite: a 5 m altitude bias on Stage-30, diagnosed on 2 s elements."""
-    case = C.BY_ID["s30-bias_h"]
-    rec = H.run_case(case, mesh=H.small_mesh(case))
-    check_case(rec)
+def test_quick_case():
+    """The quickest case (about 30-80 s): a 5 m altitude bias on Stage-30, on the default mesh.
+
+    (On 2 s elements, main e1788b4, the same data gave bias_h at chi2/dof 1.0033 with the verdict
+    "partly explained"; the study uses the default mesh throughout.)
+    """
+    check_case(record("s30-bias_h"))
 
 
 #: Cases the diagnosis did not pass when the study was last run (``benchmarks/discovery_study.py``:

@@ -85,14 +85,6 @@ def model_of(case: Case) -> str:
     return str(STAGE30) if case.vehicle == "stage30" else case.vehicle
 
 
-def small_mesh(case: Case):
-    """The coarsest mesh the study uses (2 s elements, graded first element)."""
-    from rocketid.cases.files import load_model_file
-    from rocketid.cases import ra66, ra66m
-    spec = {"ra66": ra66, "ra66m": ra66m}[case.vehicle]() if case.vehicle != "stage30" else load_model_file(STAGE30)[0]
-    return ri.default_mesh(spec, element_length=2.0, refine_first=3)
-
-
 # -------------------------------------------------------------------------------------------------
 # what the diagnosis concluded
 # -------------------------------------------------------------------------------------------------
