@@ -166,3 +166,27 @@ def test_identifiability_names_the_direction_that_trades_off_against_a_coefficie
     assert ident.startswith(("+1.00 w1/30 -1.00 w2/30", "-1.00 w1/30 +1.00 w2/30"))   # w1 - w2, either sign
     # well determined: nothing to say
     assert identifiability(names, np.diag([0.05 ** 2, 1.0, 1.0]), ["w1", "w2"], {"w1": 30.0, "w2": 30.0}) == ""
+
+
+def test_a_final_model_at_the_noise_with_a_coefficient_at_a_bound_is_not_explained():
+    """The study's RA-66M transonic case: a thrust profile and a density profile reached the noise
+    (chi2/dof 1.008) with CD_M_0 held at its lower bound and the drag table redrawn. Reaching the
+    noise is not enough: the final model must pass every check of an explanation."""
+    from rocketid.diagnostics.step import final_verdict
+    bad = accept(refit("density", 1.008, plausible=False), BAND)
+    assert bad.check("noise").passed and not bad.check("coefficients").passed
+    verdict, notes = final_verdict(True, True, False, bad)
+    assert verdict == "partly explained"
+    assert "at its lower bound" in notes[0]
+    good = accept(refit("thrust_level", 0.9917), BAND)
+    assert final_verdict(True, True, False, good) == ("explained", [])
+    # an implausible size, or an effect held at a bound, is not an explanation either
+    big = accept(refit("mass_flow", 0.995, value=0.02 * (SIZE_FACTOR + 1)), BAND)
+    assert final_verdict(True, True, False, big)[0] == "partly explained"
+    held = accept(refit("mass_flow", 0.995, at_bound=("p_mass_flow",)), BAND)
+    assert final_verdict(True, True, False, held)[0] == "partly explained"
+    # a tie the data cannot decide, a final model above the noise, nothing added
+    assert final_verdict(True, True, False, good, ambiguous="density or wind")[0] == "partly explained"
+    assert final_verdict(True, False, False, good)[0] == "partly explained"
+    assert final_verdict(False, False, True, None)[0] == "nothing missing"
+    assert final_verdict(False, False, False, None)[0] == "not explained by the catalogue"
