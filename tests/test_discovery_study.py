@@ -164,9 +164,8 @@ def test_quick_case():
     check_case(record("s30-bias_h"))
 
 
-#: Cases the diagnosis did not pass when the study was last run (``benchmarks/discovery_study.py``:
-#: all cases on discovery commit abd18d9, the rows it got wrong and the RA-66M rows re-run on main
-#: e1788b4; 2026-11-23), each with its measured failure. They stay real assertions: xfail, not
+#: Cases the diagnosis did not pass when the study was last run (``benchmarks/discovery_study.py`` on
+#: main d0b7014, 2026-11-23; the table in docs/effects.md), each with its measured failure. They stay real assertions: xfail, not
 #: strict, so that a fix shows as XPASS.
 KNOWN_FAILURES: dict[str, str] = {
     "s30-wind": "partly explained: misalignment + wind + bias_x, chi2/dof 1.0471 (band 1.036), CL_alpha 0.22 "
