@@ -41,6 +41,7 @@ def _data(model: str, out: Path) -> Path:
         base = ri.ra66()
         spec = with_effects(base, "thrust_level", {"eps_thrust": 0.02})
         p, times = ri.ra66_truth(spec), ri.ra66_times()
+        p[spec.parameter_names.index("eps_thrust")] = 0.02       # ra66_truth sets every non-CL parameter to 0.5
     else:
         mod_spec = importlib.util.spec_from_file_location("user_model", model)
         mod = importlib.util.module_from_spec(mod_spec)
@@ -57,8 +58,9 @@ def _data(model: str, out: Path) -> Path:
 def _run(csv: Path, model: str, cache: str, out: Path) -> tuple[float, str]:
     env = dict(os.environ, ROCKETID_CACHE_DIR=cache)
     t0 = time.perf_counter()
-    res = subprocess.run([sys.executable, "-m", "rocketid", "diagnose", str(csv), "--out", str(out),
-                          "--model", model], env=env, capture_output=True, text=True)
+    cmd = [sys.executable, "-c", "from rocketid.cli import main; main()", "diagnose", str(csv), "--out", str(out),
+           "--model", model]
+    res = subprocess.run(cmd, env=env, capture_output=True, text=True)
     dt = time.perf_counter() - t0
     if res.returncode not in (0, 1):
         raise RuntimeError(f"rocketid diagnose failed ({res.returncode}): {res.stderr[-2000:]}")
@@ -70,14 +72,16 @@ def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--model", default=str(ROOT / "tests" / "vehicles" / "stage30.py"))
     ap.add_argument("--json", default=None)
+    ap.add_argument("--only-ra66", action="store_true", help="only the RA-66 row")
     args = ap.parse_args(argv)
     rows = {}
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         cold = tmp / "cache"
-        user_csv = _data(args.model, tmp / "user.csv")
-        rows["new model, empty cache"] = _run(user_csv, args.model, str(cold), tmp / "r1")
-        rows["new model, warm cache"] = _run(user_csv, args.model, str(cold), tmp / "r2")
+        if not args.only_ra66:
+            user_csv = _data(args.model, tmp / "user.csv")
+            rows["new model, empty cache"] = _run(user_csv, args.model, str(cold), tmp / "r1")
+            rows["new model, warm cache"] = _run(user_csv, args.model, str(cold), tmp / "r2")
         ra_csv = _data("ra66", tmp / "ra66.csv")
         _run(ra_csv, "ra66", str(cold), tmp / "r3")                  # warm the cache
         rows["RA-66, warm cache"] = _run(ra_csv, "ra66", str(cold), tmp / "r4")

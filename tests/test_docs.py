@@ -95,3 +95,16 @@ def test_mkdocs_build_strict(tmp_path):
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert (site / "index.html").is_file()
     assert (site / "generated-code" / "index.html").is_file()
+
+
+def test_docs_and_docstrings_are_self_contained():
+    """Users have docs/ and the package, not the project's working notes: no page, README or
+    docstring sends them to METHOD.md (docs/design.md states what it fixed)."""
+    files = [ROOT / "README.md", *DOCS.rglob("*.md"), *(ROOT / "src").rglob("*.py")]
+    cited = [f"{p.relative_to(ROOT)}:{i}" for p in files
+             for i, line in enumerate(p.read_text().splitlines(), 1) if "METHOD.md" in line]
+    assert not cited, f"cites METHOD.md: {', '.join(cited)}"
+    design = (DOCS / "design.md").read_text()
+    for fact in ("dtheta/dt", "l_j(tau) = prod", "lambda_1 / lambda_k <= threshold",
+                 "eta = |s1| + |k1 - 3| + |s1 - s2| + |k1 - k2|"):
+        assert fact in design, fact

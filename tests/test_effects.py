@@ -225,3 +225,39 @@ def test_effects_are_immutable_values():
         e.realistic["eps_thrust"] = 1.0
     assert hash(e) == hash(CATALOGUE["thrust_level"])
     assert math.isclose(CATALOGUE["misalignment"].realistic["delta_thrust"], math.radians(0.25))
+
+
+def test_back_pressure_conventions(ra66m_spec):
+    """Issue 8: by default the stated thrust holds at sea level and rises as the pressure falls,
+    P + A_e (p0 - p_a(h)); the vacuum option is P - A_e p_a(h); on a model whose thrust already
+    has a nozzle term the effect is an area correction dA_e of either sign."""
+    from rocketid.diagnostics.effects import SEA_LEVEL_PRESSURE
+    from rocketid.physics.atmosphere import us76_pressure
+    sea = with_effects(ra66m_spec, "back_pressure", {"A_e": 0.4})
+    vac = with_effects(ra66m_spec, "back_pressure_vacuum", {"A_e_vac": 0.4})
+    h = sea.role("altitude")
+    T_sea = sea.expand(sea.role("thrust"))
+    T_vac = vac.expand(vac.role("thrust"))
+    P = 400000.0
+    for alt in (0.0, 10000.0, 30000.0):
+        pa = float(us76_pressure(sp.Float(alt)))
+        got = float(T_sea.subs({h: alt, sea.symbol("A_e"): 0.4}))
+        assert got == pytest.approx(P + 0.4 * (SEA_LEVEL_PRESSURE - pa), rel=1e-9)
+        got = float(T_vac.subs({h: alt, vac.symbol("A_e_vac"): 0.4}))
+        assert got == pytest.approx(P - 0.4 * pa, rel=1e-9)
+    assert sea.parameter("A_e").lower == 0.0 and vac.parameter("A_e_vac").lower == 0.0
+    # a model that already has a nozzle term: a correction of either sign, not A_e >= 0
+    nozzle = with_effects(ra66m_spec, "back_pressure_vacuum", {"A_e_vac": 0.4})
+    again = with_effects(nozzle, "back_pressure")
+    assert "dA_e" in again.parameter_names and again.parameter("dA_e").lower == -math.inf
+
+
+def test_sizes_are_relative_to_the_vehicle():
+    from rocketid.diagnostics.effects import SEA_LEVEL_PRESSURE, Vehicle
+    veh = Vehicle(thrust=610e3, mass=30e3, mass_flow=240.0, speed=1800.0, start_speed=5.0, duration=66.0,
+                  altitude=(0.0, 30e3), mach=(0.0, 3.8), sigma={"x": 2.0, "h": 3.0, "v": 0.5}, sample_interval=0.02)
+    assert CATALOGUE["back_pressure"].sizes(veh)["A_e"] == pytest.approx(0.1 * 610e3 / SEA_LEVEL_PRESSURE)
+    assert CATALOGUE["bias_h"].sizes(veh)["b_h"] == pytest.approx(15.0)       # 5 sigma of a 3 m channel
+    assert CATALOGUE["time_offset"].sizes(veh)["tau"] == pytest.approx(0.02)   # one sample
+    assert CATALOGUE["back_pressure"].sizes()["A_e"] == pytest.approx(0.4)     # RA-66's without a vehicle
+    assert CATALOGUE["earth_rotation"].least["k_rot"] == pytest.approx(0.2)

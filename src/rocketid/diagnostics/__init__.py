@@ -7,11 +7,22 @@ Part A -- candidate effects, their ranking by the score test, confirmation by re
 ``score``    :func:`rank_candidates` -> :class:`CandidateRanking` (score / Lagrange-multiplier test at the base fit)
 ``refit``    :func:`confirm` -> :class:`Confirmation` (likelihood ratio, AIC/BIC, whiteness, hold-out)
 ``history``  :class:`ModelHistory` (each revision's fit statistics and the test against the previous one)
+
+The discovery (issue 8), one module per step, each handing the next an immutable value::
+
+    screen -> refit -> accept -> step -> report
+
+``screen``   :func:`screen` -> :class:`Screen` (the ranking and the contenders to refit)
+``refit``    :func:`refit_all` -> tuple of :class:`Refit` (every contender, forked workers, time guard)
+``accept``   :func:`accept` -> :class:`Acceptance` (does a refit explain the data)
+``step``     :func:`discover` -> :class:`Discovery` (forward selection, refinement, backward check, verdict)
+``variant``  :func:`mach_variant` (the Mach-indexed variant of a time-knot drag model)
+``api``      :func:`diagnose` -> :class:`DiagnosisReport` with :class:`FinalModel` (the composition)
 """
 
-from .effects import (CATALOGUE, KINDS, Effect, apply_effect, custom_effect, density_effect,
-                      earth_rotation_effect, is_present, liftoff_fade, resolve_effects, wind_effect,
-                      with_effects)
+from .effects import (CATALOGUE, KINDS, Effect, Vehicle, apply_effect, back_pressure_effect, custom_effect,
+                      density_effect, earth_rotation_effect, is_present, liftoff_fade, resolve_effects,
+                      thrust_profile_effect, wind_effect, with_effects)
 from .history import ModelHistory, Revision
 from .refit import Confirmation, confirm, ljung_box
 from .score import AugmentedModel, CandidateRanking, CandidateScore, augment, rank_candidates
@@ -19,7 +30,8 @@ from .score import AugmentedModel, CandidateRanking, CandidateScore, augment, ra
 __all__ = [
     # part A: effects, ranking, confirmation, history
     "Effect", "CATALOGUE", "KINDS", "custom_effect", "with_effects", "apply_effect", "resolve_effects",
-    "is_present", "wind_effect", "density_effect", "earth_rotation_effect", "liftoff_fade",
+    "is_present", "wind_effect", "density_effect", "earth_rotation_effect", "liftoff_fade", "Vehicle",
+    "back_pressure_effect", "thrust_profile_effect",
     "rank_candidates", "CandidateRanking", "CandidateScore", "augment", "AugmentedModel",
     "confirm", "Confirmation", "ljung_box",
     "ModelHistory", "Revision",
@@ -32,7 +44,13 @@ __all__ = [
 from .compare import Comparison, compare
 from .locate import Location, locate
 from .plausibility import Plausibility, check_plausibility
-from .api import DiagnosisReport, diagnose
+from .api import DiagnosisReport, FinalModel, diagnose
+from .screen import Screen, screen, vehicle_of
+from .refit import Refit, refit_all
+from .accept import Acceptance, NoiseBand, accept, noise_band
+from .step import Discovery, Step, discover
+from .variant import mach_variant
 
 __all__ += ["compare", "Comparison", "locate", "Location", "check_plausibility", "Plausibility",
-            "diagnose", "DiagnosisReport"]
+            "diagnose", "DiagnosisReport", "FinalModel", "screen", "Screen", "vehicle_of", "refit_all", "Refit",
+            "accept", "Acceptance", "NoiseBand", "noise_band", "discover", "Discovery", "Step", "mach_variant"]

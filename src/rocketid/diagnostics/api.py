@@ -419,7 +419,10 @@ def _confirm_final(fit, disc, holdout, level, timeout, options, notes: list) -> 
     from .refit import confirm
     if disc is None or not disc.effects:
         return (), (), ()
-    guess = dict(zip(disc.fit.spec.parameter_names, (float(v) for v in disc.fit.p)))
+    spec_f = disc.fit.spec
+    # IPOPT's relaxed bounds leave an estimate at a bound up to ~1e-8 outside it: start inside
+    start = np.clip(np.asarray(disc.fit.p, float), spec_f.lower, spec_f.upper)
+    guess = dict(zip(spec_f.parameter_names, (float(v) for v in start)))
     try:
         conf = confirm(fit, list(disc.effects), guess=guess, holdout=holdout, level=level, options=options,
                        timeout=timeout)

@@ -339,7 +339,7 @@ def confirm(fit: EstimationResult, effect: Effect | str | Sequence[Effect | str]
     t1 = time.perf_counter()
     notes: list[str] = []
     if not new.success:
-        gave = "wall" in new.message.lower()
+        gave = _timed_out(new)
         notes.append(f"the refit {'gave up after ' + format(timeout, 'g') + ' s' if gave else 'did not converge'} "
                      f"({new.message}); its statistics are not those of an optimum")
     dof = new.n_estimated - fit.n_estimated
@@ -680,7 +680,7 @@ def summarize_refit(new: EstimationResult, base_objective: float, base_n_estimat
 
     names = tuple(new.spec.parameter_names)
     notes = list(notes)
-    gave_up = (not new.success) and "wall" in new.message.lower() and "time" in new.message.lower()
+    gave_up = (not new.success) and _timed_out(new)
     added_set = set(added)
     declared = tuple(n for n in names if n not in set(base_parameters))
     eff_params = tuple(n for e in effects if e.name in added_set for n in declared if n in _declared_by(e, declared))
@@ -718,6 +718,15 @@ def summarize_refit(new: EstimationResult, base_objective: float, base_n_estimat
                  notes=tuple(notes), least={k: float(v) for k, v in (least or {}).items() if k in eff_params},
                  base_values={k: float(v) for k, v in (base_values or {}).items()},
                  base_chi2_per_dof=float(base_chi2_per_dof))
+
+
+#: IPOPT's return status when its maximum CPU or wall time was exceeded.
+TIME_EXCEEDED = (-4, -5)
+
+
+def _timed_out(fit: EstimationResult) -> bool:
+    """IPOPT stopped at its time limit (``max_wall_time`` / ``max_cpu_time``)."""
+    return fit.status in TIME_EXCEEDED or ("time" in fit.message.lower() and "exceeded" in fit.message.lower())
 
 
 def _declared_by(effect: Effect, declared: Sequence[str]) -> set:
@@ -808,6 +817,9 @@ def run_refit(task: RefitTask) -> tuple[Refit, EstimationResult | None]:
                 new = cold
     except RocketidError as exc:
         return _failed(task, f"the refit could not be made: {exc}", time.perf_counter() - t0), None
+    if not new.success and _timed_out(new):
+        notes.append(f"gave up after {task.timeout:g} s (the refit's time limit)")
+        new = replace(new, message=f"gave up after {task.timeout:g} s (time limit; IPOPT status {new.status})")
     return summarize_refit(new, task.base_objective, task.base_n_estimated,
                            [e for e in task.effects], task.added, task.sizes, level=task.level,
                            base_parameters=task.base_parameters, seconds=time.perf_counter() - t0,

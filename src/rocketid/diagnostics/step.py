@@ -170,11 +170,16 @@ def _choose(accs: Sequence[Acceptance]) -> tuple[int | None, str]:
         i = min(acc, key=lambda j: accs[j].refit.bic[1])
         return i, f"the lowest BIC of the {len(acc)} refit(s) that reach the noise with plausible sizes"
     adm = [i for i, a in enumerate(accs) if a.admissible]
+    good = [i for i in adm if accs[i].check("coefficients").passed]
+    if good:
+        i = min(good, key=lambda j: accs[j].refit.bic[1])
+        return i, (f"none reaches the noise; the lowest BIC of the {len(good)} significant refit(s) with plausible "
+                   "sizes and coefficients")
     if adm:
         i = min(adm, key=lambda j: accs[j].refit.bic[1])
         return i, (f"none reaches the noise; the lowest BIC of the {len(adm)} significant refit(s) with plausible "
-                   "sizes and coefficients")
-    return None, "no refit is significant with a plausible size and plausible coefficients"
+                   "sizes (the coefficients are still distorted: another effect may be missing)")
+    return None, "no refit is significant with a plausible size"
 
 
 def _tie_break(accs, i, fit, chosen_effects, contenders_effects, holdout, level, options, timeout) -> tuple:
@@ -233,6 +238,46 @@ def _fit_of(base_spec, effects: Sequence[Effect], refit: Refit, data, mesh, opti
     return estimate(spec, data, guess=guess, mesh=mesh, options=options)
 
 
+
+def final_verdict(added: bool, fits: bool, base_fits: bool, last: Acceptance | None,
+                  ambiguous: str = "") -> tuple[str, list[str]]:
+    """The verdict of the stepwise search and the notes that explain a downgrade.
+
+    Parameters
+    ----------
+    added : bool
+        Effects were added to the model.
+    fits : bool
+        The final model reaches the noise (:func:`~rocketid.diagnostics.accept.fits_to_noise`).
+    base_fits : bool
+        The base model reaches the noise.
+    last : Acceptance or None
+        The acceptance test of the refit that made the final model.
+    ambiguous : str
+        Why the last choice was a tie the data cannot decide (empty when it was not).
+
+    Returns
+    -------
+    verdict : str
+        One of :data:`VERDICTS`. ``"explained"`` needs the final model to pass every check of an
+        explanation, not only to reach the noise: an effect set that reaches it with a coefficient
+        held at a bound or a redrawn drag table, or with an implausible size, is "partly explained".
+    notes : list of str
+    """
+    if not added:
+        return ("nothing missing" if base_fits else "not explained by the catalogue"), []
+    if not fits:
+        return "partly explained", []
+    notes = []
+    failed = [c for c in (last.checks if last is not None else ()) if c.name in ("coefficients", "size") and not c.passed]
+    if failed:
+        notes.append("the final model reaches the noise but is not an explanation: " +
+                     "; ".join(f"{c.name}: {c.detail}" for c in failed))
+        return "partly explained", notes
+    if ambiguous:
+        return "partly explained", notes
+    return "explained", notes
+
 def discover(fit: EstimationResult, candidates: Sequence[Effect], *, level: float = 0.05,
              max_effects: int = MAX_EFFECTS, workers: int | None = None, timeout: float = REFIT_TIMEOUT,
              options: Mapping[str, Any] | None = None, band: NoiseBand | None = None,
@@ -268,7 +313,7 @@ def discover(fit: EstimationResult, candidates: Sequence[Effect], *, level: floa
     band = band if band is not None else noise_band(fit)
     vehicle = vehicle_of(fit)
     notes = [band.note] if band.note else []
-    current, chosen_effects, last_refit = fit, [], None
+    current, chosen_effects, last_refit, last_pick = fit, [], None, None
     steps = []
     ambiguous = ""
     ok, detail = fits_to_noise(fit, band)
@@ -363,24 +408,14 @@ def discover(fit: EstimationResult, candidates: Sequence[Effect], *, level: floa
                               tuple(e.name for e in chosen_effects), None))
             break
         chosen_effects = new_effects
-        current, last_refit = new_fit, pick.refit
+        current, last_refit, last_pick = new_fit, pick.refit, pick
         ok, detail = fits_to_noise(current, band)
         steps.append(Step(number, scr, tuple(accs), pick, why, tuple(dropped), tuple(e.name for e in chosen_effects),
                           current))
     base_ok, _ = fits_to_noise(fit, band)
     if ambiguous:
         notes.append(f"ambiguous: {ambiguous}")
-    if not chosen_effects:
-        verdict = "nothing missing" if base_ok else "not explained by the catalogue"
-    elif ok:
-        verdict = "explained"
-    else:
-        verdict = "partly explained"
-    if verdict == "explained" and last_refit is not None:
-        ratios = last_refit.size_ratio()
-        if any(r > 5.0 for r in ratios.values()):
-            verdict = "partly explained"
-    if ambiguous and verdict == "explained":
-        verdict = "partly explained"
+    verdict, why = final_verdict(bool(chosen_effects), bool(ok), base_ok, last_pick, ambiguous)
+    notes += why
     return Discovery(fit, band, vehicle, tuple(steps), tuple(chosen_effects), current, last_refit, bool(ok), detail,
                      verdict, tuple(notes), {"discover_s": time.perf_counter() - t_start}, ambiguous)

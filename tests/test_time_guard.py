@@ -1,0 +1,37 @@
+"""Time guards (issue 8, item 8): every refit and hold-out prediction gives up after its time limit
+and says so, instead of crawling on (a diagnosis once ran 21 minutes in one prediction)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import rocketid as ri
+from rocketid.cases import ra66m, ra66m_truth
+from rocketid.diagnostics import CATALOGUE, with_effects
+from rocketid.diagnostics.refit import RefitTask, refit_all, run_refit
+from rocketid.errors import SettingsError
+
+
+def test_a_simulation_gives_up_after_its_wall_time():
+    spec = ra66m()
+    traj = ri.simulate(spec, None, np.linspace(0, 66, 50), rtol=1e-13, atol=1e-13, max_wall_time=1e-4)
+    assert not traj.success and "gave up after 0.0001 s of wall time" in traj.message
+    assert np.isnan(traj.states[-1]).all()
+    with pytest.raises(SettingsError, match="max_wall_time"):
+        ri.simulate(spec, None, [0.0, 1.0], max_wall_time=0)
+
+
+def test_a_refit_that_exceeds_its_limit_is_reported_as_given_up():
+    base = ra66m()
+    truth = with_effects(base, "thrust_level", {"eps_thrust": 0.02})
+    data = ri.simulate_measurements(truth, ra66m_truth(truth), ri.ra66_times(), seed=0)
+    mesh = ri.default_mesh(base, refine_first=3)
+    task = RefitTask(base_spec=base, data=data, mesh=mesh, effects=(CATALOGUE["thrust_level"],),
+                     added=("thrust_level",), start={}, sizes={"eps_thrust": 0.02}, base_objective=1e6,
+                     base_n_estimated=8, base_parameters=base.parameter_names, options={}, timeout=1e-3)
+    refit, _ = run_refit(task)
+    assert not refit.success and refit.gave_up, refit.message
+    # in a worker process too (two tasks: the forked workers run them)
+    both = refit_all([task, task], workers=2)
+    assert all(r.gave_up and not r.success for r in both)
