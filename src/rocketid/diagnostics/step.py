@@ -238,7 +238,6 @@ def _fit_of(base_spec, effects: Sequence[Effect], refit: Refit, data, mesh, opti
     return estimate(spec, data, guess=guess, mesh=mesh, options=options)
 
 
-
 def final_verdict(added: bool, fits: bool, base_fits: bool, last: Acceptance | None,
                   ambiguous: str = "") -> tuple[str, list[str]]:
     """The verdict of the stepwise search and the notes that explain a downgrade.
@@ -278,6 +277,7 @@ def final_verdict(added: bool, fits: bool, base_fits: bool, last: Acceptance | N
         return "partly explained", notes
     return "explained", notes
 
+
 def discover(fit: EstimationResult, candidates: Sequence[Effect], *, level: float = 0.05,
              max_effects: int = MAX_EFFECTS, workers: int | None = None, timeout: float = REFIT_TIMEOUT,
              options: Mapping[str, Any] | None = None, band: NoiseBand | None = None,
@@ -313,10 +313,11 @@ def discover(fit: EstimationResult, candidates: Sequence[Effect], *, level: floa
     band = band if band is not None else noise_band(fit)
     vehicle = vehicle_of(fit)
     notes = [band.note] if band.note else []
-    current, chosen_effects, last_refit, last_pick = fit, [], None, None
+    current, chosen_effects, last_pick = fit, [], None
     steps = []
     ambiguous = ""
     ok, detail = fits_to_noise(fit, band)
+    base_ok = ok
     for number in range(1, max_effects + 1):
         if number > 1 and ok:
             break
@@ -408,14 +409,14 @@ def discover(fit: EstimationResult, candidates: Sequence[Effect], *, level: floa
                               tuple(e.name for e in chosen_effects), None))
             break
         chosen_effects = new_effects
-        current, last_refit, last_pick = new_fit, pick.refit, pick
+        current, last_pick = new_fit, pick
         ok, detail = fits_to_noise(current, band)
         steps.append(Step(number, scr, tuple(accs), pick, why, tuple(dropped), tuple(e.name for e in chosen_effects),
                           current))
-    base_ok, _ = fits_to_noise(fit, band)
     if ambiguous:
         notes.append(f"ambiguous: {ambiguous}")
     verdict, why = final_verdict(bool(chosen_effects), bool(ok), base_ok, last_pick, ambiguous)
     notes += why
-    return Discovery(fit, band, vehicle, tuple(steps), tuple(chosen_effects), current, last_refit, bool(ok), detail,
+    return Discovery(fit, band, vehicle, tuple(steps), tuple(chosen_effects), current,
+                     last_pick.refit if last_pick is not None else None, bool(ok), detail,
                      verdict, tuple(notes), {"discover_s": time.perf_counter() - t_start}, ambiguous)
