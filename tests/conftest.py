@@ -70,7 +70,7 @@ def ra66m_spec():
 
 TIERS = {
     "unit": ("test_architecture", "test_summary", "test_scheduler", "test_nlp", "test_cases", "test_model",
-             "test_derivatives", "test_bad_input", "test_accept", "test_plots"),
+             "test_derivatives", "test_bad_input", "test_accept", "test_plots", "test_output"),
     "golden": ("test_estimation", "test_sensitivity", "test_estimability", "test_uncertainty", "test_collocation",
                "test_atmosphere", "test_peer_casadi"),
 }

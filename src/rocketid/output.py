@@ -32,7 +32,7 @@ from typing import Any, Iterable, Iterator, Sequence
 from .errors import SettingsError
 
 __all__ = ["atomic_open", "write_text", "write_bytes", "write_json", "write_csv", "save_figure", "check_file",
-           "check_folder", "folder_lock", "finite_or_none", "nulls_for_non_finite", "LOCK_NAME"]
+           "check_folder", "folder_lock", "remove_stale_tree", "finite_or_none", "nulls_for_non_finite", "LOCK_NAME"]
 
 #: The lock file :func:`folder_lock` keeps in a folder while a run writes there.
 LOCK_NAME = ".rocketid.lock"
@@ -53,18 +53,38 @@ def _pid_alive(pid: int) -> bool:
     return True
 
 
+_TMP = re.compile(r"^\.(?P<name>.+)\.(?P<pid>\d+)\.tmp$")
+
+
 def _remove_stale(path: Path) -> None:
     """Remove ``.NAME.<pid>.tmp`` files of ``path`` left by processes that no longer run."""
-    pattern = re.compile(r"^\." + re.escape(path.name) + r"\.(\d+)\.tmp$")
     try:
         entries = list(path.parent.iterdir())
     except OSError:
         return
     for entry in entries:
-        m = pattern.match(entry.name)
-        if m and int(m.group(1)) != os.getpid() and not _pid_alive(int(m.group(1))):
-            with contextlib.suppress(OSError):
-                entry.unlink()
+        m = _TMP.match(entry.name)
+        if m and m["name"] == path.name:
+            _unlink_if_dead(entry, int(m["pid"]))
+
+
+def _unlink_if_dead(entry: Path, pid: int) -> None:
+    if pid != os.getpid() and not _pid_alive(pid):
+        with contextlib.suppress(OSError):
+            entry.unlink()
+
+
+def remove_stale_tree(folder: str | os.PathLike) -> None:
+    """Remove every ``.NAME.<pid>.tmp`` under ``folder`` whose writer no longer runs.
+
+    A process killed with ``SIGKILL`` (or a worker killed with its parent)
+    can leave its temporary file; the next run that takes the folder's lock
+    sweeps them, so a resumed run leaves a clean folder.
+    """
+    for entry in Path(folder).rglob(".*.tmp"):
+        m = _TMP.match(entry.name)
+        if m:
+            _unlink_if_dead(entry, int(m["pid"]))
 
 
 def _make_parent(path: Path) -> None:
@@ -268,7 +288,9 @@ def folder_lock(folder: str | os.PathLike, option: str = "--out") -> Iterator[Pa
 
     The lock is an advisory ``flock`` on the file, which also holds this
     process's PID; the operating system releases it when the process ends,
-    however it ends, so a killed run never leaves a folder locked.
+    however it ends, so a killed run never leaves a folder locked. Once the
+    lock is held, temporary files left in the folder by killed writers are
+    removed (:func:`remove_stale_tree`).
 
     Raises
     ------
@@ -308,6 +330,7 @@ def folder_lock(folder: str | os.PathLike, option: str = "--out") -> Iterator[Pa
     try:
         os.ftruncate(fd, 0)
         os.write(fd, f"{os.getpid()}\n".encode())
+        remove_stale_tree(folder)  # only now: no other run can be writing here
         yield folder
     finally:
         with contextlib.suppress(OSError):

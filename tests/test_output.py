@@ -1,0 +1,66 @@
+"""Atomic writes and the output folder's lock (``rocketid.output``)."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+import pytest
+
+from rocketid.output import LOCK_NAME, atomic_open, folder_lock, remove_stale_tree, write_text
+
+
+def _dead_pid() -> int:
+    """The PID of a process that has ended (and been reaped)."""
+    proc = subprocess.Popen([sys.executable, "-c", "pass"])
+    proc.wait()
+    return proc.pid
+
+
+def test_a_failed_write_keeps_the_previous_file(tmp_path):
+    target = tmp_path / "table.csv"
+    write_text(target, "old\n")
+    with pytest.raises(RuntimeError):
+        with atomic_open(target) as fh:
+            fh.write("half a ta")
+            raise RuntimeError("killed mid-write")
+    assert target.read_text() == "old\n"
+    assert [p.name for p in tmp_path.iterdir()] == ["table.csv"]
+
+
+def test_taking_the_lock_sweeps_temporary_files_of_dead_writers_only(tmp_path):
+    dead = _dead_pid()
+    sub = tmp_path / "checkpoints"
+    sub.mkdir()
+    stale = [tmp_path / f".study.json.{dead}.tmp", sub / f".run_2.json.{dead}.tmp"]
+    with subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"]) as live_proc:
+        try:
+            live = sub / f".run_3.json.{live_proc.pid}.tmp"
+            unrelated = sub / ".notes.tmp"  # not a name rocketid writes: never touched
+            for p in (*stale, live, unrelated):
+                p.write_text("partial")
+            with folder_lock(tmp_path) as folder:
+                assert (folder / LOCK_NAME).read_text().strip() == str(os.getpid())
+                assert not any(p.exists() for p in stale)
+                assert live.exists() and unrelated.exists()
+        finally:
+            live_proc.kill()
+    assert not (tmp_path / LOCK_NAME).exists()
+
+
+def test_remove_stale_tree_on_a_clean_folder_changes_nothing(tmp_path):
+    write_text(tmp_path / "a" / "b.json", "{}")
+    remove_stale_tree(tmp_path)
+    assert sorted(p.name for p in tmp_path.rglob("*")) == ["a", "b.json"]
+
+
+def test_a_second_run_is_refused_with_the_holders_pid(tmp_path):
+    with folder_lock(tmp_path):
+        code = ("import sys; from rocketid.output import folder_lock\n"
+                f"with folder_lock({str(tmp_path)!r}): pass")
+        done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+        assert done.returncode != 0
+        assert f"PID {os.getpid()}" in done.stderr
+    with folder_lock(tmp_path):  # released: the next run takes it
+        pass
