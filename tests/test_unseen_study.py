@@ -36,7 +36,16 @@ from unseen_study import run, truth  # noqa: E402
 from unseen_study.cases import CASES, Hidden  # noqa: E402
 
 #: Cases measured not to meet the bar (``run.acceptable``), with the measured reason.
-KNOWN_FAILURES: dict[str, str] = {}
+KNOWN_FAILURES: dict[str, str] = {
+    "heavy-start": "main 5e37825: a 1.7 % start-mass error (not in the catalogue) is reported as an explained "
+                   "thrust_profile_3 (eps -1.6 .. -4.1 %, chi2/dof 1.016): a wrong effect called explained",
+    "misalignment+h-bias-drift": "main 5e37825: misalignment + bias_h + bias_v (b_v -0.13 m/s, truth 0) reach "
+                                 "chi2/dof 0.990, verdict explained: a speed bias invented for an altitude drift",
+    "h-bias-drift": "main 5e37825: bias_h + bias_v + thrust_level, chi2/dof 1.087 (band 1.082), partly "
+                    "explained: compensating effects added for a drift the catalogue lacks",
+    "back-pressure+headwind": "main 5e37825: a spurious misalignment (0.43 deg) added first, then back_pressure "
+                              "and wind; chi2/dof 1.043, h not white, partly explained",
+}
 
 
 @pytest.fixture(scope="module")
