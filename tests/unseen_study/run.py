@@ -7,7 +7,7 @@ Data and reports go to ``$ROCKETID_UNSEEN_DIR`` (default ``/tmp/rocketid-unseen`
 case and one report folder per case. One diagnosis at a time (``--workers`` is passed through,
 default 1 so the two shared cores are not both taken). ``--rescore unseen.json`` re-scores stored
 results and runs no diagnosis; ``--docs`` rewrites the table between the markers
-``<!-- unseen-table:start -->`` and ``<!-- unseen-table:end -->``.
+``<!-- unseen-table:start -->`` and ``<!-- unseen-table:end -->`` (``--marker`` names others).
 
 Outcome classes (``classify``):
 
@@ -183,6 +183,7 @@ def main(argv=None) -> int:
     parser.add_argument("--workers", type=int, default=1)
     parser.add_argument("--rescore", action="store_true", help="only re-score and print the stored results")
     parser.add_argument("--docs", help="rewrite the table in this markdown file")
+    parser.add_argument("--marker", default="unseen-table", help="the table's markers in --docs (NAME:start, NAME:end)")
     args = parser.parse_args(argv)
     path = Path(args.json)
     stored = json.loads(path.read_text()) if path.exists() else {"records": {}}
@@ -206,7 +207,7 @@ def main(argv=None) -> int:
     if args.docs:
         doc = Path(args.docs)
         body = doc.read_text()
-        start, end = "<!-- unseen-table:start -->", "<!-- unseen-table:end -->"
+        start, end = f"<!-- {args.marker}:start -->", f"<!-- {args.marker}:end -->"
         if start not in body or end not in body:
             raise SystemExit(f"{doc}: no {start} ... {end} markers")
         head, rest = body.split(start, 1)
