@@ -32,6 +32,7 @@ LAYERS: list[tuple[str, ...]] = [
     ("codegen",),
     ("collocation",),
     ("cases",),
+    ("examples",),       # shipped real data and the models that go with them
     ("nlp",),
     ("solve",),
     ("sensitivity",),
