@@ -136,3 +136,22 @@ def test_cli_estimates_several_files_jointly(two_flights, tmp_path):
                for n, v in zip(spec_a.parameter_names, truth))
     bad = CliRunner().invoke(main, ["estimate", str(f1), "--per-flight", "CL_alpha"])
     assert bad.exit_code == 2 and "several data files" in bad.output
+
+
+def test_cli_estimability_of_several_files(two_flights, tmp_path):
+    spec_a, spec_b, data_a, data_b, truth = two_flights
+    f1 = data_a.to_csv(tmp_path / "f1.csv")
+    f2 = ri.simulate_measurements(spec_a, truth, ra66_times(), seed=14).to_csv(tmp_path / "f2.csv")
+    out = tmp_path / "est.json"
+    res = CliRunner().invoke(main, ["estimability", str(f1), str(f2), "--model", "ra66m", "--at", "fit",
+                                    "--scaling", "nominal", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    est = json.loads(out.read_text())
+    assert set(est["flight_eigenvalues"]) == {"f1", "f2"} and est["shared"] == list(spec_a.parameter_names)
+    # two flights of the same program and size bring about half of each direction each
+    for k in range(len(est["eigenvalues"])):
+        assert est["shares"]["f1"][k] + est["shares"]["f2"][k] == pytest.approx(1.0, abs=1e-8)
+        assert 0.3 < est["shares"]["f1"][k] < 0.7
+    # Weyl: adding a flight's information never lowers any eigenvalue
+    for lam_f in est["flight_eigenvalues"].values():
+        assert all(j >= f * (1 - 1e-9) for j, f in zip(est["eigenvalues"], lam_f))
