@@ -59,7 +59,11 @@ def main():
         spec = with_effects(base, [throttle_effect(knots)])
         t0 = time.perf_counter()
         fit = ri.estimate(spec, data, options={"max_iter": 500})
-        unc = uncertainty(fit)
+        try:
+            se = uncertainty(fit).standard_errors
+        except ri.SensitivityError as exc:
+            se = np.full(len(spec.parameters), np.nan)
+            print(f"  no standard errors: {exc}")
         print(f"throttle: chi2/dof {fit.chi2_per_dof:.4g}, RMS h {fit.rms['h']:.1f} m, v {fit.rms['v']:.3f} m/s "
               f"({time.perf_counter() - t0:.1f} s)")
         print("  RMS v by window 20-50/50-90/90-110/110-140 s: "
@@ -69,7 +73,7 @@ def main():
             f"{t:g}s {fit.value(f'd_throttle_{j}'):.3f}" for j, t in enumerate(knots) if 0 < j < len(knots) - 1))
         for name in ("k_P", "k_mdot", "dm0", *(f"CD_{j}" for j in range(6))):
             i = spec.parameter_names.index(name)
-            print(f"  {name:7s} {fit.p[i]: .4g} +- {unc.standard_errors[i]:.3g}")
+            print(f"  {name:7s} {fit.p[i]: .4g} +- {se[i]:.3g}")
         print(f"  at bounds: {', '.join(str(s) for s, _ in fit.active_bounds()) or 'none'}")
         flights.append(Flight(label, spec, data))
     per = sorted({n for fl in flights for n in fl.spec.parameter_names
