@@ -3,7 +3,8 @@
 From a base model without a throttle schedule, the diagnosis must locate the failure in the
 broadcast's throttle-down window (the events file is the answer key, never an input) and name a
 thrust shortfall there; with the throttle effect added the error must fall to the reading noise
-where the effect acts. Marked slow (about 5-10 minutes on 2 cores):
+where the effect acts, separately and jointly (and not after 110 s: a known failure, asserted so
+that a change shows). Marked slow (about 10-15 minutes on 2 busy cores):
 ``pytest -m slow tests/test_falcon9.py``. Quick checks of the shipped data run always.
 """
 
@@ -73,8 +74,43 @@ def test_diagnosis_finds_the_throttle_down_and_the_throttle_closes_it(flight):
     inside = [v for t, v in d.items() if events["throttle_down_start"] + 5 <= t <= events["throttle_down_end"] - 5]
     assert inside and 0.10 < np.mean(inside) < 0.35
     assert fit.rms["v"] < fit0.rms["v"] / 10
-    # where the throttle acts (up to the end of the window) the speed error is at the reading noise
+    # where the throttle acts (up to the end of the window) the speed error is at the reading noise;
+    # after 110 s it is not (a known failure of this model, docs/real-telemetry.md)
     noise = reading_noise(data)
     r, t = fit.residuals["v"], data["v"].times
     k = t <= events["throttle_down_end"]
     assert np.sqrt(np.mean(r[k] ** 2)) < 1.5 * noise["v"]
+    assert np.sqrt(np.mean(r[t > 110] ** 2)) > 1.5 * noise["v"]
+
+
+@pytest.mark.slow
+def test_both_flights_jointly_reach_the_reading_noise_through_the_throttle_down():
+    """The two flights together: drag, thrust and mass-flow scales shared, each flight its own
+    attitude, throttle (knots from its own diagnosis), lift-off mass and start states."""
+    flights, keys = [], {}
+    for label in FLIGHTS:
+        data = falcon9_measurements(label)
+        base = falcon9_model(data)
+        fit0 = ri.estimate(base, data, options={"max_iter": 500})
+        first, second = _span(locate(fit0).findings)
+        lo, hi = 5.0 * np.floor(first.t_start / 5.0), 5.0 * np.ceil(second.t_end / 5.0)
+        knots = np.arange(lo, min(hi, base.tf - 10.0) + 1e-9, 2.5)
+        flights.append(Flight(label, with_effects(base, [throttle_effect(knots)]), data))
+        keys[label] = falcon9_events(label)
+    per = sorted({n for fl in flights for n in fl.spec.parameter_names
+                  if n.startswith(("alpha", "d_throttle")) or n == "dm0"})
+    joint = joint_estimate(flights, per_flight=per, options={"max_iter": 500})
+    assert joint.success
+    assert set(joint.layout.shared) == {"k_P", "k_mdot", *(f"CD_{j}" for j in range(6))}
+    for fl, r in zip(flights, joint.flights):
+        noise = reading_noise(fl.data)
+        res, t = r.residuals["v"], fl.data["v"].times
+        k = t <= keys[fl.label]["throttle_down_end"]
+        assert np.sqrt(np.mean(res[k] ** 2)) < 1.5 * noise["v"]
+        # and a known failure after 90 s: the model is not at the noise over the whole window
+        assert np.sqrt(np.mean(res[t > 110] ** 2)) > 1.5 * noise["v"]
+    est = joint.estimability()
+    assert np.all(est.eigenvalues > 0)
+    # the subsonic drag is known from the priors, not from the data
+    sub = [k for k in range(est.eigenvalues.size) if est.V[est.names.index("CD_0"), k] ** 2 > 0.5]
+    assert sub and all(est.shares["prior"][k] > 0.8 for k in sub)

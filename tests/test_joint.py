@@ -155,3 +155,18 @@ def test_cli_estimability_of_several_files(two_flights, tmp_path):
     # Weyl: adding a flight's information never lowers any eigenvalue
     for lam_f in est["flight_eigenvalues"].values():
         assert all(j >= f * (1 - 1e-9) for j, f in zip(est["eigenvalues"], lam_f))
+
+
+def test_eliminating_a_flights_own_parameters_is_the_marginal_information():
+    """The information on the shared parameters with the others eliminated is the inverse of the
+    shared block of the covariance (an identity of Gaussian marginals), also when the eliminated
+    block is singular in some direction."""
+    from rocketid.joint import _schur
+    rng = np.random.default_rng(0)
+    A = rng.standard_normal((6, 6))
+    H = A @ A.T
+    keep, drop = np.array([0, 1, 2]), np.array([3, 4, 5])
+    assert np.allclose(_schur(H, keep, drop), np.linalg.inv(np.linalg.inv(H)[np.ix_(keep, keep)]))
+    B = np.zeros((5, 5))
+    B[:3, :3] = H[:3, :3]                                   # parameters 3 and 4 have no information
+    assert np.allclose(_schur(B, keep, np.array([3, 4])), H[:3, :3])
