@@ -192,7 +192,11 @@ def solve_nlp(nlp: CollocationNLP, x0: np.ndarray, *, options: Mapping[str, Any]
     if warm is not None:
         opts.update({"warm_start_init_point": "yes", "warm_start_bound_push": 1e-9, "warm_start_bound_frac": 1e-9,
                      "warm_start_slack_bound_push": 1e-9, "warm_start_slack_bound_frac": 1e-9,
-                     "warm_start_mult_bound_push": 1e-9, "mu_init": 1e-6, "mu_strategy": "monotone"})
+                     "warm_start_mult_bound_push": 1e-9, "mu_init": 1e-6, "mu_strategy": "monotone",
+                     # IPOPT caps warm-start multipliers at 1e6 by default; the collocation rows' reach
+                     # 3e11 on RA-66 (weights 1/sigma^2 on 19 800 residuals), and the cap turned the
+                     # exact multipliers of a re-solve into an inf_du of 1e8 at iteration 0
+                     "warm_start_mult_init_max": 1e300})
     user = check_ipopt_options(options)
     opts.update(user)
     x0 = np.asarray(x0, dtype=float)
