@@ -129,3 +129,27 @@ def test_predictor_refuses_what_it_cannot_predict(ctx, problem):
     other = replace(ctx.reference, solution=replace(ctx.reference.solution))
     with pytest.raises(SettingsError, match="another solution"):
         estimate_q1(ctx.prepared, est, ctx.recipe.reference_q2, warm_start=other, predictor=ctx.predictor)
+
+
+def test_bordered_banded_solve_matches_a_dense_solve():
+    """The predictor's KKT solver against NumPy's dense solve: a symmetric matrix with a zero
+    block (like a KKT matrix), banded but for 3 dense border rows and columns, in a shuffled
+    order; and a matrix that is not banded, which it declines."""
+    import scipy.sparse as sps
+
+    from rocketid.sensitivity import _BorderedBanded
+    rng = np.random.default_rng(3)
+    nb, w, k = 300, 6, 3
+    band = sps.diags([rng.normal(size=nb - abs(d)) for d in range(-w, w + 1)], list(range(-w, w + 1)))
+    band = band + band.T + sps.diags(np.where(np.arange(nb) % 2 == 0, 0.0, 10.0))  # zero diagonal entries
+    B = rng.normal(size=(nb, k))
+    K = sps.bmat([[band, sps.csr_matrix(B)], [sps.csr_matrix(B.T), None]]).toarray()
+    shuffle = rng.permutation(nb + k)
+    Ks = sps.csc_matrix(K[shuffle][:, shuffle])
+    border = np.flatnonzero(shuffle >= nb)
+    solver = _BorderedBanded.factor(Ks, border)
+    assert solver is not None and solver.kl <= 4 * w
+    b = rng.normal(size=nb + k)
+    np.testing.assert_allclose(solver.solve(b), np.linalg.solve(Ks.toarray(), b), rtol=1e-8, atol=1e-10)
+    dense = sps.csc_matrix(rng.normal(size=(60, 60)))
+    assert _BorderedBanded.factor(dense, np.array([0])) is None

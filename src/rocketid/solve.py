@@ -64,6 +64,8 @@ IPOPT_OPTIONS: dict[str, str] = {
     "alpha_for_y": _S, "recalc_y": _S,
     # linear solver, Hessian
     "linear_solver": _S, "mumps_mem_percent": _I, "mumps_pivtol": _F, "mumps_pivtolmax": _F,
+    "mumps_permuting_scaling": _I, "mumps_scaling": _I, "mumps_dep_tol": _F,
+    "least_square_init_duals": _S, "least_square_init_primal": _S,
     "hessian_approximation": _S, "limited_memory_max_history": _I,
     "derivative_test": _S, "derivative_test_tol": _F, "derivative_test_perturbation": _F,
     "derivative_test_print_all": _S, "timing_statistics": _S,
