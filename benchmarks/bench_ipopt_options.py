@@ -45,6 +45,8 @@ VARIANTS: list[tuple[str, dict]] = [
     ("mumps_scaling=8", {"mumps_scaling": 8}),
     ("mumps_mem_percent=100 (IPOPT's: 1000)", {"mumps_mem_percent": 100}),
     ("least_square_init_duals=yes", {"least_square_init_duals": "yes"}),
+    ("constr_mult_init_max=0 (no least-squares multipliers)", {"constr_mult_init_max": 0.0}),
+    ("constr_mult_init_max=1e12 (keep them; IPOPT's: 1000)", {"constr_mult_init_max": 1e12}),
     ("nlp_scaling_method=none", {"nlp_scaling_method": "none"}),
     ("mu_strategy=monotone", {"mu_strategy": "monotone"}),
 ]
