@@ -15,7 +15,7 @@ these, and each of ``needed`` must be there). Sizes, relative to Kestrel-S (thru
 - altitude sensor bias drifting from 3 m to 9 m over the 40 s (0.15 m/s);
 - time-tag offset 20 ms (half a sample at 25 Hz);
 - a start mass 25 kg above the declared 1500 kg (1.7 %): no catalogue effect has this shape;
-- two pairs; three clean seeds.
+- two pairs; eight clean seeds.
 """
 
 from __future__ import annotations
@@ -91,6 +91,6 @@ CASES = (
     Case("clean-200", Hidden(), 200, "clean (seed 200)"),
     Case("clean-201", Hidden(), 201, "clean (seed 201)"),
     Case("clean-202", Hidden(), 202, "clean (seed 202)"),
-)
+) + tuple(Case(f"clean-{seed}", Hidden(), seed, f"clean (seed {seed})") for seed in range(203, 208))
 
 BY_NAME = {c.name: c for c in CASES}

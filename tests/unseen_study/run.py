@@ -169,9 +169,10 @@ def table(records: dict, title: str) -> str:
 
 
 def git_commit() -> str:
+    """The last commit that changed ``src/rocketid`` (what the diagnoses ran)."""
     try:
-        return subprocess.run(["git", "-C", str(REPO), "rev-parse", "--short", "HEAD"], capture_output=True,
-                              text=True, check=True).stdout.strip()
+        return subprocess.run(["git", "-C", str(REPO), "log", "-1", "--format=%h", "--", "src/rocketid"],
+                              capture_output=True, text=True, check=True).stdout.strip()
     except (OSError, subprocess.CalledProcessError):
         return "unknown"
 
@@ -193,14 +194,14 @@ def main(argv=None) -> int:
         parser.error(f"unknown case(s) {', '.join(unknown)}; known: {', '.join(BY_NAME)}")
     if not args.rescore:
         stored["commit"] = git_commit()
-        stored["when"] = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+        stored.setdefault("when", datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC"))
         stored["machine"] = platform.machine()
         for name in names:
             record = diagnose_cli(BY_NAME[name], workers=args.workers)
             stored["records"][name] = record
             path.write_text(json.dumps(stored, indent=1))
             print(row(BY_NAME[name], record), flush=True)
-    title = (f"Kestrel-S, `rocketid diagnose` of commit {stored.get('commit')}, {stored.get('when')}, "
+    title = (f"Kestrel-S, `rocketid diagnose` of src/rocketid at commit {stored.get('commit')}, {stored.get('when')}, "
              f"{stored.get('machine')}, one diagnosis at a time (`--workers {args.workers}`) on 2 shared cores.")
     text = table(stored["records"], title)
     print(text)
