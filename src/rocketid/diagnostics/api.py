@@ -467,6 +467,21 @@ def _suggest(ranking) -> str:
     return "a term of your own written with custom_effect"
 
 
+def _blind_spots(ranking, exclude=()) -> str:
+    """The candidates the base fit's coefficients absorb so far that, at a realistic size, they would go
+    unseen (score test: expected statistic below ``DETECTABLE``), with what absorbs them; "" when none."""
+    from .score import DETECTABLE
+    out = []
+    for c in (ranking.candidates if ranking is not None else ()):
+        lam = c.realistic_statistic
+        if c.name in exclude or not c.absorbed_by or lam is None or not lam < DETECTABLE:
+            continue
+        who = ", ".join(c.absorbed_by[:3]) + (" ..." if len(c.absorbed_by) > 3 else "")
+        out.append(f"{c.name} (absorbed by {who}; at a realistic size it would raise the score statistic by only "
+                   f"about {lam:.2g})")
+    return "; ".join(out)
+
+
 def _where(fit, level, window) -> str:
     try:
         loc = locate(fit, compare(fit, level=level), window=window, level=level)
@@ -496,6 +511,9 @@ def _final(disc, ranking, level, window) -> FinalModel | None:
     if disc.verdict == "nothing missing":
         text = (f"{fit.spec.name} reaches the noise (chi2/dof {fit.chi2_per_dof:.4g}, band <= {band.upper:.4g}); "
                 "no candidate effect is both significant and needed.")
+        blind = _blind_spots(ranking)
+        if blind:
+            text += (f" These data cannot show whether these are present, as their coefficients take them up: {blind}.")
     elif disc.verdict == "explained":
         r = disc.refit
         base_names = set(disc.base_fit.spec.parameter_names)
@@ -507,6 +525,9 @@ def _final(disc, ranking, level, window) -> FinalModel | None:
         text = f"the model with {names} reaches the noise (chi2/dof {fit.chi2_per_dof:.4g}): {est}."
         if r is not None and r.identifiability:
             text += f" Caution: {r.identifiability}."
+        blind = _blind_spots(ranking, exclude=disc.effect_names)
+        if blind:
+            text += f" These data cannot show whether these are present too, as the coefficients take them up: {blind}."
         ties = [n.split(": ", 1)[1] for n in disc.notes if "BIC within" in n and ": " in n and "ambiguous" not in n]
         if ties:
             text += f" Rivals: {ties[-1]}."
