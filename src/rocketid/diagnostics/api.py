@@ -525,6 +525,10 @@ def _final(disc, ranking, level, window) -> FinalModel | None:
         text = f"the model with {names} reaches the noise (chi2/dof {fit.chi2_per_dof:.4g}): {est}."
         if r is not None and r.identifiability:
             text += f" Caution: {r.identifiability}."
+        if any(e.kind == "mass" or e.name == "thrust_level" or e.name.startswith("thrust_profile") for e in disc.effects):
+            text += (" Note: x, h and v see the thrust and the mass only through their ratio (the acceleration): an "
+                     "error of the vehicle's mass (its start mass or its consumption) would fit much alike, the drag "
+                     "coefficients taking up the rest; a measured thrust or mass tells them apart.")
         blind = _blind_spots(ranking, exclude=disc.effect_names)
         if blind:
             text += f" These data cannot show whether these are present too, as the coefficients take them up: {blind}."
@@ -532,8 +536,14 @@ def _final(disc, ranking, level, window) -> FinalModel | None:
         if ties:
             text += f" Rivals: {ties[-1]}."
     elif disc.verdict == "partly explained":
-        text = (f"the model with {names} still leaves chi2/dof {fit.chi2_per_dof:.4g} (band <= {band.upper:.4g}), "
-                f"located in: {_where(fit, level, window)}.{amb} Try {_suggest(ranking)}.")
+        if disc.fits_to_noise:
+            why = next((n.split(": ", 1)[1] for n in disc.notes
+                        if n.startswith("the final model reaches the noise but is not an explanation")), "")
+            text = (f"the model with {names} reaches the noise (chi2/dof {fit.chi2_per_dof:.4g}, band <= "
+                    f"{band.upper:.4g}) but is not an explanation{': ' + why if why else ''}.{amb}")
+        else:
+            text = (f"the model with {names} does not reach the noise ({disc.noise_detail}); the residual is "
+                    f"located in: {_where(fit, level, window)}.{amb} Try {_suggest(ranking)}.")
     elif disc.ambiguous:
         text = (f"{disc.ambiguous} (chi2/dof {fit.chi2_per_dof:.4g} without them, band <= {band.upper:.4g}); the "
                 f"residual sits in: {_where(fit, level, window)}. Other data (another channel, a measured thrust or "

@@ -596,7 +596,9 @@ class Refit:
         for n, v0 in self.base_values.items():
             if n in self.parameter_names and n not in self.effect_parameters:
                 v = self.estimate(n)[0]
-                rel = abs(v - v0) / max(abs(v0), 1e-12)
+                # relative to the start value; a coefficient that started at (or near) 0 -- held at a bound --
+                # counts as a change of at most 200 %, not 2e10 %
+                rel = abs(v - v0) / max(abs(v0), 0.5 * abs(v), 1e-12)
                 if rel > worst[1]:
                     worst = (n, rel)
         return worst
