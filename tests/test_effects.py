@@ -347,3 +347,29 @@ def test_drag_correction_is_pinned_at_the_tables_knots(ra66m_spec):
     # between two knots it differs by the correction's hat (0.3 at the midpoint of the first interval)
     mid = 0.5 * (table[0] + table[1])
     assert float(f(mid)) - float(g(mid)) == pytest.approx(0.3, abs=1e-12)
+
+
+def test_misalignment_fade_time_is_estimated_only_from_rest(ra66m_spec):
+    """From rest (RA-66M) the misalignment's refined shape estimates its fade time t_r e^s (zero gives
+    the base model; s = 0 is the catalogue's 3 s fade); a vehicle released at speed has no such shape."""
+    from rocketid.diagnostics.effects import LIFTOFF_FADE_TIME, Vehicle
+    veh = Vehicle(thrust=9e5, mass=3e4, mass_flow=300.0, speed=1400.0, start_speed=0.0, duration=66.0,
+                  altitude=(0.0, 16000.0), mach=(0.0, 4.5), sigma={"x": 1.0}, sample_interval=0.01)
+    (fade,) = CATALOGUE["misalignment"].refinements(veh)
+    assert set(fade.realistic) == {"delta_thrust", "s_fade"}
+    moving = Vehicle(**{**veh.__dict__, "start_speed": 5.0})
+    assert CATALOGUE["misalignment"].refinements(moving) == []
+    spec = with_effects(ra66m_spec, [fade])
+    rng = np.random.default_rng(7)
+    point = _random_point(spec, rng)
+    np.testing.assert_allclose(_values(spec, spec.equations[:len(ra66m_spec.states)], point),
+                               _values(ra66m_spec, ra66m_spec.equations, point), rtol=1e-12, atol=1e-9)
+    # at s = 0 the thrust direction is the catalogue's faded misalignment: half of delta at t0 + 3 s
+    at = dict(spec.definitions)[spec.role("thrust_direction")]
+    at0 = dict(ra66m_spec.definitions)[ra66m_spec.role("thrust_direction")]
+    d = (at - at0).xreplace({spec.symbol("delta_thrust"): 0.01, spec.symbol("s_fade"): 0.0,
+                             spec.t: spec.t0 + LIFTOFF_FADE_TIME})
+    assert float(d) == pytest.approx(0.005, rel=1e-12)
+    d2 = (at - at0).xreplace({spec.symbol("delta_thrust"): 0.01, spec.symbol("s_fade"): math.log(2.0),
+                              spec.t: spec.t0 + 2 * LIFTOFF_FADE_TIME})
+    assert float(d2) == pytest.approx(0.005, rel=1e-12)

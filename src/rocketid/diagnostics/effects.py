@@ -406,6 +406,27 @@ def _misalignment(m: Model) -> tuple:
     return (delta,)
 
 
+def _misalignment_fade(m: Model) -> tuple:
+    """Misalignment phased in over an estimated time: ``f(t) = t^4 / (t^4 + (t_r e^s)^4)``, ``t_r`` = 3 s."""
+    sym, at = _role_definition(m, "thrust_direction", "misalignment_fade")
+    delta = m.parameter("delta_thrust", 0.0, nominal=math.radians(0.25))
+    s = m.parameter("s_fade", 0.0, bounds=(-3.0, 3.0), nominal=1.0)
+    tt = m.t - m.t0
+    m.redefine(sym, at + delta * tt ** 4 / (tt ** 4 + (LIFTOFF_FADE_TIME * sp.exp(s)) ** 4))
+    return (delta, s)
+
+
+def _refine_misalignment(vehicle: "Vehicle | None") -> list[Effect]:
+    """From rest the misalignment is phased in at lift-off; its fade time is then estimated (a moving
+    start takes the misalignment from t0 and needs no fade)."""
+    if vehicle is not None and math.isfinite(vehicle.start_speed) and vehicle.start_speed > 0:
+        return []
+    return [Effect("misalignment_fade", "thrust misalignment, fade time estimated", "propulsion", _misalignment_fade,
+                   "thrust direction alpha_thrust = alpha + delta_thrust t^4 / (t^4 + (t_r exp(s_fade))^4), "
+                   f"t_r = {LIFTOFF_FADE_TIME:g} s: the time the launcher holds the path vertical, estimated",
+                   {"delta_thrust": math.radians(0.25), "s_fade": 1.0})]
+
+
 _CHANNEL_ROLE = {"x": "downrange", "h": "altitude", "v": "speed"}
 
 
@@ -902,7 +923,8 @@ def _build_catalogue() -> dict[str, Effect]:
         earth_rotation_effect(),
         Effect("misalignment", "thrust misalignment", "propulsion", _misalignment,
                "thrust direction alpha_thrust = alpha + delta_thrust, rad, from t0 when the vehicle starts moving "
-               "(start speed > 0), else phased in by the lift-off fade f_lo(t)", {"delta_thrust": math.radians(0.25)}),
+               "(start speed > 0), else phased in by the lift-off fade f_lo(t)", {"delta_thrust": math.radians(0.25)},
+               refine=_refine_misalignment),
         replace(density_effect(), refine=_refine_density),
         Effect("bias_x", "downrange sensor bias", "sensor", _bias("x"), "z_x = x + b_x, m", {"b_x": 5.0},
                relative=rel_bias("x", 5.0, 5.0)),
