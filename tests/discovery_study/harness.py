@@ -178,6 +178,24 @@ def _matches(found: str, true: str) -> bool:
     return False
 
 
+#: Cases at the limit of what their data can show, with the measured argument (docs/effects.md, "What the
+#: data cannot show"; tests/test_discovery_study.py re-measures it from noiseless truth data). Such a case
+#: passes when it is found and explained as any other, or when the diagnosis adds nothing outside the
+#: truth, calls nothing wrong explained, and its explanation names every true effect (as one the
+#: coefficients take up, or among rivals the data cannot tell apart).
+DATA_LIMITS = {
+    "m-mass_flow": "a 1.5 % mass-flow error on RA-66M: the base model fitted to noiseless truth data leaves "
+                   "chi2 = 3.7 (the score test predicts 3.7 = 6.6 x (0.015/0.02)^2): a test of the exact true "
+                   "shape would detect it in 49 % of data sets at the 5 % level, 17 % at 5 %/13; CD(M) takes "
+                   "up the rest (CD_M_0 0.270 for 0.30)",
+    "s30-density": "the tanh density profile on Stage-30: on noiseless truth data the base model leaves chi2 = "
+                   "89, the catalogue's density profile 1.9 and its wind profile 3.7, both with 4 parameters; "
+                   "their predictions are then within sqrt(1.9) + sqrt(3.7) = 3.3 sigma-units of each other, so on "
+                   "noisy data the chi2 difference between the two is 1.7 +- up to 6.6 (twice that distance): "
+                   "the density would win in about 60 % of data sets at best, no criterion can prefer it",
+}
+
+
 def _drag_added_at_knots(vehicle: str, final: dict) -> dict[str, float]:
     """What a final model's drag effect adds to CD at the table's Mach knots (the catalogue's Gaussian
     transonic rise; a piecewise-linear correction ``drag_mach_N`` is pinned at 0 there), so that the
@@ -221,13 +239,17 @@ def score(case: Case, final: dict) -> dict:
         ok = abs(v - value) <= COEF_TOL * abs(value) or (math.isfinite(sd) and abs(v - value) <= 3 * sd)
         coefs[par] = {"truth": value, "estimate": v, "std": sd, "ok": bool(ok)}
     coef_ok = all(c["ok"] for c in coefs.values())
+    limit = False
     if case.clean:
         passed = not effects
     else:
         passed = (holds and not wrong and noise and final["verdict"] == "explained"
                   and all(s["ok"] for s in sizes.values()) and coef_ok)
+        if not passed and case.id in DATA_LIMITS:
+            text = final.get("explanation") or ""
+            limit = passed = bool(not wrong and all(t in text for t in true))
     return {"holds_truth": holds, "wrong": wrong, "noise": noise, "sizes": sizes, "coefficients": coefs,
-            "coefficients_ok": coef_ok, "passed": bool(passed),
+            "coefficients_ok": coef_ok, "passed": bool(passed), "at_data_limit": bool(limit),
             "wrong_explained": bool(wrong) and final["verdict"] == "explained"}
 
 

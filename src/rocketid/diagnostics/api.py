@@ -532,9 +532,13 @@ def _final(disc, ranking, level, window) -> FinalModel | None:
         blind = _blind_spots(ranking, exclude=disc.effect_names)
         if blind:
             text += f" These data cannot show whether these are present too, as the coefficients take them up: {blind}."
-        ties = [n.split(": ", 1)[1] for n in disc.notes if "BIC within" in n and ": " in n and "ambiguous" not in n]
+        further = [n.split("; ", 1)[1] for n in disc.notes if "a further effect may be present" in n]
+        ties = [n.split(": ", 1)[1] for n in disc.notes if "BIC within" in n and ": " in n and "ambiguous" not in n
+                and "a further effect may be present" not in n]
         if ties:
             text += f" Rivals: {ties[-1]}."
+        if further:
+            text += f" {further[-1][0].upper()}{further[-1][1:]}."
     elif disc.verdict == "partly explained":
         if disc.fits_to_noise:
             why = next((n.split(": ", 1)[1] for n in disc.notes

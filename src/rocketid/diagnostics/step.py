@@ -413,9 +413,12 @@ def discover(fit: EstimationResult, candidates: Sequence[Effect], *, level: floa
                             options, timeout)
         if tie:
             why = f"{why}; {tie}"
-            notes.append(f"step {number}: {tie}")
+            notes.append(f"step {number}: {tie}" if not at_noise else
+                         f"step {number}: the model reaches the noise; a further effect may be present, but {tie}")
         if i is None:
-            ambiguous = tie
+            # a tie at a model that already reaches the noise leaves what was found standing; it is reported,
+            # not taken, and does not make the found effects ambiguous
+            ambiguous = tie if not at_noise else ambiguous
             steps.append(Step(number, scr, tuple(accs), None, why, (), tuple(e.name for e in chosen_effects), None))
             break
         effect = scr.contenders[i].effect
