@@ -373,3 +373,19 @@ def test_misalignment_fade_time_is_estimated_only_from_rest(ra66m_spec):
     d2 = (at - at0).xreplace({spec.symbol("delta_thrust"): 0.01, spec.symbol("s_fade"): math.log(2.0),
                               spec.t: spec.t0 + 2 * LIFTOFF_FADE_TIME})
     assert float(d2) == pytest.approx(0.005, rel=1e-12)
+
+
+@pytest.mark.parametrize("channel", ["x", "h", "v"])
+def test_a_sensor_bias_refines_to_a_drifting_bias(channel, ra66m_spec):
+    """z = y + b + db (t - t0): the output moves by b at t0 and by b + 10 db ten seconds later."""
+    from rocketid.diagnostics.effects import Vehicle
+    veh = Vehicle(thrust=9e5, mass=3e4, mass_flow=300.0, speed=1400.0, start_speed=0.0, duration=66.0,
+                  altitude=(0.0, 16000.0), mach=(0.0, 4.5), sigma={channel: 1.0}, sample_interval=0.01)
+    (drift,) = CATALOGUE[f"bias_{channel}"].refinements(veh)
+    assert drift.name == f"bias_{channel}_drift" and set(drift.realistic) == {f"b_{channel}", f"db_{channel}"}
+    spec = with_effects(ra66m_spec, [drift], {f"b_{channel}": 2.0, f"db_{channel}": 0.3})
+    out = next(o for o in spec.outputs if o.name == channel).expr
+    base = next(o for o in ra66m_spec.outputs if o.name == channel).expr
+    for t, want in ((spec.t0, 2.0), (spec.t0 + 10.0, 5.0)):
+        diff = (out - base).xreplace({spec.symbol(f"b_{channel}"): 2.0, spec.symbol(f"db_{channel}"): 0.3, spec.t: t})
+        assert float(diff) == pytest.approx(want, abs=1e-12)

@@ -440,6 +440,29 @@ def _bias(channel: str) -> Callable[[Model], tuple]:
     return apply
 
 
+def _bias_drift(channel: str) -> Callable[[Model], tuple]:
+    def apply(m: Model) -> tuple:
+        name, expr = _output_of(m, _CHANNEL_ROLE[channel], channel, f"bias_{channel}_drift")
+        b = m.parameter(f"b_{channel}", 0.0, nominal=1.0)
+        d = m.parameter(f"db_{channel}", 0.0, nominal=0.1)
+        m.redefine_output(name, m.output_expression(name) + b + d * (m.t - m.t0))
+        return (b, d)
+    apply.__name__ = f"_bias_{channel}_drift"
+    return apply
+
+
+def _refine_bias(channel: str, unit: str, floor: float, sigmas: float) -> Callable:
+    """A sensor bias that drifts linearly in time: ``z = y + b + db (t - t0)`` (realistic drift: the
+    realistic bias over the flight's duration)."""
+    def refine(vehicle: "Vehicle | None") -> list[Effect]:
+        size = floor if vehicle is None else max(floor, sigmas * float(vehicle.sigma.get(channel, 0.0)))
+        dur = vehicle.duration if vehicle is not None and math.isfinite(vehicle.duration) and vehicle.duration > 0 else 66.0
+        return [Effect(f"bias_{channel}_drift", f"{_CHANNEL_ROLE[channel]} sensor bias drifting in time", "sensor",
+                       _bias_drift(channel), f"z_{channel} = {channel} + b_{channel} + db_{channel} (t - t0), {unit}",
+                       {f"b_{channel}": size, f"db_{channel}": size / dur})]
+    return refine
+
+
 def _scale(channel: str) -> Callable[[Model], tuple]:
     def apply(m: Model) -> tuple:
         name, expr = _output_of(m, _CHANNEL_ROLE[channel], channel, f"scale_{channel}")
@@ -927,11 +950,11 @@ def _build_catalogue() -> dict[str, Effect]:
                refine=_refine_misalignment),
         replace(density_effect(), refine=_refine_density),
         Effect("bias_x", "downrange sensor bias", "sensor", _bias("x"), "z_x = x + b_x, m", {"b_x": 5.0},
-               relative=rel_bias("x", 5.0, 5.0)),
+               relative=rel_bias("x", 5.0, 5.0), refine=_refine_bias("x", "m", 5.0, 5.0)),
         Effect("bias_h", "altitude sensor bias", "sensor", _bias("h"), "z_h = h + b_h, m", {"b_h": 5.0},
-               relative=rel_bias("h", 5.0, 5.0)),
+               relative=rel_bias("h", 5.0, 5.0), refine=_refine_bias("h", "m", 5.0, 5.0)),
         Effect("bias_v", "speed sensor bias", "sensor", _bias("v"), "z_v = v + b_v, m/s", {"b_v": 0.5},
-               relative=rel_bias("v", 0.5, 0.5)),
+               relative=rel_bias("v", 0.5, 0.5), refine=_refine_bias("v", "m/s", 0.5, 0.5)),
         Effect("scale_v", "speed scale factor", "sensor", _scale("v"), "z_v = (1 + k_v) v", {"k_v": 1e-3}),
         Effect("time_offset", "time-tag offset", "sensor", _time_offset,
                "every output z(t) = y(t - tau) ~ y - tau dy/dt, tau in s", {"tau": 0.01},
