@@ -458,10 +458,12 @@ def _suggest(ranking) -> str:
         return ("a thrust error in time (rocketid.diagnostics.thrust_profile_effect on the mesh's element boundaries) "
                 "or your own propulsion term (custom_effect)")
     if kind == "environment":
-        return ("a wind profile with a surface value and more basis functions (wind_effect(..., surface=True)) or a "
-                "density profile on more knots (density_effect(...))")
+        return ("a wind piecewise linear in altitude with a surface value on more knots "
+                "(rocketid.diagnostics.wind_profile_effect) or a density deviation piecewise linear in altitude "
+                "(density_profile_effect)")
     if kind == "aero":
-        return "a drag correction piecewise linear in Mach on more knots (Model.table on the Mach role)"
+        return ("a drag correction piecewise linear in Mach on more knots (rocketid.diagnostics.drag_mach_effect, "
+                "or Model.table on the Mach role)")
     if kind == "sensor":
         return "a sensor model of the failing channel (custom_effect redefining that output)"
     return "a term of your own written with custom_effect"
