@@ -117,10 +117,123 @@ class SymbolicModel:
 def _diff(expr: sp.Expr, var: sp.Symbol) -> sp.Expr:
     """``d expr / d var`` with Dirac deltas (from kinks such as Max or Abs) dropped:
     they live on a set of measure zero and have no value a solver could use."""
-    d = sp.diff(expr, var)
+    d = derivative(expr, var)
     if d.has(sp.DiracDelta):
         d = d.replace(sp.DiracDelta, lambda *args: sp.S.Zero)
     return d
+
+
+# ---------------------------------------------------------------------------
+# Differentiation: SymPy's rules, without SymPy's per-node overhead
+# ---------------------------------------------------------------------------
+#
+# ``sympy.diff`` builds a ``Derivative`` for every node it visits, and each one walks
+# its whole subtree for its free symbols and for unevaluated derivatives: on the deep
+# expressions of an ascent model (a layered atmosphere inside Mach inside a drag table)
+# that is quadratic in the depth, and most of a model's code-generation time.
+# :func:`derivative` applies the same rules as SymPy (the same constructor calls on the
+# same arguments, so the result is the same expression, to the node) with the free symbols
+# of every node computed once, and remembers each ``(node, variable)`` derivative: the
+# Hessian differentiates the Jacobian's entries, which share subtrees, and a model
+# extended by an effect shares most of its subtrees with the model it extends, so a
+# diagnosis that generates ten extended models derives the shared part once. A node
+# type without a known rule is differentiated by SymPy itself.
+
+_MEMO_MAX = 400_000
+_FREE: dict = {}
+_DERIV: dict = {}
+_RULES: dict = {}
+
+
+def _owner(cls: type, name: str):
+    for k in cls.__mro__:
+        if name in k.__dict__:
+            return k
+    return None
+
+
+def _rule(cls: type) -> str:
+    """Which of SymPy's differentiation rules a node class uses ("" = let SymPy do it)."""
+    rule = _RULES.get(cls)
+    if rule is None:
+        from sympy.functions.elementary.miscellaneous import MinMaxBase
+        ev, evn = _owner(cls, "_eval_derivative"), _owner(cls, "_eval_derivative_n_times")
+        if cls is sp.Add:
+            rule = "add"
+        elif cls is sp.Mul:
+            rule = "mul"
+        elif cls is sp.Pow:
+            rule = "pow"
+        elif cls is sp.Piecewise:
+            rule = "piecewise"
+        elif ev in (sp.Function, MinMaxBase) and evn is sp.Basic:
+            rule = "chain"
+        else:
+            rule = ""
+        _RULES[cls] = rule
+    return rule
+
+
+def _free(e) -> frozenset:
+    """``e.free_symbols``, computed once per node."""
+    if e.is_Symbol:
+        return frozenset((e,))
+    if not e.args:
+        return frozenset(e.free_symbols)
+    hit = _FREE.get(e)
+    if hit is None:
+        if _owner(type(e), "free_symbols") is sp.Basic:
+            hit = frozenset().union(*map(_free, e.args))
+        else:
+            hit = frozenset(e.free_symbols)
+        if len(_FREE) >= _MEMO_MAX:
+            _FREE.clear()
+        _FREE[e] = hit
+    return hit
+
+
+def derivative(expr: sp.Expr, var: sp.Symbol) -> sp.Expr:
+    """``sympy.diff(expr, var)`` for a symbol ``var``: the same expression, computed once per
+    ``(node, var)`` in this process (see the notes above)."""
+    if var not in _free(expr):
+        return sp.S.Zero
+    if expr == var:
+        return sp.S.One
+    key = (expr, var)
+    hit = _DERIV.get(key)
+    if hit is not None:
+        return hit
+    rule = _rule(type(expr))
+    args = expr.args
+    if rule == "add":
+        out = sp.Add(*[derivative(a, var) for a in args])
+    elif rule == "mul":
+        # Mul._eval_derivative_n_times at n = 1: the Leibniz rule, one factor differentiated per term
+        out = sp.Add(*[sp.Mul(*args[:i], derivative(a, var), *args[i + 1:]) for i, a in enumerate(args)])
+    elif rule == "pow":
+        base, ex = args
+        dbase, dexp = derivative(base, var), derivative(ex, var)
+        out = expr * (dexp * sp.log(base) + dbase * ex / base)
+    elif rule == "piecewise":
+        out = sp.Piecewise(*[(derivative(e, var), c) for e, c in args])
+    elif rule == "chain":
+        from sympy.core.function import ArgumentIndexError
+        terms = []
+        try:
+            for i, a in enumerate(args, 1):
+                da = derivative(a, var)
+                if da.is_zero:
+                    continue
+                terms.append(expr.fdiff(i) * da)
+            out = sp.Add(*terms)
+        except ArgumentIndexError:
+            out = sp.diff(expr, var)
+    else:
+        out = sp.diff(expr, var)
+    if len(_DERIV) >= _MEMO_MAX:
+        _DERIV.clear()
+    _DERIV[key] = out
+    return out
 
 
 def _nonzero(expr: sp.Expr) -> bool:
