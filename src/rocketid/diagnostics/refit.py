@@ -836,6 +836,11 @@ def _failed(task: RefitTask, message: str, seconds: float, gave_up: bool = False
                  sizes=dict(task.sizes), seconds=seconds, notes=(message,))
 
 
+def _weight(task: RefitTask) -> int:
+    """The expected cost of a refit, for the order the workers take them in: its added parameters."""
+    return sum(max(1, len(e.parameter_names)) for e in task.effects if e.name in set(task.added))
+
+
 _TASKS: list = []   # read by forked workers (the tasks are not pickled: effects may be closures)
 
 
@@ -878,7 +883,9 @@ def refit_all(tasks: Sequence[RefitTask], *, workers: int | None = None) -> tupl
     _TASKS = tasks
     ctx = mp.get_context("fork")
     results: list = [None] * len(tasks)
-    pending = list(range(len(tasks)))
+    # the refits with the most added parameters first (they take longest: a wind profile), so that no
+    # worker is left with a long one at the end while the other idles; the results keep the tasks' order
+    pending = sorted(range(len(tasks)), key=lambda i: -_weight(tasks[i]))
     running: dict = {}
     try:
         while pending or running:
