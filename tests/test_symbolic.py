@@ -76,3 +76,49 @@ def test_derive_gives_the_templates_of_sympys_diff(monkeypatch):
     assert fast == reference
     assert again == reference
     assert len(reference.point.hess_exprs) > 10
+
+
+def test_the_point_hessian_is_generated_on_first_use(tmp_path, monkeypatch):
+    """The main module has no point Hessian; its first use generates the companion module, whose
+    functions are those of the single module made from the full derivation."""
+    import importlib.util
+
+    import numpy as np
+
+    from rocketid import codegen
+    monkeypatch.setenv("ROCKETID_CACHE_DIR", str(tmp_path))
+    spec = with_effects(ri.ra66(), ["thrust_level"])
+    gen = codegen.generate(spec)
+    assert "def hessian" not in gen.source and "def jacobian" in gen.source
+    assert not gen.hessian_path.exists()
+    full = tmp_path / "full" / "rocketid_full_module.py"
+    full.parent.mkdir()
+    full.write_text(codegen.generate_source(symbolic.derive(spec), spec.name))
+    mspec = importlib.util.spec_from_file_location("rocketid_full_module", full)
+    ref = importlib.util.module_from_spec(mspec)
+    mspec.loader.exec_module(ref)
+    assert gen.HESS_ROWS == ref.HESS_ROWS and gen.HESS_COLS == ref.HESS_COLS and len(ref.HESS_ROWS) > 5
+    assert gen.hessian_path.exists()
+    rng = np.random.default_rng(3)
+    n = 7
+    Z = rng.uniform(0.1, 2.0, (n, len(gen.Z_NAMES)))
+    Z[:, 1] *= 1e4                                  # altitudes in the atmosphere's range
+    D = rng.uniform(0.1, 2.0, (n, len(gen.D_NAMES)))
+    L = rng.standard_normal((n, gen.N_RESIDUALS))
+    np.testing.assert_array_equal(gen.hessian(Z, D, L), ref.hessian(Z, D, L))
+    np.testing.assert_array_equal(gen.jacobian(Z, D), ref.jacobian(Z, D))
+    again = codegen.generate(spec)                  # both files from the cache
+    assert again.cached and again.hessian_source == gen.hessian_source
+
+
+def test_the_score_test_does_not_generate_the_augmented_models_hessian(tmp_path, monkeypatch):
+    from rocketid.diagnostics import rank_candidates
+    monkeypatch.setenv("ROCKETID_CACHE_DIR", str(tmp_path))
+    spec = ri.ra66()
+    data = ri.simulate_measurements(spec, ri.ra66_truth(spec), ri.ra66_times(), seed=0)
+    fit = ri.estimate(spec, data, mesh=ri.default_mesh(spec, refine_first=3))
+    ranking = rank_candidates(fit, ["thrust_level", "bias_h", "wind"])
+    assert ranking.candidates
+    mains = sorted(p for p in tmp_path.glob("rocketid_gen_*.py") if not p.stem.endswith("_hessian"))
+    companions = sorted(tmp_path.glob("rocketid_gen_*_hessian.py"))
+    assert len(mains) == 2 and len(companions) == 1    # the base model's (its fit solved with it)

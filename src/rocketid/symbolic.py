@@ -36,7 +36,7 @@ import sympy as sp
 
 from .model import ModelSpec
 
-__all__ = ["PointTemplate", "OutputTemplate", "SymbolicModel", "derive"]
+__all__ = ["PointTemplate", "OutputTemplate", "SymbolicModel", "derive", "derive_hessian", "derivative"]
 
 
 @dataclass(frozen=True)
@@ -107,11 +107,13 @@ class OutputTemplate:
 
 @dataclass(frozen=True)
 class SymbolicModel:
-    """The templates of a model, ready for code generation."""
+    """The templates of a model, ready for code generation (``hessian`` False: the point
+    template's Hessian was not derived)."""
 
     fingerprint: str
     point: PointTemplate
     outputs: tuple
+    hessian: bool = True
 
 
 def _diff(expr: sp.Expr, var: sp.Symbol) -> sp.Expr:
@@ -254,33 +256,27 @@ def output_variables(spec: ModelSpec) -> tuple:
     return (*spec.state_symbols, *spec.derivative_symbols, *scal)
 
 
-def derive(spec: ModelSpec) -> SymbolicModel:
-    """Derive the residual and output templates of ``spec`` with their exact
-    first and second derivatives.
-
-    Parameters
-    ----------
-    spec : ModelSpec
-
-    Returns
-    -------
-    SymbolicModel
-    """
+def _point_jacobian(spec: ModelSpec) -> tuple:
+    """``(z, d, lam, residuals, rows)``: ``rows[k]`` maps the z index of each structural non-zero
+    of ``dF_k/dz`` to its expression."""
     z, d = point_variables(spec)
     lam = tuple(sp.Symbol(f"lam_{s}") for s in spec.state_symbols)
     residuals = tuple(spec.expand(e) for e in spec.equations)
-
-    jac_rows, jac_cols, jac_exprs = [], [], []
-    hess: dict[tuple[int, int], sp.Expr] = {}
-    for k, F in enumerate(residuals):
+    rows = []
+    for F in residuals:
         row = {}
         for j, zj in enumerate(z):
             dF = _diff(F, zj)
             if _nonzero(dF):
                 row[j] = dF
-                jac_rows.append(k)
-                jac_cols.append(j)
-                jac_exprs.append(dF)
+        rows.append(row)
+    return z, d, lam, residuals, rows
+
+
+def _point_hessian(z: tuple, lam: tuple, rows: list) -> tuple:
+    """``(hess_rows, hess_cols, hess_exprs)``: the lower triangle of ``d2(sum_k lam_k F_k)/dz2``."""
+    hess: dict[tuple[int, int], sp.Expr] = {}
+    for k, row in enumerate(rows):
         cols = sorted(row)
         for a in cols:
             for b in cols:
@@ -290,12 +286,45 @@ def derive(spec: ModelSpec) -> SymbolicModel:
                 if _nonzero(d2):
                     hess[(a, b)] = hess.get((a, b), sp.S.Zero) + lam[k] * d2
     keys = sorted(hess)
+    return tuple(a for a, _ in keys), tuple(b for _, b in keys), tuple(hess[k] for k in keys)
+
+
+def derive_hessian(spec: ModelSpec) -> PointTemplate:
+    """The point template of ``spec`` with its Hessian (the part :func:`derive` leaves out with
+    ``hessian=False``; the first derivatives it repeats come from the memo of :func:`derivative`)."""
+    return derive(spec, hessian=True, outputs=False).point
+
+
+def derive(spec: ModelSpec, *, hessian: bool = True, outputs: bool = True) -> SymbolicModel:
+    """Derive the residual and output templates of ``spec`` with their exact
+    first and second derivatives.
+
+    Parameters
+    ----------
+    spec : ModelSpec
+    hessian : bool
+        Also the point template's Hessian (False: its ``hess_*`` fields are empty; an
+        analysis that needs only first derivatives, such as the score test, skips the
+        costliest part).
+    outputs : bool
+        Also the output templates (False: none).
+
+    Returns
+    -------
+    SymbolicModel
+    """
+    z, d, lam, residuals, rows = _point_jacobian(spec)
+    jac_rows = [k for k, row in enumerate(rows) for _ in sorted(row)]
+    jac_cols = [j for row in rows for j in sorted(row)]
+    jac_exprs = [row[j] for row in rows for j in sorted(row)]
+    hess_rows, hess_cols, hess_exprs = _point_hessian(z, lam, rows) if hessian else ((), (), ())
     point = PointTemplate(
         z=z, d=d, lam=lam, residuals=residuals,
         jac_rows=tuple(jac_rows), jac_cols=tuple(jac_cols), jac_exprs=tuple(jac_exprs),
-        hess_rows=tuple(a for a, _ in keys), hess_cols=tuple(b for _, b in keys),
-        hess_exprs=tuple(hess[k] for k in keys),
+        hess_rows=hess_rows, hess_cols=hess_cols, hess_exprs=hess_exprs,
     )
+    if not outputs:
+        return SymbolicModel(fingerprint=spec.fingerprint(), point=point, outputs=(), hessian=hessian)
 
     u = output_variables(spec)
     outputs = []
@@ -320,4 +349,4 @@ def derive(spec: ModelSpec) -> SymbolicModel:
             hess_rows=tuple(hrows), hess_cols=tuple(hcols), hess_exprs=tuple(hexprs),
             linear=(not hexprs) and const_grad and spec.t not in g.free_symbols,
         ))
-    return SymbolicModel(fingerprint=spec.fingerprint(), point=point, outputs=tuple(outputs))
+    return SymbolicModel(fingerprint=spec.fingerprint(), point=point, outputs=tuple(outputs), hessian=hessian)
