@@ -12,7 +12,8 @@ Generated functions
 -------------------
 ``residual(Z, D)``              -> (n, n_states)
 ``jacobian(Z, D)``              -> (n, len(JAC_ROWS))
-``hessian(Z, D, L)``            -> (n, len(HESS_ROWS)), of sum_k L[:, k] F_k
+``hessian(Z, D, L)``            -> (n, len(HESS_ROWS)), of sum_k L[:, k] F_k (in the
+                                   companion module ``<name>_hessian.py``, made on first use)
 ``output_<k>(U, D)``            -> (n,)
 ``output_<k>_grad(U, D)``       -> (n, len(OUTPUT_GRAD_IDX[k]))
 ``output_<k>_hess(U, D)``       -> (n, len(OUTPUT_HESS_ROWS[k]))
