@@ -29,6 +29,7 @@ import numpy as np
 
 from .errors import SensitivityError, SettingsError
 from .nlp import ParameterTransform
+from .output import finite_or_none
 from .sensitivity import Sensitivity, sensitivity_at, sensitivity_of
 from .solve import EstimationResult, Prepared, fit_nlp
 from .summary import Section, Summary, Table, Text
@@ -133,18 +134,35 @@ class Estimability:
         """Eigenvalues, ratios, and each direction's main parameters (text of :meth:`directions_table`)."""
         return "\n".join(self.directions_table().text_lines())
 
+    @property
+    def has_priors(self) -> bool:
+        """Whether priors contribute to H_r (then :meth:`data_share` tells the data's part)."""
+        return bool(np.any(self.sensitivity.H_prior))
+
+    def data_share(self) -> np.ndarray:
+        """The data's share of each direction's information: ``v_k^T D H_data D v_k / lambda_k``
+        (1 without priors; near 0 where the direction is known from the priors alone), shape (n_p,)."""
+        Hd = self.D[:, None] * self.sensitivity.H_data * self.D[None, :]
+        num = np.einsum("ik,ij,jk->k", self.V, Hd, self.V)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(self.eigenvalues > 0, num / self.eigenvalues, np.nan)
+
     def directions_table(self) -> Table:
-        """Eigenvalues, ratios, and each direction's main parameters, as a :class:`~rocketid.summary.Table`."""
+        """Eigenvalues, ratios, and each direction's main parameters, as a :class:`~rocketid.summary.Table`
+        (with the data's share of each eigenvalue when the model has priors)."""
         comp = self.composition()
+        share = self.data_share() if self.has_priors else None
         rows = []
         for k, (lam, r) in enumerate(zip(self.eigenvalues, self.ratios)):
             order = np.argsort(comp[:, k])[::-1]
             parts = [f"{self.parameter_names[i]} {100 * comp[i, k]:.0f}%{'-' if self.V[i, k] < 0 else '+'}"
                      for i in order if comp[i, k] >= 0.05][:4]
-            rows.append((f"q{k + 1}", float(lam), float(r), "estimated" if k < self.n_estimated else "fixed",
-                         ", ".join(parts)))
-        return Table(("dir", "eigenvalue", "ratio", "", "composition (share of each parameter)"), rows,
-                     (None, ".4g", ".4g"))
+            row = (f"q{k + 1}", float(lam), float(r), "estimated" if k < self.n_estimated else "fixed")
+            if share is not None:
+                row += (f"{100 * share[k]:.0f}%",)
+            rows.append(row + (", ".join(parts),))
+        head = ("dir", "eigenvalue", "ratio", "") + (("data share",) if share is not None else ())
+        return Table(head + ("composition (share of each parameter)",), rows, (None, ".4g", ".4g"))
 
     def summary(self) -> Summary:
         """Setting, np, table, numbered notes."""
@@ -172,6 +190,7 @@ class Estimability:
                             "vector": {n: float(self.V[i, k]) for i, n in enumerate(self.parameter_names)}}
                            for k in range(self.eigenvalues.size)],
             "notes": list(self.notes),
+            **({"data_share": [finite_or_none(v) for v in self.data_share()]} if self.has_priors else {}),
         }
 
     def to_json(self, path) -> Path:

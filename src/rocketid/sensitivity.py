@@ -64,7 +64,7 @@ class Sensitivity:
     sigma : ndarray, shape (ny,)
         Noise standard deviation of each output value.
     H_r : ndarray, shape (n_p, n_p)
-        Reduced Hessian ``Z^T diag(0, 0, Cy^-1) Z``.
+        Reduced Hessian ``Z^T diag(0, 0, Cy^-1) Z`` plus the priors' information: ``H_data + H_prior``.
     channel_slices : dict
         ``{channel: slice}`` into the rows of ``S``.
     gamma : ndarray
@@ -72,6 +72,10 @@ class Sensitivity:
     formed_s : float
         Wall time of forming ``J_w``, the LU and the back-solves.
     notes : tuple of str
+    H_data : ndarray, shape (n_p, n_p)
+        The data's share of ``H_r``: ``S^T Cy^-1 S``.
+    H_prior : ndarray, shape (n_p, n_p)
+        The priors' share: ``diag(1 / sd^2)`` on the parameters with a prior (zero without priors).
     """
 
     p: np.ndarray
@@ -85,6 +89,14 @@ class Sensitivity:
     gamma: np.ndarray
     formed_s: float
     notes: tuple = ()
+    H_data: np.ndarray | None = None
+    H_prior: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.H_data is None:
+            object.__setattr__(self, "H_data", self.H_r)
+        if self.H_prior is None:
+            object.__setattr__(self, "H_prior", np.zeros_like(self.H_r))
 
     @property
     def n_parameters(self) -> int:
@@ -237,8 +249,11 @@ def _form(nlp: CollocationNLP, p: np.ndarray, gamma: np.ndarray) -> Sensitivity:
     Z = np.vstack([np.eye(n_p), sol])
     sigma = nlp.sigma_vector()
     Sw = S / sigma[:, None]
-    H_r = Sw.T @ Sw
-    H_r = 0.5 * (H_r + H_r.T)
+    H_data = Sw.T @ Sw
+    H_data = 0.5 * (H_data + H_data.T)
+    _, _, weight = nlp.spec.prior_arrays()
+    H_prior = np.diag(weight)
+    H_r = H_data + H_prior
     slices = nlp.channel_slices()
     notes = []
     colnorm = np.linalg.norm(Sw, axis=0)
@@ -249,4 +264,5 @@ def _form(nlp: CollocationNLP, p: np.ndarray, gamma: np.ndarray) -> Sensitivity:
     return Sensitivity(
         p=np.asarray(p, float).copy(), parameter_names=nlp.spec.parameter_names, S=S,
         state_sensitivity=dgamma.reshape(lay.layout.n_nodes, lay.layout.n_states, n_p), Z=Z, sigma=sigma, H_r=H_r,
-        channel_slices=slices, gamma=gamma, formed_s=time.perf_counter() - t0, notes=tuple(notes))
+        channel_slices=slices, gamma=gamma, formed_s=time.perf_counter() - t0, notes=tuple(notes), H_data=H_data,
+        H_prior=H_prior)

@@ -234,7 +234,8 @@ def solve_nlp(nlp: CollocationNLP, x0: np.ndarray, *, options: Mapping[str, Any]
 
 def default_mesh(spec: ModelSpec, K: int = 4, element_length: float | None = None, refine_first: int = 0) -> Mesh:
     """A mesh of about 1 s elements (or ``element_length``, at most 1/20 of the
-    horizon) that puts every family breakpoint on an element boundary, with K
+    horizon) that puts every family breakpoint and every event time (``Model.event``)
+    on an element boundary, with K
     Radau points; ``refine_first`` splits the first element geometrically.
 
     RA-66 gets 66 elements of 1 s with K = 4: the collocation error at the true
@@ -244,7 +245,8 @@ def default_mesh(spec: ModelSpec, K: int = 4, element_length: float | None = Non
     """
     span = spec.tf - spec.t0
     h = element_length if element_length is not None else min(1.0, span / 20)
-    fam_bps = sorted({float(b) for f in spec.families for b in f.breakpoints} | {spec.t0, spec.tf})
+    fam_bps = sorted({float(b) for f in spec.families for b in f.breakpoints} | {spec.t0, spec.tf}
+                     | {float(e) for e in spec.events if spec.t0 < e < spec.tf})
     bounds = [fam_bps[0]]
     for a, b in zip(fam_bps[:-1], fam_bps[1:]):
         n = max(1, int(math.ceil((b - a) / h - 1e-9)))
@@ -399,9 +401,20 @@ class EstimationResult:
         return self.nlp.transform.P.shape[1]
 
     @property
+    def prior_objective(self) -> float:
+        """The priors' share of J (``sum ((p - mean) / sd)^2 / 2``; 0 without priors)."""
+        return self.nlp.prior_objective(self.x) if self.spec.priors else 0.0
+
+    @property
+    def data_objective(self) -> float:
+        """The data's share of J: the weighted residuals' ``1/2 sum ((y - y_meas)/sigma)^2``."""
+        return self.objective - self.prior_objective
+
+    @property
     def chi2_per_dof(self) -> float:
-        """``2 J / (n_data - n_estimated)``: near 1 when the model fits to the noise."""
-        return 2.0 * self.objective / max(1, self.n_data - self.n_estimated)
+        """``2 J_data / (n_data - n_estimated)``: near 1 when the model fits to the noise (``J_data``
+        is J without the priors' penalty, :attr:`data_objective`)."""
+        return 2.0 * self.data_objective / max(1, self.n_data - self.n_estimated)
 
     @cached_property
     def rms(self) -> dict[str, float]:
@@ -440,7 +453,9 @@ class EstimationResult:
         fit = Section("Fit", (
             ("objective J", f"{self.objective:.6g}"),
             ("chi2 / dof", f"{self.chi2_per_dof:.4f}  (2J / ({self.n_data} - {self.n_estimated}))"),
-            ("RMS residual", ", ".join(f"{k} {v:.4g}" for k, v in self.rms.items()))))
+            ("RMS residual", ", ".join(f"{k} {v:.4g}" for k, v in self.rms.items())),
+            *((("priors", f"{len(self.spec.priors)} Gaussian priors, their share of J {self.prior_objective:.4g} "
+                          f"(data {self.data_objective:.6g})"),) if self.spec.priors else ())))
         notes = list(self.notes)
         if not self.success:
             notes.insert(0, f"IPOPT did not converge: {self.message.rstrip('.')}. The estimates are the last iterate, "
@@ -470,6 +485,9 @@ class EstimationResult:
                      "K": int(self.prepared.transcription.mesh.K)},
             "timings": {k: float(v) for k, v in self.timings.items()},
             "notes": list(self.notes),
+            **({"priors": {str(pr.symbol): {"mean": pr.mean, "sd": pr.sd, "source": pr.source}
+                           for pr in self.spec.priors},
+                "prior_objective": finite_or_none(self.prior_objective)} if self.spec.priors else {}),
         }
 
     def to_json(self, path) -> None:
