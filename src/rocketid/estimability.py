@@ -21,7 +21,7 @@ from __future__ import annotations
 import enum
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
@@ -30,8 +30,8 @@ import numpy as np
 from .errors import SensitivityError, SettingsError
 from .nlp import ParameterTransform
 from .output import finite_or_none
-from .sensitivity import Sensitivity, sensitivity_at, sensitivity_of
-from .solve import EstimationResult, Prepared, fit_nlp
+from .sensitivity import Sensitivity, SolutionPredictor, sensitivity_at, sensitivity_of
+from .solve import DEFAULT_IPOPT, EstimationResult, Prepared, fit_nlp
 from .summary import Section, Summary, Table, Text
 
 __all__ = ["Scaling", "Estimability", "analyze", "estimate_q1", "Uncertainty", "uncertainty",
@@ -332,7 +332,7 @@ def analyze(prepared: Prepared, p: Sequence[float] | Mapping | None = None, *, t
 
 def estimate_q1(prepared: Prepared, est: Estimability, q2: Sequence[float], *,
                 warm_start: EstimationResult | None = None, options: Mapping[str, Any] | None = None,
-                nlp=None) -> EstimationResult:
+                nlp=None, predictor: SolutionPredictor | None = None) -> EstimationResult:
     """Solve (7.9): estimate ``q1`` with ``q2`` fixed; ``p = D V1 q1 + D V2 q2``.
 
     Parameters
@@ -346,6 +346,11 @@ def estimate_q1(prepared: Prepared, est: Estimability, q2: Sequence[float], *,
         values start IPOPT (the sampling loop's fast path).
     nlp : CollocationNLP, optional
         A transformed NLP with the same ``V1`` to re-offset (saves set-up).
+    predictor : SolutionPredictor, optional
+        The KKT factors at ``warm_start``'s solution (``SolutionPredictor.at(warm_start.nlp,
+        warm_start.solution)``): IPOPT starts from the predicted solution of the new problem
+        (primal and multipliers) instead of the previous one, and usually accepts it at once.
+        The estimate is IPOPT's either way; ignored without ``warm_start``.
 
     Returns
     -------
@@ -369,6 +374,13 @@ def estimate_q1(prepared: Prepared, est: Estimability, q2: Sequence[float], *,
         # keep the states, move q1 to the least-squares fit of the previous p
         x0 = nlp.layout.with_parameters(warm_start.x, warm_start.p)
         warm = warm_start.solution
+        if predictor is not None:
+            if predictor.solution is not warm:
+                raise SettingsError("the predictor was formed at another solution than warm_start's")
+            pred = predictor.predict(nlp, tol=float((options or {}).get("tol", DEFAULT_IPOPT["tol"])))
+            if pred is not None:
+                x0 = pred.x
+                warm = replace(warm, x=pred.x, mult_g=pred.mult_g)
 
         def cold_start():
             p = np.clip(nlp.layout.parameters(x0), spec.lower, spec.upper)

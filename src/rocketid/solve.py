@@ -64,6 +64,8 @@ IPOPT_OPTIONS: dict[str, str] = {
     "alpha_for_y": _S, "recalc_y": _S,
     # linear solver, Hessian
     "linear_solver": _S, "mumps_mem_percent": _I, "mumps_pivtol": _F, "mumps_pivtolmax": _F,
+    "mumps_permuting_scaling": _I, "mumps_scaling": _I, "mumps_dep_tol": _F,
+    "least_square_init_duals": _S, "least_square_init_primal": _S,
     "hessian_approximation": _S, "limited_memory_max_history": _I,
     "derivative_test": _S, "derivative_test_tol": _F, "derivative_test_perturbation": _F,
     "derivative_test_print_all": _S, "timing_statistics": _S,
@@ -192,7 +194,11 @@ def solve_nlp(nlp: CollocationNLP, x0: np.ndarray, *, options: Mapping[str, Any]
     if warm is not None:
         opts.update({"warm_start_init_point": "yes", "warm_start_bound_push": 1e-9, "warm_start_bound_frac": 1e-9,
                      "warm_start_slack_bound_push": 1e-9, "warm_start_slack_bound_frac": 1e-9,
-                     "warm_start_mult_bound_push": 1e-9, "mu_init": 1e-6, "mu_strategy": "monotone"})
+                     "warm_start_mult_bound_push": 1e-9, "mu_init": 1e-6, "mu_strategy": "monotone",
+                     # IPOPT caps warm-start multipliers at 1e6 by default; the collocation rows' reach
+                     # 3e11 on RA-66 (weights 1/sigma^2 on 19 800 residuals), and the cap turned the
+                     # exact multipliers of a re-solve into an inf_du of 1e8 at iteration 0
+                     "warm_start_mult_init_max": 1e300})
     user = check_ipopt_options(options)
     opts.update(user)
     x0 = np.asarray(x0, dtype=float)

@@ -30,7 +30,7 @@ __all__ = ["command"]
 
 
 @click.command("estimability")
-@click.argument("data_file", metavar="DATA.csv", type=click.Path(dir_okay=False))
+@click.argument("data_files", metavar="DATA.csv...", nargs=-1, required=True, type=click.Path(dir_okay=False))
 @model_option
 @click.option("--scaling", type=click.Choice(["none", "nominal"]), default="none", show_default=True,
               help="Decompose H_r in physical units, or with each parameter divided by its nominal value.")
@@ -43,6 +43,8 @@ __all__ = ["command"]
 @click.option("--guess", "guesses", multiple=True, type=NameValue(float), metavar="NAME=VALUE",
               help="Change a parameter of the guess (repeatable; default: the model's p0).")
 @data_options
+@click.option("--per-flight", "per_flight", multiple=True, metavar="NAME",
+              help="With several data files: a parameter each flight has for itself (repeatable).")
 @click.option("--ipopt", "ipopt", multiple=True, type=NameValue(str, "value"), metavar="NAME=VALUE",
               help="IPOPT option for the full fit of --at fit (repeatable).")
 @click.option("--out", "out", required=True, type=click.Path(dir_okay=False), metavar="EST.json",
@@ -50,11 +52,15 @@ __all__ = ["command"]
 @click.option("--plot", "plot", type=click.Path(dir_okay=False), default=None, metavar="EST.png",
               help="Plot the eigenvalue spectrum and the directions' composition.")
 @verbose_option
-def command(data_file, model, scaling, threshold, n_estimated, at, guesses, columns, time_column, sigmas,
-            n_elements, K, ipopt, out, plot):
+def command(data_files, model, scaling, threshold, n_estimated, at, guesses, columns, time_column, sigmas,
+            n_elements, K, per_flight, ipopt, out, plot):
     """Estimability report: eigenvalues of the reduced Hessian, ratios, np, directions.
 
     Prints the report; writes EST.json (and EST.png with --plot).
+
+    Several files are several flights of one vehicle: the report gives the eigenvalues of the
+    information on the shared parameters for each flight alone and jointly, and each flight's
+    share of every joint direction (which directions each flight adds).
     """
     from ..estimability import analyze, select_np
     from ..sensitivity import sensitivity_at, sensitivity_of
@@ -75,6 +81,13 @@ def command(data_file, model, scaling, threshold, n_estimated, at, guesses, colu
     if n_estimated is not None and not 1 <= n_estimated <= n_p:
         raise SettingsError(f"--np must be from 1 to {n_p} (the number of parameters of {spec.name}), "
                             f"got {n_estimated}")
+    if len(data_files) > 1:
+        _joint(spec, data_files, scaling=scaling, at=at, guesses=guesses, columns=columns, time_column=time_column,
+               sigmas=sigmas, n_elements=n_elements, K=K, per_flight=per_flight, options=options, out=out)
+        return
+    if per_flight:
+        raise SettingsError("--per-flight needs several data files (one per flight)")
+    data_file = data_files[0]
     guess, mesh, data = fit_inputs(spec, data_file, guesses=guesses, columns=columns, time_column=time_column,
                                    sigmas=sigmas, n_elements=n_elements, K=K)
     status(f"read {data.n_samples} values of {', '.join(data.names)} from {data_file}; collocating on "
@@ -122,3 +135,38 @@ def command(data_file, model, scaling, threshold, n_estimated, at, guesses, colu
         fig = est.plot(plot)
         plt.close(fig)
         status(f"wrote {plot}")
+
+
+def _joint(spec, data_files, *, scaling, at, guesses, columns, time_column, sigmas, n_elements, K, per_flight,
+           options, out):
+    """The joint estimability report of several flights (``rocketid.joint.joint_estimability``)."""
+    from ..cli import assignments, read_flights
+    from ..joint import joint_estimability, joint_estimate, joint_prepare
+    from ..sensitivity import sensitivity_at
+
+    flights = read_flights(data_files, spec, columns=columns, time_column=time_column, sigmas=sigmas,
+                           n_elements=n_elements, K=K)
+    guess = assignments(guesses, "--guess")
+    prep = joint_prepare(flights, per_flight=per_flight)
+    lay = prep.layout
+    payload = {"model": spec.name, "data": [str(p) for p in data_files], "at": at}
+    if at == "fit":
+        joint = joint_estimate(flights, per_flight=per_flight, guess=guess, options=options, prepared=prep)
+        payload["fit"] = {"success": bool(joint.success), "iterations": int(joint.iterations),
+                          "chi2_per_dof": float(joint.chi2_per_dof)}
+        if not joint.success:
+            click.echo(f"Error: the joint fit did not converge ({joint.message}); use --at guess or --ipopt",
+                       err=True)
+            click.get_current_context().exit(EXIT_NOT_CONVERGED)
+        est = joint.estimability(scaling=scaling)
+    else:
+        theta = lay.guess.copy()
+        for name, value in guess.items():
+            if name not in lay.names:
+                raise SettingsError(f"--guess {name}: not a joint parameter; they are {', '.join(lay.names)}")
+            theta[lay.names.index(name)] = value
+        infos = [sensitivity_at(pr, lay.flight_parameters(theta, f)).H_data for f, pr in enumerate(prep.prepared)]
+        est = joint_estimability(lay, infos, scaling=scaling)
+    click.echo(est.summary().text())
+    payload.update(est.to_dict())
+    write_json(out, payload)

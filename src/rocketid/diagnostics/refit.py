@@ -613,7 +613,9 @@ class Refit:
         for n, v0 in self.base_values.items():
             if n in self.parameter_names and n not in self.effect_parameters:
                 v = self.estimate(n)[0]
-                rel = abs(v - v0) / max(abs(v0), 1e-12)
+                # relative to the start value; a coefficient that started at (or near) 0 -- held at a bound --
+                # counts as a change of at most 200 %, not 2e10 %
+                rel = abs(v - v0) / max(abs(v0), 0.5 * abs(v), 1e-12)
                 if rel > worst[1]:
                     worst = (n, rel)
         return worst
@@ -639,51 +641,93 @@ class Refit:
                 "identifiability": self.identifiability, "seconds": float(self.seconds), "notes": list(self.notes)}
 
 
+INFLATION = 3.0
+"""A base coefficient whose standard error the added effect multiplies by more than this trades off
+against the effect ...""" 
+
+LOOSE = 0.05
+"""... when that standard error is also more than this share of the coefficient's value: the data then
+no longer pin the coefficient (a lift slope known to 0.1 % before and 2 % after is still pinned)."""
+
+
 def identifiability(names: Sequence[str], cov: np.ndarray, effect_parameters: Sequence[str],
-                    sizes: Mapping[str, float]) -> str:
+                    sizes: Mapping[str, float], values: Sequence[float] | None = None) -> str:
     """What of an added effect the data do not pin down, in the estimability analysis' terms.
 
-    The covariance of the effect's parameters, in units of their realistic sizes, is split
-    into eigen-directions: a direction whose standard error exceeds one realistic size is
-    not identifiable from these data (it trades off against the coefficients it correlates
-    with); the best-determined direction is the combination that is. Returns "" when every
-    direction is identifiable.
+    Two views of the same covariance:
+
+    * the covariance of the effect's parameters, in units of their realistic sizes, split into
+      eigen-directions: a direction whose standard error exceeds one realistic size is not
+      identifiable from these data (it trades off against the coefficients it correlates with);
+      the best-determined direction is the combination that is;
+    * each base coefficient's standard error against its standard error with the effect's
+      parameters held (the conditional covariance ``C_bb - C_be C_ee^-1 C_eb``): a coefficient
+      whose error the effect inflates by more than :data:`INFLATION` times, to more than
+      :data:`LOOSE` of its value (``values``; without them any inflation counts), trades off
+      against the effect (a wind profile against the lift slope), even when each knot alone looks
+      determined.
+
+    Returns "" when every direction is identifiable and no coefficient is inflated.
     """
-    idx = [names.index(n) for n in effect_parameters]
+    idx = [names.index(n) for n in effect_parameters if n in names]
+    if not idx or not np.all(np.isfinite(cov[np.ix_(idx, idx)])):
+        return ""
+    parts = []
     scale = np.array([sizes.get(n) or 0.0 for n in effect_parameters])
-    if not idx or not np.all(scale > 0) or not np.all(np.isfinite(cov[np.ix_(idx, idx)])):
-        return ""
-    C = cov[np.ix_(idx, idx)] / np.outer(scale, scale)
-    w, V = np.linalg.eigh(C)
-    sd = np.sqrt(np.clip(w, 0.0, None))
-    if sd[-1] <= 1.0:
-        return ""
     d = np.sqrt(np.clip(np.diag(cov), 1e-300, None))
-    corr = cov / np.outer(d, d)
     others = [i for i in range(len(names)) if i not in idx]
-    worst = V[:, -1]
-    trade = ""
+    if np.all(scale > 0):
+        C = cov[np.ix_(idx, idx)] / np.outer(scale, scale)
+        w, V = np.linalg.eigh(C)
+        sd = np.sqrt(np.clip(w, 0.0, None))
+        if sd[-1] > 1.0:
+            worst = V[:, -1]
+            trade = ""
+            if others:
+                # correlation of the poorly determined combination with each coefficient
+                u = worst / scale
+                cu = cov[np.ix_(idx, others)].T @ u
+                su = math.sqrt(max(float(u @ cov[np.ix_(idx, idx)] @ u), 1e-300))
+                r = cu / (su * d[others])
+                j = int(np.argmax(np.abs(r)))
+                trade = f", trading off against {names[others[j]]} (correlation {r[j]:+.2f})"
+
+            def combo(v):
+                v = v / np.max(np.abs(v))
+                return " ".join(f"{c:+.2f} {n}/{s:g}" for c, n, s in zip(v, effect_parameters, scale) if abs(c) >= 0.05)
+
+            bad = int(np.sum(sd > 1.0))
+            if len(idx) == 1:
+                parts.append(f"{effect_parameters[0]} is not identifiable from these data: its standard error is "
+                             f"{sd[0]:.2g} realistic sizes{trade}")
+            else:
+                parts.append(f"{bad} of {len(idx)} directions of {', '.join(effect_parameters)} are not identifiable "
+                             f"from these data (standard error up to {sd[-1]:.2g} realistic sizes, along "
+                             f"{combo(worst)}{trade}); the identifiable combination is {combo(V[:, 0])} (standard "
+                             f"error {sd[0]:.2g} realistic sizes)")
     if others:
-        # correlation of the poorly determined combination with each coefficient
-        u = worst / scale
-        cu = cov[np.ix_(idx, others)].T @ u
-        su = math.sqrt(max(float(u @ cov[np.ix_(idx, idx)] @ u), 1e-300))
-        r = cu / (su * d[others])
-        j = int(np.argmax(np.abs(r)))
-        trade = f", trading off against {names[others[j]]} (correlation {r[j]:+.2f})"
-
-    def combo(v):
-        v = v / np.max(np.abs(v))
-        return " ".join(f"{c:+.2f} {n}/{s:g}" for c, n, s in zip(v, effect_parameters, scale) if abs(c) >= 0.05)
-
-    bad = int(np.sum(sd > 1.0))
-    good = sd[0]
-    if len(idx) == 1:
-        return (f"{effect_parameters[0]} is not identifiable from these data: its standard error is {sd[0]:.2g} "
-                f"realistic sizes{trade}")
-    return (f"{bad} of {len(idx)} directions of {', '.join(effect_parameters)} are not identifiable from these data "
-            f"(standard error up to {sd[-1]:.2g} realistic sizes, along {combo(worst)}{trade}); the identifiable "
-            f"combination is {combo(V[:, 0])} (standard error {good:.2g} realistic sizes)")
+        Cee = cov[np.ix_(idx, idx)]
+        Ceb = cov[np.ix_(idx, others)]
+        try:
+            cond = np.diag(cov)[others] - np.einsum("ij,ij->j", Ceb, np.linalg.solve(Cee, Ceb))
+        except np.linalg.LinAlgError:
+            cond = np.full(len(others), np.nan)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            infl = np.sqrt(np.diag(cov)[others] / np.clip(cond, 1e-300, None))
+        loose = [values is None or d[i] > LOOSE * abs(float(values[i])) for i in others]
+        hit = [(float(infl[k]), names[others[k]]) for k in range(len(others))
+               if np.isfinite(infl[k]) and infl[k] > INFLATION and loose[k]]
+        if hit:
+            hit.sort(reverse=True)
+            what = ", ".join(f"{n} {f:.1f}x" + ("" if values is None else
+                                                  f" to {100 * d[names.index(n)] / max(abs(float(values[names.index(n)])), 1e-300):.2g} %")
+                             for f, n in hit[:3])
+            who = (", ".join(effect_parameters) if len(effect_parameters) <= 3 else
+                   f"{effect_parameters[0]} .. {effect_parameters[-1]}")
+            parts.append(f"{who} {'trades' if len(effect_parameters) == 1 else 'trade'} off against {', '.join(n for _, n in hit[:3])}: adding it multiplies their standard "
+                         f"errors ({what}): the effect and {'that coefficient' if len(hit) == 1 else 'those coefficients'} "
+                         "are not separately identifiable from these data, only their combined action is")
+    return "; ".join(parts)
 
 
 def summarize_refit(new: EstimationResult, base_objective: float, base_n_estimated: int, effects: Sequence[Effect],
@@ -708,7 +752,8 @@ def summarize_refit(new: EstimationResult, base_objective: float, base_n_estimat
     try:
         unc = uncertainty(new)
         std = np.asarray(unc.standard_errors, float)
-        ident = identifiability(list(names), np.asarray(unc.parameter_covariance), eff_params, sizes)
+        ident = identifiability(list(names), np.asarray(unc.parameter_covariance), eff_params, sizes,
+                                values=np.asarray(new.p, float))
         try:
             pl = check_plausibility(new, uncertainty=unc, level=level, realistic=dict(sizes))
             base_flags = [f for f in pl.flagged(severity="fail") if not set(f.parameters) & set(declared)]
