@@ -362,10 +362,12 @@ def discover(fit: EstimationResult, candidates: Sequence[Effect], *, level: floa
     ok, detail = fits_to_noise(fit, band)
     base_ok = ok
     for number in range(1, max_effects + 1):
-        # once an effect has brought the model to the noise band, the search goes on only for a refit that
-        # passes every check (the band is wide: on RA-66M it allows ~650 in chi2, and a density profile
-        # behind a thrust error is worth 58 -- significant, and found alone at the noise)
-        at_noise = number > 1 and ok
+        # once an effect has brought the model to the noise band the search stops. (Going on for refits that
+        # pass every check was tried: on RA-66M with a jet-stream wind it added a spurious misalignment after
+        # wind_pl_13 had reached the noise -- a wrong effect called explained -- so it is not done.)
+        if number > 1 and ok:
+            break
+        at_noise = False
         remaining = [e for e in candidates if e.name not in {c.name for c in chosen_effects}]
         scr = screen(current, remaining, level=level, vehicle=vehicle)
         if not scr.contenders:
