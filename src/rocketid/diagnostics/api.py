@@ -425,7 +425,7 @@ def _confirm_final(fit, disc, holdout, level, timeout, options, notes: list) -> 
     guess = dict(zip(spec_f.parameter_names, (float(v) for v in start)))
     try:
         conf = confirm(fit, list(disc.effects), guess=guess, holdout=holdout, level=level, options=options,
-                       timeout=timeout)
+                       timeout=timeout, fitted=disc.fit)
     except RocketidError as exc:
         notes.append(f"the final model could not be confirmed: {exc}")
         return (), (), ()

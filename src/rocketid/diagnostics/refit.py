@@ -289,7 +289,7 @@ def holdout_window(spec, holdout) -> tuple[float, float] | None:
 def confirm(fit: EstimationResult, effect: Effect | str | Sequence[Effect | str], *,
             holdout: tuple[float, float] | str | None = "auto", guess: Mapping | None = None,
             level: float = 0.05, lags: int | None = None, options: Mapping[str, Any] | None = None,
-            timeout: float | None = None) -> Confirmation:
+            timeout: float | None = None, fitted: EstimationResult | None = None) -> Confirmation:
     """Add ``effect`` to ``fit``'s model, refit from nominal values and compare (module notes).
 
     Parameters
@@ -313,6 +313,10 @@ def confirm(fit: EstimationResult, effect: Effect | str | Sequence[Effect | str]
     timeout : float, optional
         Seconds each solve and each hold-out prediction may take; one that exceeds
         it is given up, and a note says so (default :data:`REFIT_TIMEOUT`).
+    fitted : EstimationResult, optional
+        A converged fit of the model with ``effect`` to the same data on the same mesh, made
+        already (the stepwise search's final fit): taken as the refit instead of solving the
+        same problem again from its estimate.
 
     Returns
     -------
@@ -335,7 +339,10 @@ def confirm(fit: EstimationResult, effect: Effect | str | Sequence[Effect | str]
     spec = with_effects(base_spec, effects)
     data = fit.prepared.measurements
     mesh = fit.prepared.transcription.mesh
-    new = estimate(spec, data, guess=guess, mesh=mesh, options=options)
+    if fitted is not None and _same_problem(fitted, spec, data, mesh):
+        new = fitted
+    else:
+        new = estimate(spec, data, guess=guess, mesh=mesh, options=options)
     t1 = time.perf_counter()
     notes: list[str] = []
     if not new.success:
@@ -452,6 +459,16 @@ def confirm(fit: EstimationResult, effect: Effect | str | Sequence[Effect | str]
         level=float(level), lags=int(lags or DEFAULT_LAGS), notes=tuple(notes),
         timings={"refit_s": t1 - t0, "checks_s": t2 - t1, "holdout_s": t3 - t2, "total_s": t3 - t0},
         holdout_fits=hold_fits, effect_covariance=cov, acceptance=acceptance)
+
+
+def _same_problem(fitted: EstimationResult, spec, data: Measurements, mesh) -> bool:
+    """``fitted`` is a converged fit of ``spec``'s model to ``data`` on ``mesh``."""
+    m = fitted.prepared.transcription.mesh
+    return bool(fitted.success and fitted.spec.fingerprint() == spec.fingerprint()
+                and tuple(fitted.spec.parameter_names) == tuple(spec.parameter_names)
+                and np.array_equal(fitted.spec.lower, spec.lower) and np.array_equal(fitted.spec.upper, spec.upper)
+                and fitted.prepared.measurements is data and m.K == mesh.K
+                and np.array_equal(m.boundaries, mesh.boundaries))
 
 
 def _acceptance(fit: EstimationResult, new: EstimationResult, effects: Sequence[Effect], base_spec, D: float,
@@ -833,9 +850,10 @@ class RefitTask:
     base_chi2_per_dof: float = float("nan")
 
 
-def refit_spec(task: RefitTask, start: Mapping | None = None):
-    """The model of a task, with its starting values (within bounds)."""
-    spec = with_effects(task.base_spec, list(task.effects))
+def refit_spec(task: RefitTask, start: Mapping | None = None, *, model=None):
+    """The model of a task, with its starting values (within bounds); ``model``: the task's model
+    already built (``refit_spec(task, {})``), to set other starting values on."""
+    spec = with_effects(task.base_spec, list(task.effects)) if model is None else model
     guess = {}
     for n, v in (task.start if start is None else start).items():
         if n in spec.parameter_names:
@@ -849,13 +867,16 @@ def run_refit(task: RefitTask) -> tuple[Refit, EstimationResult | None]:
     t0 = time.perf_counter()
     notes = []
     try:
-        spec = refit_spec(task)
+        model = refit_spec(task, {})
+        spec = refit_spec(task, model=model)
         opts = {"max_wall_time": float(task.timeout)}
         opts.update(task.options or {})
         new = estimate(spec, task.data, mesh=task.mesh, options=opts)
         if not (new.success and new.chi2_per_dof <= task.band_upper):
-            # warm start from a fit the missing effect distorted: also from the model's own guesses
-            cold = estimate(refit_spec(task, {}), task.data, mesh=task.mesh, options=opts)
+            # warm start from a fit the missing effect distorted: also from the model's own guesses (the
+            # same model and NLP: only the start differs)
+            cold = estimate(model, task.data, mesh=task.mesh, options=opts,
+                            prepared=replace(new.prepared, spec=model))
             if cold.success and (not new.success or cold.objective < new.objective):
                 notes.append(f"refitted from the model's guesses (chi2/dof {cold.chi2_per_dof:.4g}; from the current "
                              f"estimate {new.chi2_per_dof:.4g})")
@@ -879,6 +900,11 @@ def _failed(task: RefitTask, message: str, seconds: float, gave_up: bool = False
                  objective=float("nan"), n_data=0, n_estimated=0, chi2_per_dof=float("nan"),
                  base_objective=task.base_objective, base_n_estimated=task.base_n_estimated, whiteness={},
                  sizes=dict(task.sizes), seconds=seconds, notes=(message,))
+
+
+def _weight(task: RefitTask) -> int:
+    """The expected cost of a refit, for the order the workers take them in: its added parameters."""
+    return sum(max(1, len(e.parameter_names)) for e in task.effects if e.name in set(task.added))
 
 
 _TASKS: list = []   # read by forked workers (the tasks are not pickled: effects may be closures)
@@ -923,7 +949,9 @@ def refit_all(tasks: Sequence[RefitTask], *, workers: int | None = None) -> tupl
     _TASKS = tasks
     ctx = mp.get_context("fork")
     results: list = [None] * len(tasks)
-    pending = list(range(len(tasks)))
+    # the refits with the most added parameters first (they take longest: a wind profile), so that no
+    # worker is left with a long one at the end while the other idles; the results keep the tasks' order
+    pending = sorted(range(len(tasks)), key=lambda i: -_weight(tasks[i]))
     running: dict = {}
     try:
         while pending or running:
