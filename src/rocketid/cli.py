@@ -69,7 +69,7 @@ from .model import ModelSpec, check_guess
 __all__ = [
     "main", "simulate_command", "estimate_command",
     "ModelSource", "BUILTIN_MODELS", "load_model", "model_option", "data_options", "fit_inputs", "verbose_option",
-    "NameValue", "assignments", "parameter_values", "ipopt_options", "read_data", "make_mesh", "write_json",
+    "NameValue", "SigmaValue", "sigma_argument", "given_sigmas", "assignments", "parameter_values", "ipopt_options", "read_data", "make_mesh", "write_json",
     "status", "progress", "LAZY_COMMANDS",
 ]
 
@@ -116,6 +116,65 @@ class NameValue(click.ParamType):
         if isinstance(converted, float) and not math.isfinite(converted):
             self.fail(f"in {text!r}, the value must be finite", param, ctx)
         return name, converted
+
+
+class SigmaValue(click.ParamType):
+    """A ``--sigma`` value: ``NAME=VALUE`` (a number), ``NAME=estimate``, or ``estimate``
+    (every channel), parsed to ``(name, value)`` with name ``"*"`` for every channel."""
+
+    name = "NAME=VALUE|NAME=estimate|estimate"
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, tuple):
+            return value
+        text = str(value).strip()
+        if text.lower() == "estimate":
+            return "*", "estimate"
+        name, sep, raw = text.partition("=")
+        name, raw = name.strip(), raw.strip()
+        if not sep or not name or not raw:
+            self.fail(f"{text!r} is not NAME=VALUE, NAME=estimate or estimate (for example h=2.5)", param, ctx)
+        if raw.lower() == "estimate":
+            return name, "estimate"
+        try:
+            v = float(raw)
+        except ValueError:
+            self.fail(f"in {text!r}, {raw!r} is not a number or 'estimate'", param, ctx)
+        if not math.isfinite(v):
+            self.fail(f"in {text!r}, the value must be finite", param, ctx)
+        return name, v
+
+
+def sigma_argument(pairs: Iterable[tuple[str, Any]], spec: ModelSpec, option: str = "--sigma"):
+    """The ``sigma=`` argument of :func:`rocketid.estimate` from ``--sigma`` values:
+    None, ``"estimate"`` (every channel) or ``{output: value or "estimate"}``.
+
+    Raises
+    ------
+    SettingsError
+        A name given twice, an output the model does not have, or ``estimate`` for every
+        channel together with a value for one.
+    """
+    raw = assignments(pairs, option)
+    if "*" in raw:
+        if len(raw) > 1:
+            others = ", ".join(k for k in raw if k != "*")
+            raise SettingsError(f"{option} estimate (every channel) cannot be combined with {option} for {others}; "
+                                f"name the channels to estimate instead ({option} NAME=estimate)")
+        return "estimate"
+    outputs = spec.output_names
+    for name in raw:
+        if name not in outputs:
+            raise SettingsError(f"{option} {name}: model {spec.name!r} has no output {name!r}; "
+                                f"its outputs are {', '.join(outputs)}")
+    return raw or None
+
+
+def given_sigmas(sigma) -> dict[str, float]:
+    """The numeric values of a ``sigma=`` argument (the ones not to be estimated)."""
+    if not isinstance(sigma, Mapping):
+        return {}
+    return {k: v for k, v in sigma.items() if not isinstance(v, str)}
 
 
 def assignments(pairs: Iterable[tuple[str, Any]], option: str, allowed: Sequence[str] | None = None) -> dict[str, Any]:
@@ -251,6 +310,13 @@ def verbose_option(f):
                         help="Show progress and full tracebacks.")(f)
 
 
+def sigma_option_decl():
+    """The ``--sigma`` option: a value, ``NAME=estimate`` or ``estimate``."""
+    return click.option("--sigma", "sigmas", multiple=True, type=SigmaValue(), metavar="NAME=VALUE|NAME=estimate|estimate",
+                        help="Noise standard deviation of an output (repeatable; default: the model's); "
+                             "NAME=estimate estimates it with the parameters, 'estimate' every output's.")
+
+
 def data_options(f):
     """``--column``, ``--time-column``, ``--sigma`` (reading DATA.csv) and ``--elements``,
     ``--K`` (the mesh): the options of every command that fits a model to a data file."""
@@ -258,8 +324,7 @@ def data_options(f):
         click.option("--column", "columns", multiple=True, type=NameValue(str, "CSV column name"),
                      metavar="NAME=CSVCOL", help="Read output NAME from column CSVCOL (repeatable)."),
         click.option("--time-column", default="t", show_default=True, help="Name of the time column."),
-        click.option("--sigma", "sigmas", multiple=True, type=NameValue(float), metavar="NAME=VALUE",
-                     help="Noise standard deviation of an output (repeatable; default: the model's)."),
+        sigma_option_decl(),
         click.option("--elements", "n_elements", type=click.IntRange(min=1), default=None, metavar="N",
                      help="About N finite elements (default: elements of about 1 s)."),
         click.option("--K", "K", type=click.IntRange(1, MAX_DEGREE), default=4, show_default=True, metavar="K",
@@ -319,7 +384,7 @@ def fit_inputs(spec: ModelSpec, data_file, *, guesses, columns, time_column, sig
     check_guess(spec, guess, where="--guess", error=SettingsError)
     mesh = make_mesh(spec, n_elements, K)
     data = read_data(data_file, spec, time_column=time_column, columns=assignments(columns, "--column"),
-                     sigma=assignments(sigmas, "--sigma"))
+                     sigma=given_sigmas(sigma_argument(sigmas, spec)))
     return guess, mesh, data
 
 
@@ -515,13 +580,32 @@ def estimate_command(data_file, model, columns, time_column, sigmas, n_elements,
     check_determined(spec, data)
     prepared = prepare_verbosely(spec, data, mesh)
     status("solving with IPOPT")
-    result = estimate(spec, data, guess=guess, prepared=prepared, options=options)
+    result = estimate(spec, data, guess=guess, prepared=prepared, options=options, sigma=sigma_argument(sigmas, spec))
     click.echo(result.summary().text())
+    payload = result.to_dict()
+    if result.success:
+        payload["std_err"] = _print_standard_errors(result)
     if out is not None:
-        path = write_json(out, result.to_dict())
+        path = write_json(out, payload)
         status(f"wrote {path}")
     if not result.success:
         click.get_current_context().exit(EXIT_NOT_CONVERGED)
+
+
+def _print_standard_errors(result) -> dict:
+    """Print the estimates' standard errors and 95 % intervals (from the reduced Hessian at the
+    estimate, with the sigmas of the fit); ``{name: std err}`` for FIT.json, empty when they
+    cannot be formed (the reason is printed)."""
+    from .estimability import uncertainty
+
+    try:
+        unc = uncertainty(result)
+    except RocketidError as exc:
+        click.echo(f"\nStandard errors: not available ({_one_line(exc)})")
+        return {}
+    click.echo("")
+    click.echo(unc.summary().text())
+    return {str(n): output.finite_or_none(float(s)) for n, s in zip(unc.parameter_names, unc.standard_errors)}
 
 
 if __name__ == "__main__":  # pragma: no cover

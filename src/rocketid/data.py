@@ -22,7 +22,11 @@ import numpy as np
 from .errors import DataError
 from .output import write_csv
 
-__all__ = ["Channel", "Measurements", "read_csv", "MAX_VALUE", "SIGMA_RANGE"]
+__all__ = ["Channel", "Measurements", "read_csv", "sigma_request", "ESTIMATE", "MAX_VALUE", "SIGMA_RANGE"]
+
+#: The word that asks for a channel's noise level to be estimated (``sigma="estimate"``,
+#: ``sigma={"h": "estimate"}``, ``--sigma estimate``, ``--sigma h=estimate``).
+ESTIMATE = "estimate"
 
 #: Largest magnitude of a measured value: squares of larger values overflow a double.
 MAX_VALUE = 1e150
@@ -145,6 +149,22 @@ class Measurements:
         """Total number of measured values over all channels."""
         return sum(c.times.size for c in self.channels)
 
+    def with_sigma(self, sigma: Mapping[str, float]) -> "Measurements":
+        """A copy whose named channels have the noise standard deviations ``sigma``.
+
+        Raises
+        ------
+        DataError
+            A name that is not a channel, or a sigma that is not positive and finite.
+        """
+        sigma = dict(sigma)
+        unknown = [k for k in sigma if k not in self.names]
+        if unknown:
+            raise DataError(f"sigma is given for {', '.join(map(repr, unknown))}, which is not a channel; "
+                            f"the channels are {', '.join(self.names)}")
+        return Measurements(tuple(Channel(c.name, c.times, c.values, sigma[c.name]) if c.name in sigma else c
+                                  for c in self.channels))
+
     def subset(self, names: Sequence[str]) -> "Measurements":
         """Only the named channels (in that order)."""
         return Measurements(tuple(self[n] for n in names))
@@ -167,6 +187,58 @@ class Measurements:
                 raise DataError("to_csv needs channels with common sample times; write channels separately")
         cols = [t0] + [c.values for c in self.channels]
         return write_csv(path, ["t", *self.names], ([repr(float(v)) for v in row] for row in zip(*cols)))
+
+
+def sigma_request(sigma, channels: Sequence[str], where: str = "sigma") -> tuple[dict[str, float], tuple[str, ...]]:
+    """Split a noise-level request into given values and channels to estimate.
+
+    Parameters
+    ----------
+    sigma : None, "estimate", or mapping
+        None: nothing requested (the data's or the model's sigma). ``"estimate"``: every
+        channel's sigma is estimated. A mapping ``{channel: value or "estimate"}``.
+    channels : sequence of str
+        The channels that may be named.
+    where : str
+        How the request is called in messages (``"sigma"``, ``"--sigma"``).
+
+    Returns
+    -------
+    given : dict
+        ``{channel: sigma}`` given as numbers.
+    estimated : tuple of str
+        Channels whose sigma is estimated, in the order of ``channels``.
+
+    Raises
+    ------
+    DataError
+        An unknown channel, or a value that is neither a positive number nor "estimate".
+    """
+    channels = tuple(channels)
+    if sigma is None:
+        return {}, ()
+    if isinstance(sigma, str):
+        if sigma.strip().lower() != ESTIMATE:
+            raise DataError(f"{where} = {sigma!r}: give 'estimate' or a mapping {{channel: value or 'estimate'}}")
+        return {}, channels
+    if not isinstance(sigma, Mapping):
+        raise DataError(f"{where} must be 'estimate' or a mapping {{channel: value or 'estimate'}}, "
+                        f"got {type(sigma).__name__} {sigma!r}")
+    given, estimated = {}, []
+    for name, value in sigma.items():
+        if name not in channels:
+            raise DataError(f"{where} {name}: there is no channel {name!r}; the channels are {', '.join(channels)}")
+        if isinstance(value, str) and value.strip().lower() == ESTIMATE:
+            estimated.append(name)
+            continue
+        try:
+            v = float(value)
+        except (TypeError, ValueError):
+            raise DataError(f"{where} {name}={value!r}: give a positive number or 'estimate'") from None
+        if not (v > 0 and math.isfinite(v)):
+            raise DataError(f"{where} {name}={value!r}: sigma must be positive and finite (or 'estimate')")
+        given[name] = v
+    return given, tuple(c for c in channels if c in estimated)
 
 
 def read_csv(path: str | os.PathLike, channels: Sequence[str] = ("x", "h", "v"), *,

@@ -25,7 +25,7 @@ import sympy as sp
 
 from .codegen import generate
 from .collocation.transcription import Mesh, Transcription, transcribe
-from .data import Measurements
+from .data import Measurements, sigma_request
 from .errors import DataError, ModelError, SettingsError, SolverError
 from .model import ModelSpec, check_guess
 from .nlp import CollocationNLP, build_nlp
@@ -33,7 +33,7 @@ from .output import finite_or_none
 from .summary import Section, Summary, Table
 
 __all__ = ["IPOPT_OPTIONS", "check_ipopt_options", "NLPSolution", "solve_nlp", "EstimationResult",
-           "estimate", "prepare", "default_mesh", "Prepared"]
+           "estimate", "prepare", "default_mesh", "Prepared", "relax_sigma", "ml_sigma"]
 
 _S, _I, _F = "str", "int", "float"
 IPOPT_OPTIONS: dict[str, str] = {
@@ -286,6 +286,14 @@ class Prepared:
             note = f"the initial-guess simulation failed ({traj.message}); states initialized by holding its last value"
         return S, note
 
+    def with_sigma(self, sigma: Mapping[str, float]) -> "Prepared":
+        """The same collocation with the channels' noise levels ``sigma`` (``{channel: value}``):
+        the NLP is rebuilt on the same transcription (code generation is not repeated)."""
+        data = self.measurements.with_sigma(sigma)
+        t0 = time.perf_counter()
+        nlp = build_nlp(self.transcription, generate(self.spec), data)
+        return replace(self, measurements=data, nlp=nlp, setup_s=self.setup_s + time.perf_counter() - t0)
+
 
 def prepare(spec: ModelSpec, data: Measurements, *, mesh: Mesh | None = None) -> Prepared:
     """Generate code, transcribe, and build the NLP (7.5) for ``spec`` and ``data``."""
@@ -329,6 +337,11 @@ class EstimationResult:
     notes : tuple of str
     retried : bool
         A warm-started solve failed and this is the cold solve that repeated it.
+    sigma_estimated : tuple of str
+        Channels whose noise level was estimated with the parameters (:func:`relax_sigma`);
+        their sigma in :attr:`sigma` is the maximum-likelihood estimate.
+    sigma_iterations : int
+        Fits of the relaxation (0 when no sigma was estimated).
     """
 
     success: bool
@@ -343,6 +356,8 @@ class EstimationResult:
     timings: dict
     notes: tuple = ()
     retried: bool = False
+    sigma_estimated: tuple = ()
+    sigma_iterations: int = 0
 
     @property
     def spec(self) -> ModelSpec:
@@ -403,6 +418,19 @@ class EstimationResult:
         """``2 J / (n_data - n_estimated)``: near 1 when the model fits to the noise."""
         return 2.0 * self.objective / max(1, self.n_data - self.n_estimated)
 
+    @property
+    def sigma(self) -> dict[str, float]:
+        """The noise standard deviation of each channel used in the fit (estimated ones included)."""
+        return {k: float(v) for k, v in zip(self.nlp.channel_names, self.nlp.channel_sigmas)}
+
+    @property
+    def sigma_std(self) -> dict[str, float]:
+        """Standard error of each estimated sigma, ``sigma / sqrt(2 n)`` (the inverse Fisher
+        information of a Gaussian channel's sigma with ``n`` samples; the parameters' and the
+        sigmas' information are uncorrelated, so the parameters do not change it)."""
+        n = {k: r.size for k, r in self.residuals.items()}
+        return {k: self.sigma[k] / math.sqrt(2.0 * n[k]) for k in self.sigma_estimated}
+
     @cached_property
     def rms(self) -> dict[str, float]:
         """Root-mean-square residual per channel."""
@@ -440,17 +468,28 @@ class EstimationResult:
         fit = Section("Fit", (
             ("objective J", f"{self.objective:.6g}"),
             ("chi2 / dof", f"{self.chi2_per_dof:.4f}  (2J / ({self.n_data} - {self.n_estimated}))"),
-            ("RMS residual", ", ".join(f"{k} {v:.4g}" for k, v in self.rms.items()))))
+            ("RMS residual", ", ".join(f"{k} {v:.4g}" for k, v in self.rms.items())),
+            ("sigma", self._sigma_text())))
         notes = list(self.notes)
         if not self.success:
             notes.insert(0, f"IPOPT did not converge: {self.message.rstrip('.')}. The estimates are the last iterate, "
                             "not an optimum.")
         for s, side in self.active_bounds():
             notes.append(f"{s} is at its {side} bound: the estimate is limited by the bound, not by the data.")
+        if self.sigma_estimated:
+            notes.append(f"sigma of {', '.join(self.sigma_estimated)} estimated with the parameters (maximum "
+                         "likelihood): chi2/dof is then near 1 by construction and does not test the fit; a model "
+                         "error shows as a larger sigma instead. Compare the estimated sigma with what the sensor "
+                         "or the data's resolution allows.")
         if self.success and self.chi2_per_dof > 1.5:
             notes.append(f"chi2/dof = {self.chi2_per_dof:.3g} is well above 1: the model does not fit to the noise "
                          "level (a missing effect or wrong sigma); see `rocketid diagnose`.")
         return Summary(f"rocketid estimation: {self.spec.name}", (problem, solver, parameters, fit), notes)
+
+    def _sigma_text(self) -> str:
+        std = self.sigma_std
+        return ", ".join(f"{k} {v:.4g} +- {std[k]:.2g} (estimated)" if k in std else f"{k} {v:.4g}"
+                         for k, v in self.sigma.items())
 
     def to_dict(self) -> dict:
         """A JSON-ready dictionary (``success``, ``parameters``, ``objective``, ...);
@@ -465,6 +504,9 @@ class EstimationResult:
             "chi2_per_dof": finite_or_none(self.chi2_per_dof),
             "iterations": int(self.iterations),
             "rms": {k: finite_or_none(v) for k, v in self.rms.items()},
+            "sigma": {k: finite_or_none(v) for k, v in self.sigma.items()},
+            "sigma_estimated": list(self.sigma_estimated),
+            "sigma_std": {k: finite_or_none(v) for k, v in self.sigma_std.items()},
             "n_data": int(self.n_data),
             "mesh": {"n_elements": int(self.prepared.transcription.mesh.n_elements),
                      "K": int(self.prepared.transcription.mesh.K)},
@@ -480,7 +522,8 @@ class EstimationResult:
 
 def estimate(spec: ModelSpec, data: Measurements, *, guess: Mapping | Sequence[float] | None = None,
              mesh: Mesh | None = None, options: Mapping[str, Any] | None = None,
-             warm_start: EstimationResult | None = None, prepared: Prepared | None = None) -> EstimationResult:
+             warm_start: EstimationResult | None = None, prepared: Prepared | None = None,
+             sigma: str | Mapping[str, float | str] | None = None) -> EstimationResult:
     """Estimate all parameters of ``spec`` from ``data`` (the NLP (7.5)).
 
     Parameters
@@ -497,6 +540,11 @@ def estimate(spec: ModelSpec, data: Measurements, *, guess: Mapping | Sequence[f
         Start from a previous solution of the same problem (primal and dual).
     prepared : Prepared, optional
         Reuse an already built NLP (same spec, data and mesh).
+    sigma : "estimate" or mapping, optional
+        Noise levels: ``"estimate"`` estimates every channel's sigma with the
+        parameters (:func:`relax_sigma`); a mapping ``{channel: value or
+        "estimate"}`` gives some and estimates others. Default: the data's sigma,
+        else the model's.
 
     Returns
     -------
@@ -505,8 +553,13 @@ def estimate(spec: ModelSpec, data: Measurements, *, guess: Mapping | Sequence[f
         a non-converged solve.
     """
     check_determined(spec, data)
+    given, estimated = sigma_request(sigma, data.names if isinstance(data, Measurements) else ())
+    if given:
+        data = data.with_sigma(given)
     if prepared is None:
         prepared = prepare(spec, data, mesh=mesh)
+    elif given:
+        prepared = prepared.with_sigma(given)
     nlp = prepared.nlp
     notes = []
     p0 = spec.parameter_vector(guess)
@@ -522,7 +575,99 @@ def estimate(spec: ModelSpec, data: Measurements, *, guess: Mapping | Sequence[f
         if note:
             notes.append(note)
         x0 = nlp.initial_x(S, p0)
-    return fit_nlp(prepared, nlp, x0, options=options, warm=warm, setup_s=prepared.setup_s, notes=notes)
+    fit = fit_nlp(prepared, nlp, x0, options=options, warm=warm, setup_s=prepared.setup_s, notes=notes)
+    if estimated:
+        fit = relax_sigma(fit, estimated, options=options)
+    return fit
+
+
+def ml_sigma(fit: EstimationResult, channels: Sequence[str]) -> dict[str, float]:
+    """The maximum-likelihood noise level of each channel at ``fit``'s parameters,
+    ``sqrt(mean(residual^2))``.
+
+    Raises
+    ------
+    DataError
+        A channel whose residuals are all zero (sigma cannot be estimated: give it).
+    """
+    out = {}
+    for c in channels:
+        r = fit.residuals[c]
+        with np.errstate(over="ignore", invalid="ignore"):
+            s = float(np.sqrt(np.mean(r ** 2)))
+        if not (s > 0 and math.isfinite(s)):
+            raise DataError(f"the noise level of channel {c!r} cannot be estimated: its residuals are "
+                            f"{'all zero' if s == 0 else 'not finite'} at the fit; give its sigma (--sigma {c}=VALUE)")
+        out[c] = s
+    return out
+
+
+def relax_sigma(fit: EstimationResult, channels: Sequence[str], *, options: Mapping[str, Any] | None = None,
+                rtol: float = 1e-6, max_fits: int = 30) -> EstimationResult:
+    """Maximum likelihood with the noise levels of ``channels`` unknown: the output-error
+    method's relaxation.
+
+    With ``n_k`` samples and residuals ``r_k`` in channel ``k``, the likelihood is largest over
+    ``sigma_k`` at ``sigma_k^2 = r_k . r_k / n_k`` for given parameters. The relaxation
+    alternates: sigma from the residuals of the last fit, then the parameters again with those
+    sigmas (starting from the last solution), until no sigma changes by more than ``rtol``
+    relatively. The fixed point is a stationary point of the concentrated likelihood
+    ``sum_k n_k / 2 log(r_k . r_k / n_k)``.
+
+    Parameters
+    ----------
+    fit : EstimationResult
+        A fit with any starting sigmas (the model's or the data's).
+    channels : sequence of str
+        The channels whose sigma is estimated; the others keep theirs.
+    options : mapping, optional
+        IPOPT options of the refits.
+    rtol : float
+        Convergence: the largest relative change of a sigma between two fits.
+    max_fits : int
+        Give up (with a note) after this many refits.
+
+    Returns
+    -------
+    EstimationResult
+        The last fit, with the estimated sigmas in its data (``fit.sigma``,
+        ``fit.prepared.measurements``) so that the covariance, the statistic criterion
+        and the score test use them; ``sigma_estimated`` names the channels.
+    """
+    channels = tuple(channels)
+    if not channels:
+        return fit
+    unknown = [c for c in channels if c not in fit.nlp.channel_names]
+    if unknown:
+        raise DataError(f"sigma of {', '.join(map(repr, unknown))} cannot be estimated: not a fitted channel "
+                        f"({', '.join(fit.nlp.channel_names)})")
+    notes = list(fit.notes)
+    fits = 1
+    solve_s = fit.timings.get("solve_s", 0.0)
+    current = fit.sigma
+    converged = False
+    while fit.success:
+        new = ml_sigma(fit, channels)
+        change = max(abs(new[c] / current[c] - 1.0) for c in channels)
+        if change <= rtol:
+            converged = True
+            break
+        if fits > max_fits:
+            break
+        prepared = fit.prepared.with_sigma(new)
+        fit = fit_nlp(prepared, prepared.nlp, fit.x, options=options)
+        solve_s += fit.timings["solve_s"]
+        fits += 1
+        current = new
+    if not fit.success:
+        notes.append(f"the fit failed while the noise levels were being estimated (fit {fits}); the sigmas are those "
+                     "of the last fit")
+    elif not converged:
+        notes.append(f"the noise levels did not settle within {max_fits} refits (last relative change "
+                     f"{change:.2g}); the estimates are the last ones")
+    notes.extend(n for n in fit.notes if n not in notes)
+    return replace(fit, notes=tuple(notes), sigma_estimated=channels, sigma_iterations=fits,
+                   timings={"setup_s": fit.prepared.setup_s, "solve_s": solve_s})
 
 
 def fit_nlp(prepared: Prepared, nlp: CollocationNLP, x0: np.ndarray, *, options: Mapping[str, Any] | None = None,

@@ -25,7 +25,8 @@ import time
 
 import click
 
-from ..cli import EXIT_NOT_CONVERGED, NameValue, assignments, model_option, read_data, status, verbose_option
+from ..cli import (EXIT_NOT_CONVERGED, NameValue, assignments, given_sigmas, model_option, read_data, sigma_argument,
+                   sigma_option_decl, status, verbose_option)
 from ..errors import SettingsError
 from ..output import check_folder, folder_lock
 
@@ -56,8 +57,7 @@ __all__ = ["command"]
 @click.option("--column", "columns", multiple=True, type=NameValue(str, "CSV column name"),
               metavar="NAME=CSVCOL", help="Read output NAME from column CSVCOL (repeatable).")
 @click.option("--time-column", default="t", show_default=True, help="Name of the time column.")
-@click.option("--sigma", "sigmas", multiple=True, type=NameValue(float), metavar="NAME=VALUE",
-              help="Noise standard deviation of an output (repeatable; default: the model's).")
+@sigma_option_decl()
 @verbose_option
 def command(data_file, out, model, level, confirm_top, holdout, max_effects, workers, refit_timeout, window,
             columns, time_column, sigmas):
@@ -79,14 +79,15 @@ def command(data_file, out, model, level, confirm_top, holdout, max_effects, wor
     holdout = _holdout(holdout)
     check_folder(out, "--out")  # before the work: a bad --out fails at once, not after the fits
     spec, label = resolve_model(model)
-    sig = assignments(sigmas, "--sigma", allowed=list(spec.output_names))
-    data = read_data(data_file, spec, time_column=time_column, columns=assignments(columns, "--column"), sigma=sig)
+    sigma = sigma_argument(sigmas, spec)
+    data = read_data(data_file, spec, time_column=time_column, columns=assignments(columns, "--column"),
+                     sigma=given_sigmas(sigma))
     with folder_lock(out):
         status(f"read {data.n_samples} values of {', '.join(data.names)} from {data_file}; fitting {spec.name} and "
                "diagnosing")
         t0 = time.perf_counter()
         report = diagnose(data, spec, level=level, confirm_top=confirm_top, window=window, holdout=holdout,
-                          max_effects=max_effects, workers=workers, refit_timeout=refit_timeout)
+                          max_effects=max_effects, workers=workers, refit_timeout=refit_timeout, sigma=sigma)
         report = _relabel(report, label, str(data_file))
         path = report.write(out)
     for line in report.verdict():

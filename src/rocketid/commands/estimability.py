@@ -22,7 +22,7 @@ from dataclasses import replace
 import click
 
 from ..cli import (EXIT_NOT_CONVERGED, NameValue, data_options, fit_inputs, ipopt_options, load_model,
-                   model_option, prepare_verbosely, status, verbose_option, write_json)
+                   model_option, prepare_verbosely, sigma_argument, status, verbose_option, write_json)
 from ..errors import SettingsError
 from ..output import check_file
 
@@ -75,6 +75,11 @@ def command(data_file, model, scaling, threshold, n_estimated, at, guesses, colu
     if n_estimated is not None and not 1 <= n_estimated <= n_p:
         raise SettingsError(f"--np must be from 1 to {n_p} (the number of parameters of {spec.name}), "
                             f"got {n_estimated}")
+    sigma = sigma_argument(sigmas, spec)
+    if sigma is not None and at == "guess" and any(v == "estimate" for v in
+                                                   (sigma.values() if isinstance(sigma, dict) else [sigma])):
+        raise SettingsError("--sigma estimate needs a fit to estimate the noise from: add --at fit (or give the "
+                            "sigma as a number)")
     guess, mesh, data = fit_inputs(spec, data_file, guesses=guesses, columns=columns, time_column=time_column,
                                    sigmas=sigmas, n_elements=n_elements, K=K)
     status(f"read {data.n_samples} values of {', '.join(data.names)} from {data_file}; collocating on "
@@ -84,9 +89,11 @@ def command(data_file, model, scaling, threshold, n_estimated, at, guesses, colu
     extra_notes = []
     fit_info = None
     if at == "fit":
-        fit = estimate(spec, data, guess=guess, prepared=prepared, options=options)
+        fit = estimate(spec, data, guess=guess, prepared=prepared, options=options, sigma=sigma)
         fit_info = {"success": bool(fit.success), "iterations": int(fit.iterations),
-                    "objective": float(fit.objective), "chi2_per_dof": float(fit.chi2_per_dof)}
+                    "objective": float(fit.objective), "chi2_per_dof": float(fit.chi2_per_dof),
+                    "sigma": fit.sigma, "sigma_estimated": list(fit.sigma_estimated)}
+        prepared = fit.prepared  # the estimated sigmas weight H_r
         if not fit.success:
             click.echo(f"Error: the full fit did not converge ({fit.message}); the reduced Hessian is not formed "
                        "at a point that is not an estimate (use --at guess, or --ipopt to help the fit)", err=True)
