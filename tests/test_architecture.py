@@ -32,6 +32,7 @@ LAYERS: list[tuple[str, ...]] = [
     ("codegen",),
     ("collocation",),
     ("cases",),
+    ("start",),          # starting points from the data, flight windows, sanity checks
     ("nlp",),
     ("solve",),
     ("sensitivity",),

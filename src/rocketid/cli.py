@@ -69,7 +69,7 @@ from .model import ModelSpec, check_guess
 __all__ = [
     "main", "simulate_command", "estimate_command",
     "ModelSource", "BUILTIN_MODELS", "load_model", "model_option", "data_options", "fit_inputs", "verbose_option",
-    "NameValue", "SigmaValue", "sigma_argument", "given_sigmas", "assignments", "parameter_values", "ipopt_options", "read_data", "make_mesh", "write_json",
+    "NameValue", "SigmaValue", "sigma_argument", "given_sigmas", "flight_window", "windowed_inputs", "assignments", "parameter_values", "ipopt_options", "read_data", "make_mesh", "write_json",
     "status", "progress", "LAZY_COMMANDS",
 ]
 
@@ -234,16 +234,29 @@ def ipopt_options(pairs: Iterable[tuple[str, str]]) -> dict[str, Any]:
 
 
 def read_data(path: str | os.PathLike, spec: ModelSpec, *, time_column: str = "t",
-              columns: Mapping[str, str] | None = None, sigma: Mapping[str, float] | None = None) -> Measurements:
+              columns: Mapping[str, str] | None = None, sigma: Mapping[str, float] | None = None,
+              unmeasured: Sequence[str] = (), window: tuple[float, float] | None = None) -> Measurements:
     """Read a CSV with one column per model output (see :func:`rocketid.data.read_csv`);
-    ``columns`` and ``sigma`` are keyed by output name, checked against the model."""
+    ``columns`` and ``sigma`` are keyed by output name, checked against the model.
+
+    An output without a column is left out (predicted, not fitted) when it is named in
+    ``unmeasured`` or when the file has no column that goes unread; an empty cell means
+    "not measured then". ``window`` keeps the samples in ``[t0, t1]``.
+    """
     outputs = spec.output_names
-    for option, mapping in (("--column", columns), ("--sigma", sigma)):
-        for name in mapping or {}:
+    for option, names in (("--column", columns), ("--sigma", sigma), ("--unmeasured", unmeasured)):
+        for name in names or {}:
             if name not in outputs:
                 raise SettingsError(f"{option} {name}: model {spec.name!r} has no output {name!r}; "
                                     f"its outputs are {', '.join(outputs)}")
-    return read_csv(path, outputs, time_column=time_column, column_map=columns, sigma=sigma)
+    wanted = [o for o in outputs if o not in set(unmeasured)]
+    if not wanted:
+        raise SettingsError(f"--unmeasured names every output of model {spec.name!r}: nothing is left to fit")
+    data = read_csv(path, wanted, time_column=time_column, column_map=columns,
+                    sigma={k: v for k, v in (sigma or {}).items() if k in wanted}, missing="auto")
+    if window is not None:
+        data = data.window(*window)
+    return data
 
 
 def make_mesh(spec: ModelSpec, n_elements: int | None = None, K: int = 4):
@@ -317,14 +330,53 @@ def sigma_option_decl():
                              "NAME=estimate estimates it with the parameters, 'estimate' every output's.")
 
 
+def window_option_decl(name: str = "--window"):
+    """The flight-window option ``--window T0:T1``."""
+    return click.option(name, "window_text", default=None, metavar="T0:T1",
+                        help="Fit only the flight window T0:T1 (s; '20:' to the end). A window that starts in "
+                             "flight estimates the initial states the data determine (guesses from the data).")
+
+
+def unmeasured_option_decl():
+    """``--unmeasured NAME``: a model output the data do not measure (predicted, not fitted)."""
+    return click.option("--unmeasured", "unmeasured", multiple=True, metavar="NAME",
+                        help="A model output the data do not measure: predicted, not fitted (repeatable). An "
+                             "output without a column is taken as unmeasured anyway when every column of the "
+                             "file is read.")
+
+
+def flight_window(text: str | None, option: str = "--window"):
+    """``--window`` text -> ``(T0, T1)`` (NaN for an open end) or None."""
+    from .start import parse_window
+
+    if text is None:
+        return None
+    return parse_window(text, option)
+
+
+def windowed_inputs(spec: ModelSpec, data: Measurements, guess, window, n_elements, K):
+    """Cut the model and the data to ``window`` (:func:`rocketid.start.apply_window`):
+    ``(spec, data, guess, mesh, notes)``, the guess extended by the initial states' guesses."""
+    from .start import apply_window, window_guess
+
+    if window is None:
+        return spec, data, guess, make_mesh(spec, n_elements, K), []
+    spec_w, data_w, notes = apply_window(spec, data, window, guess)
+    guess_w = window_guess(spec, spec_w, guess)
+    return spec_w, data_w, guess_w, make_mesh(spec_w, n_elements, K), notes
+
+
 def data_options(f):
-    """``--column``, ``--time-column``, ``--sigma`` (reading DATA.csv) and ``--elements``,
-    ``--K`` (the mesh): the options of every command that fits a model to a data file."""
+    """``--column``, ``--time-column``, ``--sigma``, ``--unmeasured``, ``--window`` (reading
+    DATA.csv) and ``--elements``, ``--K`` (the mesh): the options of every command that fits a
+    model to a data file."""
     for opt in reversed([
         click.option("--column", "columns", multiple=True, type=NameValue(str, "CSV column name"),
                      metavar="NAME=CSVCOL", help="Read output NAME from column CSVCOL (repeatable)."),
         click.option("--time-column", default="t", show_default=True, help="Name of the time column."),
         sigma_option_decl(),
+        unmeasured_option_decl(),
+        window_option_decl(),
         click.option("--elements", "n_elements", type=click.IntRange(min=1), default=None, metavar="N",
                      help="About N finite elements (default: elements of about 1 s)."),
         click.option("--K", "K", type=click.IntRange(1, MAX_DEGREE), default=4, show_default=True, metavar="K",
@@ -377,14 +429,16 @@ def prepare_verbosely(spec: ModelSpec, data: Measurements, mesh):
     return prepared
 
 
-def fit_inputs(spec: ModelSpec, data_file, *, guesses, columns, time_column, sigmas, n_elements, K):
+def fit_inputs(spec: ModelSpec, data_file, *, guesses, columns, time_column, sigmas, n_elements, K,
+               unmeasured=()):
     """``(guess, mesh, data)`` from the options of a command that fits ``spec`` to DATA.csv
-    (``--guess`` checked against the bounds, :func:`data_options`)."""
+    (``--guess`` checked against the bounds, :func:`data_options`; the window is applied by
+    :func:`windowed_inputs`)."""
     guess = parameter_values(spec, assignments(guesses, "--guess"), "--guess")
     check_guess(spec, guess, where="--guess", error=SettingsError)
     mesh = make_mesh(spec, n_elements, K)
     data = read_data(data_file, spec, time_column=time_column, columns=assignments(columns, "--column"),
-                     sigma=given_sigmas(sigma_argument(sigmas, spec)))
+                     sigma=given_sigmas(sigma_argument(sigmas, spec)), unmeasured=tuple(unmeasured))
     return guess, mesh, data
 
 
@@ -560,27 +614,35 @@ def simulate_command(out, model, seed, no_noise, params):
 @click.option("--out", "out", type=click.Path(dir_okay=False), default=None, metavar="FIT.json",
               help="Write the result as JSON.")
 @verbose_option
-def estimate_command(data_file, model, columns, time_column, sigmas, n_elements, K, guesses, ipopt, out):
+def estimate_command(data_file, model, columns, time_column, sigmas, unmeasured, window_text, n_elements, K, guesses,
+                     ipopt, out):
     """Estimate the model's parameters from measurements in DATA.csv.
 
     Prints the summary; with --out writes FIT.json (success, parameters,
     objective, iterations, timings, ...). Exit code 1 when IPOPT did not
     converge (the JSON is still written).
     """
+    from dataclasses import replace
+
     from .solve import check_determined, estimate
 
     options = ipopt_options(ipopt)
+    window = flight_window(window_text)
     if out is not None:
         output.check_file(out, "--out")
     src = load_model(model)
     spec = src.spec
+    sigma = sigma_argument(sigmas, spec)
     guess, mesh, data = fit_inputs(spec, data_file, guesses=guesses, columns=columns, time_column=time_column,
-                                   sigmas=sigmas, n_elements=n_elements, K=K)
+                                   sigmas=sigmas, n_elements=n_elements, K=K, unmeasured=unmeasured)
     status(f"read {data.n_samples} values of {', '.join(data.names)} from {data_file}")
+    spec, data, guess, mesh, wnotes = windowed_inputs(spec, data, guess, window, n_elements, K)
     check_determined(spec, data)
     prepared = prepare_verbosely(spec, data, mesh)
     status("solving with IPOPT")
-    result = estimate(spec, data, guess=guess, prepared=prepared, options=options, sigma=sigma_argument(sigmas, spec))
+    result = estimate(spec, data, guess=guess, prepared=prepared, options=options, sigma=sigma)
+    if wnotes:
+        result = replace(result, notes=tuple(wnotes) + result.notes)
     click.echo(result.summary().text())
     payload = result.to_dict()
     if result.success:
@@ -588,7 +650,7 @@ def estimate_command(data_file, model, columns, time_column, sigmas, n_elements,
     if out is not None:
         path = write_json(out, payload)
         status(f"wrote {path}")
-    if not result.success:
+    if not result.success or result.sanity:
         click.get_current_context().exit(EXIT_NOT_CONVERGED)
 
 

@@ -244,7 +244,9 @@ def default_mesh(spec: ModelSpec, K: int = 4, element_length: float | None = Non
     """
     span = spec.tf - spec.t0
     h = element_length if element_length is not None else min(1.0, span / 20)
-    fam_bps = sorted({float(b) for f in spec.families for b in f.breakpoints} | {spec.t0, spec.tf})
+    # a model cut to a window keeps its families' breakpoints outside it
+    fam_bps = sorted({float(b) for f in spec.families for b in f.breakpoints if spec.t0 < b < spec.tf}
+                     | {spec.t0, spec.tf})
     bounds = [fam_bps[0]]
     for a, b in zip(fam_bps[:-1], fam_bps[1:]):
         n = max(1, int(math.ceil((b - a) / h - 1e-9)))
@@ -395,6 +397,34 @@ class EstimationResult:
         """The collocation polynomial's states at ``times``, shape (n, n_states)."""
         return self.prepared.transcription.states_at(self.nlp.full_vector(self.x), np.asarray(times, float))
 
+    @property
+    def unmeasured_outputs(self) -> tuple[str, ...]:
+        """The model's outputs that the data do not measure (predicted, not fitted)."""
+        return tuple(n for n in self.spec.output_names if n not in self.nlp.channel_names)
+
+    def predict(self, output: str, times: Sequence[float] | None = None) -> np.ndarray:
+        """An output's values along the fitted trajectory (the collocation polynomial) at
+        ``times`` (default: the mesh nodes); works for outputs the data do not measure.
+
+        Raises
+        ------
+        ModelError
+            ``output`` is not an output of the model.
+        """
+        from .simulate import evaluate_along
+
+        expr = next((o.expr for o in self.spec.outputs if o.name == output), None)
+        if expr is None:
+            raise ModelError(f"model {self.spec.name!r} has no output {output!r}; its outputs are "
+                             f"{', '.join(self.spec.output_names)}")
+        times = self.node_times if times is None else np.asarray(times, float)
+        tr = self.prepared.transcription
+        w = self.nlp.full_vector(self.x)
+        ns = tr.layout.n_states
+        S = (tr.interpolation_matrix(times) @ w).reshape(times.size, ns)
+        dS = (tr.interpolation_matrix(times, derivative=True) @ w).reshape(times.size, ns)
+        return evaluate_along(self.spec, expr, times, S, self.p, dS)
+
     @cached_property
     def residuals(self) -> dict[str, np.ndarray]:
         """Model minus measurement at each channel's samples."""
@@ -458,7 +488,7 @@ class EstimationResult:
                     f"{len(nlp.hessianstructure()[0])} Hessian non-zeros"),
             ("data", f"{self.n_data} values in {len(nlp.channel_names)} channels ({', '.join(nlp.channel_names)})")))
         solver = Section("Solver", (
-            ("status", f"{'converged' if self.success else 'FAILED'} ({self.status}: {self.message})"),
+            ("status", f"{self._status_word()} ({self.status}: {self.message})"),
             ("iterations", str(self.iterations)),
             ("time", f"setup {self.timings['setup_s']:.3f} s, IPOPT {self.timings['solve_s']:.3f} s")))
         parameters = Section("Parameters", (Table(
@@ -474,8 +504,13 @@ class EstimationResult:
         if not self.success:
             notes.insert(0, f"IPOPT did not converge: {self.message.rstrip('.')}. The estimates are the last iterate, "
                             "not an optimum.")
+        if self.success:
+            notes.extend(f"NOT CREDIBLE: {n}." for n in self.sanity)
         for s, side in self.active_bounds():
             notes.append(f"{s} is at its {side} bound: the estimate is limited by the bound, not by the data.")
+        if self.unmeasured_outputs:
+            notes.append(f"output(s) {', '.join(self.unmeasured_outputs)} are not in the data: predicted "
+                         "(EstimationResult.predict), not fitted.")
         if self.sigma_estimated:
             notes.append(f"sigma of {', '.join(self.sigma_estimated)} estimated with the parameters (maximum "
                          "likelihood): chi2/dof is then near 1 by construction and does not test the fit; a model "
@@ -485,6 +520,21 @@ class EstimationResult:
             notes.append(f"chi2/dof = {self.chi2_per_dof:.3g} is well above 1: the model does not fit to the noise "
                          "level (a missing effect or wrong sigma); see `rocketid diagnose`.")
         return Summary(f"rocketid estimation: {self.spec.name}", (problem, solver, parameters, fit), notes)
+
+    @cached_property
+    def sanity(self) -> tuple[str, ...]:
+        """What makes this result not credible even if IPOPT converged (every parameter at a
+        bound, chi2/dof above 1e4, a fitted trajectory that descends where the data climb or
+        turns through more than 90 degrees); empty when nothing is wrong."""
+        from .start import result_checks
+        return tuple(result_checks(self))
+
+    def _status_word(self) -> str:
+        if not self.success:
+            return "FAILED"
+        if self.sanity:
+            return "IPOPT stopped at an optimum, but the result is NOT CREDIBLE (see the notes)"
+        return "converged"
 
     def _sigma_text(self) -> str:
         std = self.sigma_std
@@ -507,6 +557,8 @@ class EstimationResult:
             "sigma": {k: finite_or_none(v) for k, v in self.sigma.items()},
             "sigma_estimated": list(self.sigma_estimated),
             "sigma_std": {k: finite_or_none(v) for k, v in self.sigma_std.items()},
+            "unmeasured_outputs": list(self.unmeasured_outputs),
+            "sanity": list(self.sanity) if self.success else [],
             "n_data": int(self.n_data),
             "mesh": {"n_elements": int(self.prepared.transcription.mesh.n_elements),
                      "K": int(self.prepared.transcription.mesh.K)},
@@ -523,7 +575,8 @@ class EstimationResult:
 def estimate(spec: ModelSpec, data: Measurements, *, guess: Mapping | Sequence[float] | None = None,
              mesh: Mesh | None = None, options: Mapping[str, Any] | None = None,
              warm_start: EstimationResult | None = None, prepared: Prepared | None = None,
-             sigma: str | Mapping[str, float | str] | None = None) -> EstimationResult:
+             sigma: str | Mapping[str, float | str] | None = None,
+             window: Sequence[float] | None = None) -> EstimationResult:
     """Estimate all parameters of ``spec`` from ``data`` (the NLP (7.5)).
 
     Parameters
@@ -545,6 +598,11 @@ def estimate(spec: ModelSpec, data: Measurements, *, guess: Mapping | Sequence[f
         parameters (:func:`relax_sigma`); a mapping ``{channel: value or
         "estimate"}`` gives some and estimates others. Default: the data's sigma,
         else the model's.
+    window : (float, float), optional
+        A flight window ``(T0, T1)`` (s): the data and the model are cut to it
+        (:func:`rocketid.start.apply_window`); a window that starts after the model's
+        ``t0`` estimates the initial states the data determine (parameters ``<state>_0``,
+        guessed from the data). The result's ``spec`` is the windowed model.
 
     Returns
     -------
@@ -552,6 +610,18 @@ def estimate(spec: ModelSpec, data: Measurements, *, guess: Mapping | Sequence[f
         ``success`` is False (with a note) when IPOPT fails; never raises for
         a non-converged solve.
     """
+    notes = []
+    if window is not None:
+        from .start import apply_window, window_guess
+        if prepared is not None:
+            raise SettingsError("window= cuts the model and the data: it cannot be combined with prepared=")
+        if not isinstance(spec, ModelSpec) or not isinstance(data, Measurements):
+            prepare(spec, data)  # names the wrong type
+        p_full = spec.parameter_vector(guess)
+        spec_w, data, wnotes = apply_window(spec, data, window, p_full)
+        notes += wnotes
+        guess = window_guess(spec, spec_w, p_full)
+        spec = spec_w
     check_determined(spec, data)
     given, estimated = sigma_request(sigma, data.names if isinstance(data, Measurements) else ())
     if given:
@@ -561,7 +631,6 @@ def estimate(spec: ModelSpec, data: Measurements, *, guess: Mapping | Sequence[f
     elif given:
         prepared = prepared.with_sigma(given)
     nlp = prepared.nlp
-    notes = []
     p0 = spec.parameter_vector(guess)
     check_guess(spec, p0)
     warm = None
@@ -571,10 +640,10 @@ def estimate(spec: ModelSpec, data: Measurements, *, guess: Mapping | Sequence[f
         if guess is not None:
             x0 = nlp.layout.with_reduced(x0, p0)  # (7.5): the reduced parameters are p
     else:
-        S, note = prepared.initial_states(p0)
-        if note:
-            notes.append(note)
-        x0 = nlp.initial_x(S, p0)
+        from .start import start_states
+        start = start_states(spec, prepared.measurements, prepared.transcription.mesh.node_times, p0)
+        notes.extend(start.notes)
+        x0 = nlp.initial_x(start.states, p0)
     fit = fit_nlp(prepared, nlp, x0, options=options, warm=warm, setup_s=prepared.setup_s, notes=notes)
     if estimated:
         fit = relax_sigma(fit, estimated, options=options)

@@ -21,8 +21,9 @@ from dataclasses import replace
 
 import click
 
-from ..cli import (EXIT_NOT_CONVERGED, NameValue, data_options, fit_inputs, ipopt_options, load_model,
-                   model_option, prepare_verbosely, sigma_argument, status, verbose_option, write_json)
+from ..cli import (EXIT_NOT_CONVERGED, NameValue, data_options, fit_inputs, flight_window, ipopt_options, load_model,
+                   model_option, prepare_verbosely, sigma_argument, status, verbose_option, windowed_inputs,
+                   write_json)
 from ..errors import SettingsError
 from ..output import check_file
 
@@ -51,7 +52,7 @@ __all__ = ["command"]
               help="Plot the eigenvalue spectrum and the directions' composition.")
 @verbose_option
 def command(data_file, model, scaling, threshold, n_estimated, at, guesses, columns, time_column, sigmas,
-            n_elements, K, ipopt, out, plot):
+            unmeasured, window_text, n_elements, K, ipopt, out, plot):
     """Estimability report: eigenvalues of the reduced Hessian, ratios, np, directions.
 
     Prints the report; writes EST.json (and EST.png with --plot).
@@ -80,13 +81,19 @@ def command(data_file, model, scaling, threshold, n_estimated, at, guesses, colu
                                                    (sigma.values() if isinstance(sigma, dict) else [sigma])):
         raise SettingsError("--sigma estimate needs a fit to estimate the noise from: add --at fit (or give the "
                             "sigma as a number)")
+    window = flight_window(window_text)
     guess, mesh, data = fit_inputs(spec, data_file, guesses=guesses, columns=columns, time_column=time_column,
-                                   sigmas=sigmas, n_elements=n_elements, K=K)
+                                   sigmas=sigmas, n_elements=n_elements, K=K, unmeasured=unmeasured)
+    spec, data, guess, mesh, window_notes = windowed_inputs(spec, data, guess, window, n_elements, K)
+    n_p = len(spec.parameters)
+    if n_estimated is not None and not 1 <= n_estimated <= n_p:
+        raise SettingsError(f"--np must be from 1 to {n_p} (the number of parameters of {spec.name} in the window), "
+                            f"got {n_estimated}")
     status(f"read {data.n_samples} values of {', '.join(data.names)} from {data_file}; collocating on "
            f"{mesh.describe()}")
     t0 = time.perf_counter()
     prepared = prepare_verbosely(spec, data, mesh)
-    extra_notes = []
+    extra_notes = list(window_notes)
     fit_info = None
     if at == "fit":
         fit = estimate(spec, data, guess=guess, prepared=prepared, options=options, sigma=sigma)

@@ -558,7 +558,8 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
              mesh=None, options: Mapping[str, Any] | None = None, holdout: tuple | str | None = "auto",
              max_effects: int = 3, workers: int | None = None, refit_timeout: float = 180.0,
              refine: bool = True, variant: bool | str = "auto",
-             sigma: str | Mapping[str, float | str] | None = None) -> DiagnosisReport:
+             sigma: str | Mapping[str, float | str] | None = None,
+             flight_window: Sequence[float] | None = None) -> DiagnosisReport:
     """Fit ``model`` to ``data`` and find what it misses::
 
         fit -> compare -> locate -> plausibility
@@ -610,6 +611,10 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
         They are estimated from the base model's residuals, so a missing effect inflates
         them and "reaches the noise" means "reaches the base fit's residual level": give
         the sensor's sigma when it is known.
+    flight_window : (float, float), optional
+        Diagnose only the flight window ``(T0, T1)`` (s): the model and the data are cut to
+        it (:func:`rocketid.start.apply_window`; a window that starts in flight estimates the
+        initial states the data determine), and everything after works on the windowed model.
 
     Returns
     -------
@@ -626,6 +631,15 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
     holdout_window(spec, holdout)           # refuse a bad window before any work
     meas, data_label = _read_data(data, spec)
     notes: list[str] = []
+    if flight_window is not None:
+        from ..start import apply_window, window_guess
+        p_full = spec.parameter_vector(guess)
+        spec_w, meas, wnotes = apply_window(spec, meas, flight_window, p_full)
+        notes.extend(wnotes)
+        guess = window_guess(spec, spec_w, p_full)
+        spec = spec_w
+        if mesh is not None:
+            raise SettingsError("flight_window cuts the model: give no mesh (the default mesh of the window is used)")
     timings: dict = {}
 
     def timed(key, fn, *args, **kw):
