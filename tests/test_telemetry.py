@@ -76,3 +76,126 @@ def test_read_channels_bad_input(tmp_path):
         ri.read_channels({})
     with pytest.raises(DataError, match="does not exist"):
         ri.read_channels({"h": tmp_path / "nope.csv"})
+
+
+# ---------------------------------------------------------------------------
+# Flight windows
+# ---------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def ra66_seed5(ra66_spec, ra66_p_true):
+    return ri.simulate_measurements(ra66_spec, ra66_p_true, ri.ra66_times(), seed=5)
+
+
+def test_window_from_20s_with_free_initial_states_recovers_the_truth(ra66_spec, ra66_p_true, ra66_seed5):
+    from rocketid.estimability import uncertainty
+
+    fit = ri.estimate(ra66_spec, ra66_seed5, window=(20.0, 66.0))
+    assert fit.success, fit.message
+    assert fit.spec.t0 == 20.0 and fit.spec.tf == 66.0
+    # CD0's hat function lives on [0, 11] s: no longer a parameter; the states at 20 s are
+    names = fit.spec.parameter_names
+    assert "CD0" not in names and names[-4:] == ("x_0", "h_0", "v_0", "theta_0")
+    assert any("CD0 acts only outside the window" in n for n in fit.notes)
+    # the truth at 20 s from the independent integrator (DOP853, tolerance 1e-12)
+    s20 = ri.simulate(ra66_spec, ra66_p_true, [0.0, 20.0], rtol=1e-12, atol=1e-12).states[-1]
+    truth = dict(zip(ra66_spec.parameter_names, ra66_p_true))
+    truth.update(zip(("x_0", "h_0", "v_0", "theta_0"), s20))
+    unc = uncertainty(fit)
+    z = {n: (v - truth[n]) / s for n, v, s in zip(names, fit.p, unc.standard_errors)}
+    assert all(abs(v) < 4 for v in z.values()), z
+    assert abs(fit.value("theta_0") - s20[3]) < 1e-4 and abs(fit.value("h_0") - s20[1]) < 0.5
+    assert 0.9 < fit.chi2_per_dof < 1.1
+    assert fit.n_data == 3 * 4601
+
+
+def test_window_guesses_come_from_the_data(ra66_spec, ra66_p_true, ra66_seed5):
+    from rocketid.start import initial_from_data
+
+    values, source = initial_from_data(ra66_spec, ra66_seed5, 20.0)
+    s20 = ri.simulate(ra66_spec, ra66_p_true, [0.0, 20.0], rtol=1e-12, atol=1e-12).states[-1]
+    assert source == {"x": "measured", "h": "measured", "v": "measured", "theta": "kinematics"}
+    got = np.array([values[s] for s in ra66_spec.state_symbols])
+    # sigma = 1 m noise, 100 Hz: the local fits are within a metre; sin(theta) = (dh/dt) / v within 0.01 rad
+    assert np.all(np.abs(got[:3] - s20[:3]) < 1.0) and abs(got[3] - s20[3]) < 0.01
+
+
+def test_window_ending_early_keeps_the_launch_state(ra66_spec, ra66_seed5):
+    fit = ri.estimate(ra66_spec, ra66_seed5, window=(0.0, 30.0))
+    assert fit.success and fit.spec.tf == 30.0
+    assert not any(n.endswith("_0") for n in fit.spec.parameter_names)
+    assert {"CD4", "CD5", "CD6"}.isdisjoint(fit.spec.parameter_names)   # knots 44, 55, 66 s act after 30 s
+    assert 0.9 < fit.chi2_per_dof < 1.1
+
+
+def test_cli_window(tmp_path, ra66_seed5):
+    path = ra66_seed5.to_csv(tmp_path / "d.csv")
+    out = tmp_path / "w.json"
+    r = CliRunner().invoke(main, ["estimate", str(path), "--window", "20:", "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    import json
+    d = json.loads(out.read_text())
+    assert {"x_0", "h_0", "v_0", "theta_0"} <= set(d["parameters"]) and "CD0" not in d["parameters"]
+    assert abs(d["parameters"]["theta_0"] - 1.2625) < 1e-3
+
+
+@pytest.mark.parametrize("args, fragment", [
+    (["--window", "20"], "--window must be T0:T1"),
+    (["--window", "30:20"], "the end must be after the start"),
+    (["--window", "50:90"], "not inside model 'RA-66''s horizon [0, 66]"),
+    (["--window", "a:b"], "--window must be T0:T1"),
+    (["--unmeasured", "q"], "--unmeasured q: model 'RA-66' has no output 'q'"),
+    (["--unmeasured", "x", "--unmeasured", "h", "--unmeasured", "v"], "nothing is left to fit"),
+])
+def test_cli_bad_window_and_unmeasured(tmp_path, args, fragment):
+    data = tmp_path / "d.csv"
+    data.write_text("t,x,h,v\n" + "".join(f"{0.1 * k:.1f},{k},{k},{k}\n" for k in range(1, 20)))
+    r = CliRunner().invoke(main, ["estimate", str(data), *args])
+    assert r.exit_code == 2
+    lines = [ln for ln in r.output.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("Error:") and fragment in lines[0], r.output
+
+
+def test_window_without_data_in_it(ra66_spec, ra66_seed5):
+    short = ra66_seed5.window(0.0, 10.0)
+    with pytest.raises(DataError, match="no samples of x, h, v in the window"):
+        ri.estimate(ra66_spec, short, window=(20.0, 66.0))
+
+
+# ---------------------------------------------------------------------------
+# Outputs the data do not measure
+# ---------------------------------------------------------------------------
+
+
+def test_unmeasured_output_is_predicted_not_fitted(tmp_path, ra66_spec, ra66_p_true, ra66_seed5):
+    """Without x (no downrange, like broadcast telemetry), h and v still fit; x is predicted and
+    the prediction agrees with the independent simulation of x."""
+    hv = ra66_seed5.subset(["h", "v"])
+    fit = ri.estimate(ra66_spec, hv)
+    assert fit.success and fit.unmeasured_outputs == ("x",)
+    assert fit.nlp.channel_names == ("h", "v") and fit.n_data == 2 * 6600
+    assert any("x are not in the data: predicted" in n for n in fit.summary().notes)
+    t = np.linspace(1, 66, 14)
+    x_true = ri.simulate(ra66_spec, ra66_p_true, t, rtol=1e-12, atol=1e-12).states[:, 0]
+    assert np.max(np.abs(fit.predict("x", t) - x_true)) < 5.0
+    # the CLI reads a file without an x column (every column of the file is read) ...
+    path = hv.to_csv(tmp_path / "hv.csv")
+    out = tmp_path / "f.json"
+    r = CliRunner().invoke(main, ["estimate", str(path), "--out", str(out)])
+    assert r.exit_code == 0, r.output
+    import json
+    assert json.loads(out.read_text())["unmeasured_outputs"] == ["x"]
+    # ... but a file with an unread column may have misnamed x: an error that says both fixes
+    (tmp_path / "alt.csv").write_text("t,h,v,downrange_km\n" + "".join(
+        f"{0.1 * k:.1f},{k},{k},{k}\n" for k in range(1, 30)))
+    r = CliRunner().invoke(main, ["estimate", str(tmp_path / "alt.csv")])
+    assert r.exit_code == 2 and "missing column(s) x" in r.output and "--unmeasured x" in r.output
+    r = CliRunner().invoke(main, ["estimate", str(tmp_path / "alt.csv"), "--unmeasured", "x"])
+    assert "missing column" not in r.output
+
+
+def test_predict_bad_output(ra66_spec, ra66_seed5):
+    fit = ri.estimate(ra66_spec, ra66_seed5.window(0, 20), window=(0, 20))
+    with pytest.raises(ri.ModelError, match="has no output 'q'"):
+        fit.predict("q")

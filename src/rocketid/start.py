@@ -355,9 +355,15 @@ def start_checks(spec: ModelSpec, data: Measurements, times: np.ndarray, S: np.n
                 notes.append(f"the trajectory descends where the data climb (altitude {hs[0]:.4g} -> {hs[-1]:.4g} "
                              f"against measured {ch.values[0]:.4g} -> {ch.values[-1]:.4g}; it turns down near t = "
                              f"{times[i]:.3g} s)")
-        if np.any(hs < min(0.0, float(hs[0])) - 1.0) and (ch is None or np.min(ch.values) >= 0):
-            i = int(np.argmax(hs < min(0.0, float(hs[0])) - 1.0))
-            notes.append(f"the trajectory flies into the ground at t = {times[i]:.3g} s")
+        if np.all(np.isfinite(hs)):
+            low = min(0.0, float(hs[0]))
+            if ch is not None:  # below the lowest measured altitude by more than 1 % of the measured range
+                low = min(low, float(np.min(ch.values))) - max(1.0, 0.01 * float(np.ptp(ch.values)))
+            else:
+                low -= 1.0
+            if np.any(hs < low):
+                i = int(np.argmax(hs < low))
+                notes.append(f"the trajectory flies into the ground at t = {times[i]:.3g} s")
     if th in spec.state_symbols:
         tt = S[:, spec.state_symbols.index(th)]
         good = np.isfinite(tt)
