@@ -163,10 +163,12 @@ def sigma_argument(pairs: Iterable[tuple[str, Any]], spec: ModelSpec, option: st
                                 f"name the channels to estimate instead ({option} NAME=estimate)")
         return "estimate"
     outputs = spec.output_names
-    for name in raw:
+    for name, value in raw.items():
         if name not in outputs:
-            raise SettingsError(f"{option} {name}: model {spec.name!r} has no output {name!r}; "
-                                f"its outputs are {', '.join(outputs)}")
+            raise SettingsError(f"{option} {name}={value:g}: {name!r} is not one of {', '.join(outputs)} (model "
+                                f"{spec.name!r} has no output {name!r})" if not isinstance(value, str) else
+                                f"{option} {name}={value}: {name!r} is not one of {', '.join(outputs)} (model "
+                                f"{spec.name!r} has no output {name!r})")
     return raw or None
 
 
