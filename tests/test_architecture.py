@@ -32,11 +32,13 @@ LAYERS: list[tuple[str, ...]] = [
     ("codegen",),
     ("collocation",),
     ("cases",),
+    ("examples",),       # shipped real data and the models that go with them
     ("start",),          # starting points from the data, flight windows, sanity checks
     ("nlp",),
     ("solve",),
     ("sensitivity",),
     ("estimability",),
+    ("joint",),          # several flights fitted jointly (shared and per-flight parameters)
     ("sampling",),       # statistic-criterion sampling (7.10)
     ("study",),          # the chapter's RA-66 study (Tables 7.1-7.3) on top of sampling
     ("diagnostics",),    # compare, locate, candidate effects, score test, report

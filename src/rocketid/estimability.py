@@ -21,7 +21,7 @@ from __future__ import annotations
 import enum
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
@@ -29,8 +29,9 @@ import numpy as np
 
 from .errors import SensitivityError, SettingsError
 from .nlp import ParameterTransform
-from .sensitivity import Sensitivity, sensitivity_at, sensitivity_of
-from .solve import EstimationResult, Prepared, fit_nlp
+from .output import finite_or_none
+from .sensitivity import Sensitivity, SolutionPredictor, sensitivity_at, sensitivity_of
+from .solve import DEFAULT_IPOPT, EstimationResult, Prepared, fit_nlp
 from .summary import Section, Summary, Table, Text
 
 __all__ = ["Scaling", "Estimability", "analyze", "estimate_q1", "Uncertainty", "uncertainty",
@@ -133,18 +134,35 @@ class Estimability:
         """Eigenvalues, ratios, and each direction's main parameters (text of :meth:`directions_table`)."""
         return "\n".join(self.directions_table().text_lines())
 
+    @property
+    def has_priors(self) -> bool:
+        """Whether priors contribute to H_r (then :meth:`data_share` tells the data's part)."""
+        return bool(np.any(self.sensitivity.H_prior))
+
+    def data_share(self) -> np.ndarray:
+        """The data's share of each direction's information: ``v_k^T D H_data D v_k / lambda_k``
+        (1 without priors; near 0 where the direction is known from the priors alone), shape (n_p,)."""
+        Hd = self.D[:, None] * self.sensitivity.H_data * self.D[None, :]
+        num = np.einsum("ik,ij,jk->k", self.V, Hd, self.V)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(self.eigenvalues > 0, num / self.eigenvalues, np.nan)
+
     def directions_table(self) -> Table:
-        """Eigenvalues, ratios, and each direction's main parameters, as a :class:`~rocketid.summary.Table`."""
+        """Eigenvalues, ratios, and each direction's main parameters, as a :class:`~rocketid.summary.Table`
+        (with the data's share of each eigenvalue when the model has priors)."""
         comp = self.composition()
+        share = self.data_share() if self.has_priors else None
         rows = []
         for k, (lam, r) in enumerate(zip(self.eigenvalues, self.ratios)):
             order = np.argsort(comp[:, k])[::-1]
             parts = [f"{self.parameter_names[i]} {100 * comp[i, k]:.0f}%{'-' if self.V[i, k] < 0 else '+'}"
                      for i in order if comp[i, k] >= 0.05][:4]
-            rows.append((f"q{k + 1}", float(lam), float(r), "estimated" if k < self.n_estimated else "fixed",
-                         ", ".join(parts)))
-        return Table(("dir", "eigenvalue", "ratio", "", "composition (share of each parameter)"), rows,
-                     (None, ".4g", ".4g"))
+            row = (f"q{k + 1}", float(lam), float(r), "estimated" if k < self.n_estimated else "fixed")
+            if share is not None:
+                row += (f"{100 * share[k]:.0f}%",)
+            rows.append(row + (", ".join(parts),))
+        head = ("dir", "eigenvalue", "ratio", "") + (("data share",) if share is not None else ())
+        return Table(head + ("composition (share of each parameter)",), rows, (None, ".4g", ".4g"))
 
     def summary(self) -> Summary:
         """Setting, np, table, numbered notes."""
@@ -172,6 +190,7 @@ class Estimability:
                             "vector": {n: float(self.V[i, k]) for i, n in enumerate(self.parameter_names)}}
                            for k in range(self.eigenvalues.size)],
             "notes": list(self.notes),
+            **({"data_share": [finite_or_none(v) for v in self.data_share()]} if self.has_priors else {}),
         }
 
     def to_json(self, path) -> Path:
@@ -313,7 +332,7 @@ def analyze(prepared: Prepared, p: Sequence[float] | Mapping | None = None, *, t
 
 def estimate_q1(prepared: Prepared, est: Estimability, q2: Sequence[float], *,
                 warm_start: EstimationResult | None = None, options: Mapping[str, Any] | None = None,
-                nlp=None) -> EstimationResult:
+                nlp=None, predictor: SolutionPredictor | None = None) -> EstimationResult:
     """Solve (7.9): estimate ``q1`` with ``q2`` fixed; ``p = D V1 q1 + D V2 q2``.
 
     Parameters
@@ -327,6 +346,11 @@ def estimate_q1(prepared: Prepared, est: Estimability, q2: Sequence[float], *,
         values start IPOPT (the sampling loop's fast path).
     nlp : CollocationNLP, optional
         A transformed NLP with the same ``V1`` to re-offset (saves set-up).
+    predictor : SolutionPredictor, optional
+        The KKT factors at ``warm_start``'s solution (``SolutionPredictor.at(warm_start.nlp,
+        warm_start.solution)``): IPOPT starts from the predicted solution of the new problem
+        (primal and multipliers) instead of the previous one, and usually accepts it at once.
+        The estimate is IPOPT's either way; ignored without ``warm_start``.
 
     Returns
     -------
@@ -350,6 +374,13 @@ def estimate_q1(prepared: Prepared, est: Estimability, q2: Sequence[float], *,
         # keep the states, move q1 to the least-squares fit of the previous p
         x0 = nlp.layout.with_parameters(warm_start.x, warm_start.p)
         warm = warm_start.solution
+        if predictor is not None:
+            if predictor.solution is not warm:
+                raise SettingsError("the predictor was formed at another solution than warm_start's")
+            pred = predictor.predict(nlp, tol=float((options or {}).get("tol", DEFAULT_IPOPT["tol"])))
+            if pred is not None:
+                x0 = pred.x
+                warm = replace(warm, x=pred.x, mult_g=pred.mult_g)
 
         def cold_start():
             p = np.clip(nlp.layout.parameters(x0), spec.lower, spec.upper)

@@ -61,6 +61,7 @@ __all__ = [
     "InputSpec",
     "OutputSpec",
     "TableSpec",
+    "PriorSpec",
     "ROLES",
 ]
 
@@ -245,6 +246,30 @@ class TableSpec:
 
 
 @dataclass(frozen=True)
+class PriorSpec:
+    """What is known about a parameter before the flight: a Gaussian prior.
+
+    The estimation adds the penalty ``((p - mean) / sd)^2 / 2`` to the objective (7.5); the
+    reduced Hessian gains ``1 / sd^2`` on the parameter's diagonal (the prior's share of the
+    information, reported apart from the data's).
+
+    Attributes
+    ----------
+    symbol : sympy.Symbol
+        The estimated parameter.
+    mean, sd : float
+        Mean and standard deviation (same units as the parameter).
+    source : str
+        Where the knowledge comes from (``"wind tunnel"``, ``"static firing"``), for reports.
+    """
+
+    symbol: sp.Symbol
+    mean: float
+    sd: float
+    source: str = ""
+
+
+@dataclass(frozen=True)
 class ModelSpec:
     """An immutable, validated model: the value handed to every later stage.
 
@@ -268,6 +293,37 @@ class ModelSpec:
     _builder: "Model | None" = field(default=None, repr=False, compare=False)
     roles: tuple[tuple[str, sp.Expr], ...] = ()
     tables: tuple[TableSpec, ...] = ()
+    priors: tuple[PriorSpec, ...] = ()
+    events: tuple[float, ...] = ()
+
+    # -- priors ------------------------------------------------------------------
+    def prior_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The priors as arrays over the parameter vector.
+
+        Returns
+        -------
+        has : ndarray of bool, shape (n_p,)
+            Which parameters have a prior.
+        mean : ndarray, shape (n_p,)
+            Prior means (0 where there is none).
+        weight : ndarray, shape (n_p,)
+            ``1 / sd^2`` (0 where there is none).
+        """
+        n = len(self.parameters)
+        has, mean, weight = np.zeros(n, bool), np.zeros(n), np.zeros(n)
+        index = {s: i for i, s in enumerate(self.parameter_symbols)}
+        for pr in self.priors:
+            i = index[pr.symbol]
+            has[i], mean[i], weight[i] = True, pr.mean, 1.0 / pr.sd ** 2
+        return has, mean, weight
+
+    def prior_objective(self, p: Sequence[float]) -> float:
+        """The priors' share of the objective, ``sum ((p - mean) / sd)^2 / 2``."""
+        if not self.priors:
+            return 0.0
+        _, mean, weight = self.prior_arrays()
+        d = np.asarray(p, float) - mean
+        return 0.5 * float(np.sum(weight * d * d))
 
     # -- physical roles --------------------------------------------------------
     def role(self, role: str) -> sp.Expr | None:
@@ -466,6 +522,7 @@ class ModelSpec:
             pts.update(f.breakpoints)
         for u in self.inputs:
             pts.update(u.breakpoints)
+        pts.update(self.events)
         return tuple(sorted(b for b in pts if self.t0 <= b <= self.tf))
 
     def input_values(self, t: np.ndarray) -> np.ndarray:
@@ -598,6 +655,18 @@ class ModelSpec:
             out += [k for k, v in idle.items() if v and k not in out]
         return out
 
+    def with_priors(self, priors: Mapping[sp.Symbol | str, Sequence]) -> "ModelSpec":
+        """A copy with Gaussian priors added (or replaced): ``{parameter: (mean, sd)}`` or
+        ``{parameter: (mean, sd, source)}`` (see :meth:`Model.prior`)."""
+        m = self.to_model()
+        for key, value in priors.items():
+            try:
+                mean, sd, *rest = value
+            except (TypeError, ValueError):
+                raise ModelError(f"prior on {key}: give (mean, sd) or (mean, sd, source), got {value!r}") from None
+            m.prior(key, mean, sd, source=rest[0] if rest else "")
+        return m.freeze()
+
     def summary(self) -> Summary:
         """A short description of the model: its components and coefficient families."""
         rows = [("states", ", ".join(map(str, self.state_symbols))),
@@ -606,6 +675,10 @@ class ModelSpec:
                 ("outputs", ", ".join(f"{o.name} (sigma {o.sigma:g})" for o in self.outputs))]
         rows += [Text(f"family {f.symbol}: breakpoints {list(f.breakpoints)} -> knots {', '.join(map(str, f.knots))}")
                  for f in self.families]
+        rows += [Text(f"prior {pr.symbol} ~ N({pr.mean:g}, {pr.sd:g}^2)" + (f" ({pr.source})" if pr.source else ""))
+                 for pr in self.priors]
+        if self.events:
+            rows.append(("events", ", ".join(f"{e:g}" for e in self.events) + " s"))
         return Summary(f"Model {self.name!r}: t in [{self.t0:g}, {self.tf:g}]", (Section("", rows),), rule=False,
                        key_width=11)
 
@@ -660,6 +733,8 @@ class Model:
         self._outputs: list[OutputSpec] = []
         self._roles: dict[str, sp.Expr] = {}
         self._tables: list[TableSpec] = []
+        self._priors: list[PriorSpec] = []
+        self._events: list[float] = []
 
     # -- attribute access ----------------------------------------------------
     def __getattr__(self, name: str) -> sp.Symbol:
@@ -682,6 +757,8 @@ class Model:
         new._outputs = list(self._outputs)
         new._roles = dict(self.__dict__.get("_roles", {}))
         new._tables = list(self.__dict__.get("_tables", []))
+        new._priors = list(self.__dict__.get("_priors", []))
+        new._events = list(self.__dict__.get("_events", []))
         return new
 
     def remove_family(self, family: sp.Symbol | str) -> None:
@@ -939,6 +1016,51 @@ class Model:
                 return e
         raise ModelError(f"{symbol} is not a definition of model {self.name!r}")
 
+    def prior(self, parameter: sp.Symbol | str, mean: float, sd: float, *, source: str = "") -> None:
+        """A Gaussian prior on an estimated parameter: what is known before the flight.
+
+        Parameters
+        ----------
+        parameter : sympy.Symbol or str
+            An estimated parameter (a knot of a family or table included).
+        mean, sd : float
+            The prior's mean and standard deviation (``sd > 0``), in the parameter's units.
+        source : str
+            Where the knowledge comes from (shown in reports), e.g. ``"wind tunnel"``.
+
+        Examples
+        --------
+        >>> m = Model("decay", 0.0, 1.0)
+        >>> y = m.state("y", 1.0)
+        >>> k = m.parameter("k", 0.5, bounds=(0.0, 10.0))
+        >>> m.ode({y: -k * y})
+        >>> m.output("y", y, sigma=0.01)
+        >>> m.prior(k, 1.2, 0.1, source="bench test")
+        >>> m.freeze().priors[0].sd
+        0.1
+        """
+        sym = self._names.get(parameter) if isinstance(parameter, str) else parameter
+        if sym is None or sym not in {p.symbol for p in self._parameters}:
+            raise ModelError(f"prior on {parameter}: not an estimated parameter of model {self.name!r}; its "
+                             f"parameters are {', '.join(str(p.symbol) for p in self._parameters) or 'none'}")
+        mean = _float(mean, f"prior mean of {sym}")
+        sd = _float(sd, f"prior sd of {sym}")
+        if not (math.isfinite(mean) and math.isfinite(sd) and sd > 0):
+            raise ModelError(f"prior on {sym}: the mean must be finite and the sd positive and finite, got "
+                             f"mean={mean:g}, sd={sd:g}")
+        self._priors = [pr for pr in self.__dict__.get("_priors", []) if pr.symbol != sym]
+        self._priors.append(PriorSpec(sym, mean, sd, str(source)))
+
+    def event(self, time: float) -> None:
+        """Declare an event time (a throttle change, a staging): the right-hand side may have a
+        kink there, so the default mesh puts an element boundary and the simulator a stop at it."""
+        t = _float(time, "event time")
+        if not self.t0 <= t <= self.tf:
+            return  # outside the horizon (a window of the flight): nothing to align
+        events = self.__dict__.setdefault("_events", [])
+        if t not in events:
+            events.append(t)
+
     def has(self, name: str) -> bool:
         """Whether the model has a component with this name."""
         return name in self._names
@@ -1096,6 +1218,9 @@ class Model:
             # a table's variable gets its role also when the role is declared after the table
             tables=tuple(replace(tb, variable_role=next((r for r, e in self._roles.items() if e == tb.variable),
                                                         tb.variable_role)) for tb in self._tables),
+            priors=tuple(pr for pr in self.__dict__.get("_priors", [])
+                         if pr.symbol in {p.symbol for p in self._parameters}),
+            events=tuple(sorted(self.__dict__.get("_events", []))),
         )
         _check_symbols(spec)
         check_guess(spec)

@@ -2,11 +2,12 @@
 
 The collocated problem is
 
-    min_x  J(x) = 1/2 sum_k sum_s ((g_k(u_ks) - y_ks) / sigma_k)^2
+    min_x  J(x) = 1/2 sum_k sum_s ((g_k(u_ks) - y_ks) / sigma_k)^2  [+ 1/2 sum_i ((p_i - mu_i) / s_i)^2]
     s.t.   c(x) = [ IC w - s0 ;  F(z_c) for every collocation point c ;  A_lin x ]
            cl <= c(x) <= cu,  xl <= x <= xu
 
-with the full decision vector ``w = T x + w0`` (``T`` is the identity for the
+(the bracket: Gaussian priors on parameters, when the model declares them), with the full
+decision vector ``w = T x + w0`` (``T`` is the identity for the
 plain estimation (7.5); for (7.9), ``p = V1 q1 + V2 q2`` with ``q2`` fixed,
 so ``x = [S, q1]`` and the bounds on ``p`` become the linear rows ``A_lin``).
 
@@ -518,6 +519,12 @@ def _build_hessian(st: NLPStructure) -> HessianStructure:
     for ch in st.channels:
         if ch.linear:
             H_lin = H_lin + (ch.G.T @ ch.G) / ch.sigma ** 2
+    has, _, weight = tr.spec.prior_arrays()
+    if has.any():
+        # the priors' penalty is quadratic in p = P r + c: a constant P^T W P in the parameter block
+        Hp = st.P.T @ (weight[:, None] * st.P)
+        H_lin = H_lin + sps.block_diag([sps.csr_matrix((n - Hp.shape[0], n - Hp.shape[0])),
+                                        sps.csr_matrix(np.where(np.abs(Hp) > 0, Hp, 0.0))], format="csr")
     H_lin = sps.tril(H_lin).tocoo()
     triples.append((H_lin.row.astype(np.int64), H_lin.col.astype(np.int64), np.arange(H_lin.nnz), np.ones(H_lin.nnz)))
     nsrc.append(H_lin.nnz)
@@ -616,6 +623,8 @@ class CollocationNLP:
             x_upper = np.concatenate([np.full(nsv, np.inf), hi - c if np.any(c) else hi])
         set_(self, "x_lower", x_lower)
         set_(self, "x_upper", x_upper)
+        has, mean, weight = spec.prior_arrays()
+        set_(self, "_prior", (mean, weight) if has.any() else None)
         set_(self, "c_lower", np.concatenate([np.zeros(ns + n_col * ns), lin_lo]))
         set_(self, "c_upper", np.concatenate([np.zeros(ns + n_col * ns), lin_hi]))
 
@@ -720,7 +729,15 @@ class CollocationNLP:
             J += 0.5 * float(np.sum(r * (st.w_lin * r)))
         for r, ch in zip(self.residuals(x, linear=False), (c for c in self._channels if not c.linear)):
             J += 0.5 * float(np.sum(r * r)) / ch.sigma ** 2
-        return J
+        return J + self.prior_objective(x)
+
+    def prior_objective(self, x: np.ndarray) -> float:
+        """The priors' penalty ``sum ((p - mean) / sd)^2 / 2`` at ``x`` (0 without priors)."""
+        if self._prior is None:
+            return 0.0
+        mean, weight = self._prior
+        d = self.layout.parameters(x) - mean
+        return 0.5 * float(np.sum(weight * d * d))
 
     def gradient(self, x: np.ndarray) -> np.ndarray:
         st = self.structure
@@ -736,6 +753,10 @@ class CollocationNLP:
             dU = np.zeros_like(U)
             dU[:, ch.maps.fn.grad_idx] = gv * r[:, None]
             grad += ch.maps.Mu.T @ dU.ravel()
+        if self._prior is not None:
+            mean, weight = self._prior
+            grad = np.array(grad, dtype=float)
+            grad[self.layout.parameter_columns] += self.transform.P.T @ (weight * (self.layout.parameters(x) - mean))
         return grad
 
     def constraints(self, x: np.ndarray) -> np.ndarray:

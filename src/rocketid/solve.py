@@ -64,6 +64,8 @@ IPOPT_OPTIONS: dict[str, str] = {
     "alpha_for_y": _S, "recalc_y": _S,
     # linear solver, Hessian
     "linear_solver": _S, "mumps_mem_percent": _I, "mumps_pivtol": _F, "mumps_pivtolmax": _F,
+    "mumps_permuting_scaling": _I, "mumps_scaling": _I, "mumps_dep_tol": _F,
+    "least_square_init_duals": _S, "least_square_init_primal": _S,
     "hessian_approximation": _S, "limited_memory_max_history": _I,
     "derivative_test": _S, "derivative_test_tol": _F, "derivative_test_perturbation": _F,
     "derivative_test_print_all": _S, "timing_statistics": _S,
@@ -192,7 +194,11 @@ def solve_nlp(nlp: CollocationNLP, x0: np.ndarray, *, options: Mapping[str, Any]
     if warm is not None:
         opts.update({"warm_start_init_point": "yes", "warm_start_bound_push": 1e-9, "warm_start_bound_frac": 1e-9,
                      "warm_start_slack_bound_push": 1e-9, "warm_start_slack_bound_frac": 1e-9,
-                     "warm_start_mult_bound_push": 1e-9, "mu_init": 1e-6, "mu_strategy": "monotone"})
+                     "warm_start_mult_bound_push": 1e-9, "mu_init": 1e-6, "mu_strategy": "monotone",
+                     # IPOPT caps warm-start multipliers at 1e6 by default; the collocation rows' reach
+                     # 3e11 on RA-66 (weights 1/sigma^2 on 19 800 residuals), and the cap turned the
+                     # exact multipliers of a re-solve into an inf_du of 1e8 at iteration 0
+                     "warm_start_mult_init_max": 1e300})
     user = check_ipopt_options(options)
     opts.update(user)
     x0 = np.asarray(x0, dtype=float)
@@ -234,7 +240,8 @@ def solve_nlp(nlp: CollocationNLP, x0: np.ndarray, *, options: Mapping[str, Any]
 
 def default_mesh(spec: ModelSpec, K: int = 4, element_length: float | None = None, refine_first: int = 0) -> Mesh:
     """A mesh of about 1 s elements (or ``element_length``, at most 1/20 of the
-    horizon) that puts every family breakpoint on an element boundary, with K
+    horizon) that puts every family breakpoint and every event time (``Model.event``)
+    on an element boundary, with K
     Radau points; ``refine_first`` splits the first element geometrically.
 
     RA-66 gets 66 elements of 1 s with K = 4: the collocation error at the true
@@ -246,7 +253,7 @@ def default_mesh(spec: ModelSpec, K: int = 4, element_length: float | None = Non
     h = element_length if element_length is not None else min(1.0, span / 20)
     # a model cut to a window keeps its families' breakpoints outside it
     fam_bps = sorted({float(b) for f in spec.families for b in f.breakpoints if spec.t0 < b < spec.tf}
-                     | {spec.t0, spec.tf})
+                     | {spec.t0, spec.tf} | {float(e) for e in spec.events if spec.t0 < e < spec.tf})
     bounds = [fam_bps[0]]
     for a, b in zip(fam_bps[:-1], fam_bps[1:]):
         n = max(1, int(math.ceil((b - a) / h - 1e-9)))
@@ -444,9 +451,20 @@ class EstimationResult:
         return self.nlp.transform.P.shape[1]
 
     @property
+    def prior_objective(self) -> float:
+        """The priors' share of J (``sum ((p - mean) / sd)^2 / 2``; 0 without priors)."""
+        return self.nlp.prior_objective(self.x) if self.spec.priors else 0.0
+
+    @property
+    def data_objective(self) -> float:
+        """The data's share of J: the weighted residuals' ``1/2 sum ((y - y_meas)/sigma)^2``."""
+        return self.objective - self.prior_objective
+
+    @property
     def chi2_per_dof(self) -> float:
-        """``2 J / (n_data - n_estimated)``: near 1 when the model fits to the noise."""
-        return 2.0 * self.objective / max(1, self.n_data - self.n_estimated)
+        """``2 J_data / (n_data - n_estimated)``: near 1 when the model fits to the noise (``J_data``
+        is J without the priors' penalty, :attr:`data_objective`)."""
+        return 2.0 * self.data_objective / max(1, self.n_data - self.n_estimated)
 
     @property
     def sigma(self) -> dict[str, float]:
@@ -499,7 +517,9 @@ class EstimationResult:
             ("objective J", f"{self.objective:.6g}"),
             ("chi2 / dof", f"{self.chi2_per_dof:.4f}  (2J / ({self.n_data} - {self.n_estimated}))"),
             ("RMS residual", ", ".join(f"{k} {v:.4g}" for k, v in self.rms.items())),
-            ("sigma", self._sigma_text())))
+            ("sigma", self._sigma_text()),
+            *((("priors", f"{len(self.spec.priors)} Gaussian priors, their share of J {self.prior_objective:.4g} "
+                          f"(data {self.data_objective:.6g})"),) if self.spec.priors else ())))
         notes = list(self.notes)
         if not self.success:
             notes.insert(0, f"IPOPT did not converge: {self.message.rstrip('.')}. The estimates are the last iterate, "
@@ -564,6 +584,9 @@ class EstimationResult:
                      "K": int(self.prepared.transcription.mesh.K)},
             "timings": {k: float(v) for k, v in self.timings.items()},
             "notes": list(self.notes),
+            **({"priors": {str(pr.symbol): {"mean": pr.mean, "sd": pr.sd, "source": pr.source}
+                           for pr in self.spec.priors},
+                "prior_objective": finite_or_none(self.prior_objective)} if self.spec.priors else {}),
         }
 
     def to_json(self, path) -> None:

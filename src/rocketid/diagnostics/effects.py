@@ -56,7 +56,7 @@ from ..model import ROLES, Model, ModelSpec, missing_role_message
 from ..physics.atmosphere import us76_pressure
 from ..physics.gravity import EARTH_RADIUS
 
-__all__ = ["Effect", "Vehicle", "back_pressure_effect", "thrust_profile_effect", "CATALOGUE", "KINDS", "custom_effect", "with_effects", "apply_effect", "resolve_effects",
+__all__ = ["Effect", "Vehicle", "back_pressure_effect", "thrust_profile_effect", "throttle_effect", "CATALOGUE", "KINDS", "custom_effect", "with_effects", "apply_effect", "resolve_effects",
            "is_present", "check_effect_parameters", "effect_parameter_problems", "wind_effect", "density_effect", "earth_rotation_effect",
            "liftoff_fade", "EARTH_RATE", "LIFTOFF_FADE_TIME"]
 
@@ -643,6 +643,52 @@ def thrust_profile_effect(knot_times: Sequence[float], *, name: str | None = Non
     return Effect(name, f"thrust error in time ({len(knots)} knots)", "propulsion", apply,
                   f"thrust P (1 + eps(t)), eps piecewise linear in time on {', '.join(f'{k:g}' for k in knots)} s",
                   {n: 0.02 for n in names})
+
+
+def throttle_effect(times: Sequence[float], *, name: str = "throttle", open_ends: bool = False) -> Effect:
+    """A throttle-down the model lacks: thrust **and** mass flow scaled by ``1 - d(t)``.
+
+    ``d`` is piecewise linear in time through ``times`` (the event times, declared as model events so
+    that the default mesh has element boundaries there): zero at the first and last time (the engine
+    at its nominal setting outside the window) unless ``open_ends``, and an estimated value
+    ``d_throttle_j`` (guess 0: the base model) at every time in between. Thrust becomes
+    ``P (1 - d(t))`` and mass ``m(t) + mdot integral d``, with ``mdot = -dm/dt`` of the base model,
+    which must be constant (a mass linear in time). See :func:`rocketid.physics.propulsion.throttle_schedule`.
+
+    Parameters
+    ----------
+    times : sequence of float
+        Event times of the schedule (at least three with closed ends), s.
+    name : str
+    open_ends : bool
+        Estimate the first and last value too (the setting then stays at them beyond the window).
+    """
+    knots = tuple(float(k) for k in times)
+    if len(knots) < (1 if open_ends else 3) or any(b <= a for a, b in zip(knots[:-1], knots[1:])):
+        raise ModelError(f"throttle effect {name!r}: give strictly increasing event times, at least "
+                         f"{1 if open_ends else 3} (the ends are fixed at the nominal setting)")
+    free = range(len(knots)) if open_ends else range(1, len(knots) - 1)
+    names = tuple(f"d_{name}_{j}" for j in free)
+
+    def apply(m: Model) -> tuple:
+        from ..physics.propulsion import throttle_schedule
+        t_sym, thrust = _role_definition(m, "thrust", name)
+        m_sym, mass = _role_definition(m, "mass", name)
+        mdot = -sp.diff(_expanded(m, mass), m.t)
+        if mdot.free_symbols - {c for c, _ in m._constants} - {p.symbol for p in m._parameters}:
+            raise ModelError(f"effect {name!r} needs a mass that falls linearly in time (a constant mass flow); the "
+                             f"mass of model {m.name!r} has mass flow {mdot}")
+        params = {j: m.parameter(f"d_{name}_{j}", 0.0, bounds=(-1.0, 1.0), nominal=0.1) for j in free}
+        levels = [params.get(j, 0.0) for j in range(len(knots))]
+        sched = throttle_schedule(m, knots, levels, name=f"{name}_reduction")
+        m.redefine(t_sym, thrust * (1 - sched.setting))
+        m.redefine(m_sym, mass + mdot * sched.integral)
+        return tuple(params.values())
+
+    return Effect(name, f"throttle change ({len(names)} levels)", "propulsion", apply,
+                  f"thrust and mass flow scaled by 1 - d(t), d piecewise linear in time through "
+                  f"{', '.join(f'{k:g}' for k in knots)} s" + ("" if open_ends else " (0 at the ends)"),
+                  {n: 0.2 for n in names})
 
 
 def _spread(lo: float, hi: float, n: int) -> list[float]:

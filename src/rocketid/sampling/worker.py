@@ -7,7 +7,8 @@ the reference solution of (7.9) at ``q2 = V2^T p0``)::
     rng      = numpy.random.default_rng([s, k])
     p_trial  = distribution(rng, lower, upper, nominal)        step 5
     q2       = V2^T D^-1 p_trial
-    fit      = (7.9) with q2 fixed, warm-started from the reference   step 6
+    fit      = (7.9) with q2 fixed, IPOPT started from the solution   step 6
+               that the reference's KKT factors predict
     eta      = (7.10) of fit's residuals                        step 7
 
 Every solve of every run starts from the same reference solution (never from
@@ -37,9 +38,10 @@ import numpy as np
 
 from ..collocation.transcription import Mesh
 from ..data import Measurements
-from ..errors import RocketidError
+from ..errors import RocketidError, SensitivityError
 from ..estimability import Estimability, estimate_q1
 from ..model import ModelSpec
+from ..sensitivity import SolutionPredictor
 from ..solve import EstimationResult, NLPSolution, Prepared, prepare, result_of
 from .criterion import criterion_of
 from .settings import SamplingSettings
@@ -227,9 +229,13 @@ class WorkerContext:
         The reference solution as a result object, whose transformed NLP
         every draw re-offsets (``CollocationNLP.with_offset``).
     setup_s : float
-        Wall time to rebuild (NLP from the recipe, code from the disk cache).
+        Wall time to rebuild (NLP from the recipe, code from the disk cache, the predictor).
     codegen_cached : bool
     pid : int
+    predictor : SolutionPredictor or None
+        The KKT matrix factorized at the reference solution: each draw starts IPOPT from its
+        predicted solution (``estimate_q1(predictor=)``). None when the reference did not
+        converge or its KKT matrix is singular; draws then start from the reference itself.
     """
 
     recipe: Recipe
@@ -238,6 +244,7 @@ class WorkerContext:
     setup_s: float
     codegen_cached: bool
     pid: int
+    predictor: SolutionPredictor | None = None
 
     @classmethod
     def build(cls, recipe: Recipe, prepared: Prepared | None = None) -> "WorkerContext":
@@ -251,7 +258,12 @@ class WorkerContext:
         nlp = prepared.nlp.with_transform(tf)
         sol = recipe.reference
         ref = result_of(prepared, nlp, sol)
-        return cls(recipe, prepared, ref, time.perf_counter() - t0, bool(prepared.codegen_cached), os.getpid())
+        try:
+            predictor = SolutionPredictor.at(nlp, sol) if ref.success else None
+        except SensitivityError:
+            predictor = None
+        return cls(recipe, prepared, ref, time.perf_counter() - t0, bool(prepared.codegen_cached), os.getpid(),
+                   predictor)
 
 
 def trial_parameters(recipe: Recipe, seed: int, draw: int) -> np.ndarray:
@@ -278,7 +290,8 @@ def evaluate_draw(ctx: WorkerContext, seed: int, draw: int) -> DrawOutcome:
     p_trial = trial_parameters(recipe, seed, draw)
     q2 = est.q2_of(p_trial)
     try:
-        fit = estimate_q1(ctx.prepared, est, q2, warm_start=ctx.reference, options=recipe.settings.ipopt_options)
+        fit = estimate_q1(ctx.prepared, est, q2, warm_start=ctx.reference, options=recipe.settings.ipopt_options,
+                          predictor=ctx.predictor)
     except _FAILURE_EXCEPTIONS as exc:
         return draw_outcome(seed, draw, None, q2, p_trial, time.perf_counter() - t0,
                             error=f"{type(exc).__name__}: {exc}")

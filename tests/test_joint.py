@@ -1,0 +1,138 @@
+"""Several flights of one vehicle fitted jointly (rocketid.joint).
+
+Truth: two RA-66M flights with different pitch programs, simulated by the high-accuracy
+integrator at the true aerodynamics (independent of the collocation under test). Each is
+fitted alone, then both jointly: the joint standard errors must be smaller than either
+flight's alone and the joint estimates within 4 standard errors of the truth. Per-flight
+nuisance parameters (a sensor bias each flight has, of different sizes) keep their flight's
+label, and a misfit present in one flight only is reported as such.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import sympy as sp
+from click.testing import CliRunner
+
+import rocketid as ri
+from rocketid.cases.ra66 import ra66_times, ra66_vehicle_model
+from rocketid.cases.ra66m import RA66M_MACH_KNOTS, ra66m, ra66m_truth
+from rocketid.cli import main
+from rocketid.diagnostics import with_effects
+from rocketid.errors import SettingsError
+from rocketid.estimability import uncertainty
+from rocketid.joint import Flight, joint_estimate, joint_prepare
+
+
+def _alpha_b(t):
+    """A second pitch program: a -5 deg kick over 3-19 s, then a 2.5 deg excitation of period 9 s."""
+    kick = -5 * sp.pi / 180 * sp.sin(sp.pi * (t - 3) / 16) ** 2
+    exc = 2.5 * sp.pi / 180 * sp.sin(2 * sp.pi * (t - 19) / 9)
+    return sp.Piecewise((0, t < 3), (kick, t <= 19), (exc, True))
+
+
+def _aero(m, fc, alpha):
+    cd = m.table("CD_M", fc.mach, RA66M_MACH_KNOTS, 0.4, bounds=(0.01, 2.0), nominal=0.4)
+    cla = m.parameter("CL_alpha", 2.0, bounds=(0.0, 10.0), nominal=2.5)
+    return cd, cla * alpha
+
+
+@pytest.fixture(scope="module")
+def two_flights():
+    spec_a = ra66m()
+    spec_b = ra66_vehicle_model("RA-66M-b", "RA-66M with a second pitch program", _alpha_b, _aero).freeze()
+    truth = ra66m_truth(spec_a)
+    assert spec_a.parameter_names == spec_b.parameter_names
+    data_a = ri.simulate_measurements(spec_a, truth, ra66_times(), seed=11)
+    data_b = ri.simulate_measurements(spec_b, truth, ra66_times(), seed=12)
+    return spec_a, spec_b, data_a, data_b, truth
+
+
+def test_joint_fit_beats_either_flight_alone_and_agrees_with_the_truth(two_flights):
+    spec_a, spec_b, data_a, data_b, truth = two_flights
+    fit_a, fit_b = ri.estimate(spec_a, data_a), ri.estimate(spec_b, data_b)
+    assert fit_a.success and fit_b.success
+    se_a, se_b = uncertainty(fit_a).standard_errors, uncertainty(fit_b).standard_errors
+    joint = joint_estimate([Flight("A", spec_a, data_a), Flight("B", spec_b, data_b)])
+    assert joint.success, joint.message
+    assert joint.names == spec_a.parameter_names            # all shared, names kept
+    se = joint.standard_errors
+    assert np.all(se < se_a) and np.all(se < se_b)
+    assert np.all(np.abs(joint.theta - truth) < 4 * se)
+    assert 0.95 < joint.chi2_per_dof < 1.05
+    for r in joint.flights:
+        assert 0.95 < r.chi2_per_dof < 1.05
+    # J of the joint problem is the flights' J at the joint estimate; it cannot be below the separate
+    # minima, and exceeds them by about a chi-square of 8 degrees of freedom when the flights agree
+    assert joint.objective == pytest.approx(sum(r.objective for r in joint.flights), rel=1e-10)
+    excess = joint.objective - (fit_a.objective + fit_b.objective)
+    assert -1e-6 < excess < 30.0
+    est = joint.estimability()
+    assert est.condition_number < min(est.flight_condition_numbers().values())
+    for k in range(est.eigenvalues.size):            # each joint direction's eigenvalue is the flights' sum
+        assert est.shares["A"][k] + est.shares["B"][k] == pytest.approx(1.0, abs=1e-8)
+    assert "from A" in est.summary().text()
+
+
+def test_per_flight_biases_carry_the_flight_label(two_flights):
+    spec_a, spec_b, data_a, data_b, truth = two_flights
+    # each flight's altimeter reads high by its own bias: +15 m on A, -25 m on B
+    shifted_a = ri.Measurements.from_arrays(data_a["x"].times, {
+        "x": data_a["x"].values, "h": data_a["h"].values + 15.0, "v": data_a["v"].values})
+    shifted_b = ri.Measurements.from_arrays(data_b["x"].times, {
+        "x": data_b["x"].values, "h": data_b["h"].values - 25.0, "v": data_b["v"].values})
+    sa, sb = with_effects(spec_a, ["bias_h"]), with_effects(spec_b, ["bias_h"])
+    joint = joint_estimate([Flight("A", sa, shifted_a), Flight("B", sb, shifted_b)], per_flight=["b_h"])
+    assert joint.success
+    assert "b_h[A]" in joint.names and "b_h[B]" in joint.names and "b_h" not in joint.names
+    se = joint.standard_errors
+    for name, value in (("b_h[A]", 15.0), ("b_h[B]", -25.0)):
+        i = joint.names.index(name)
+        assert abs(joint.theta[i] - value) < 4 * se[i]
+    d = joint.to_dict()
+    assert set(d["shared"]) == set(spec_a.parameter_names)
+    assert {"b_h[A]", "b_h[B]"} <= set(d["parameters"]) and set(d["per_flight"]) == {"A", "B"}
+
+
+def test_a_misfit_in_one_flight_only_is_reported_as_such(two_flights):
+    spec_a, spec_b, data_a, data_b, truth = two_flights
+    biased_b = ri.Measurements.from_arrays(data_b["x"].times, {
+        "x": data_b["x"].values, "h": data_b["h"].values + 4.0, "v": data_b["v"].values})
+    joint = joint_estimate([Flight("A", spec_a, data_a), Flight("B", spec_b, biased_b)])
+    assert joint.flight("B").chi2_per_dof > joint.flight("A").chi2_per_dof
+    alone = {label: r.chi2_per_dof for label, r in zip(joint.labels, joint.alone)}
+    assert alone["A"] < 1.1 and alone["B"] > 1.5            # the bias is B's own
+    report = joint.consistency()
+    assert len(report.notes) == 1 and "flight(s) B do not fit" in report.notes[0]
+    # without the bias, both fit alone and together: no note
+    clean = joint_estimate([Flight("A", spec_a, data_a), Flight("B", spec_b, data_b)])
+    assert clean.consistency().notes == ()
+
+
+def test_bad_joint_inputs_are_refused(two_flights):
+    spec_a, spec_b, data_a, data_b, truth = two_flights
+    with pytest.raises(SettingsError, match="labels must differ"):
+        joint_prepare([Flight("A", spec_a, data_a), Flight("A", spec_b, data_b)])
+    with pytest.raises(SettingsError, match="not a parameter"):
+        joint_prepare([Flight("A", spec_a, data_a), Flight("B", spec_b, data_b)], per_flight=["b_zz"])
+    with pytest.raises(SettingsError, match="label"):
+        Flight("A[1]", spec_a, data_a)
+
+
+def test_cli_estimates_several_files_jointly(two_flights, tmp_path):
+    spec_a, spec_b, data_a, data_b, truth = two_flights
+    f1, f2 = data_a.to_csv(tmp_path / "f1.csv"), data_a.to_csv(tmp_path / "f2.csv")
+    ri.simulate_measurements(spec_a, truth, ra66_times(), seed=13).to_csv(f2)
+    out = tmp_path / "fit.json"
+    res = CliRunner().invoke(main, ["estimate", str(f1), str(f2), "--model", "ra66m", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "rocketid joint estimation: 2 flights" in res.output
+    fit = json.loads(out.read_text())
+    assert fit["flights"] == ["f1", "f2"] and set(fit["parameters"]) == set(spec_a.parameter_names)
+    assert all(abs(fit["parameters"][n] - v) < 4 * fit["standard_errors"][n]
+               for n, v in zip(spec_a.parameter_names, truth))
+    bad = CliRunner().invoke(main, ["estimate", str(f1), "--per-flight", "CL_alpha"])
+    assert bad.exit_code == 2 and "several data files" in bad.output

@@ -1,0 +1,155 @@
+"""The sampling draw's predictor (issue 9, lever 1): the KKT factors at the reference solution
+of (7.9) predict each draw's solution, and IPOPT starts from the prediction.
+
+The truths are IPOPT's own cold solves of the same (7.9) problems (from a simulation, no
+multipliers, nothing shared with the predictor but the NLP), and the draws made without the
+predictor (IPOPT warm-started from the reference, the path before the predictor).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+import rocketid as ri
+from rocketid.errors import SensitivityError, SettingsError
+from rocketid.estimability import estimate_q1
+from rocketid.sampling import SamplingSettings, prepare_sampling
+from rocketid.sampling.worker import WorkerContext, evaluate_draw, trial_parameters
+from rocketid.sensitivity import SolutionPredictor
+
+SEED = 7
+DRAWS = range(1, 9)
+
+
+@pytest.fixture(scope="module")
+def problem(ra66_spec, ra66_noisy):
+    prepared = ri.prepare(ra66_spec, ra66_noisy)
+    return prepare_sampling(prepared, settings=SamplingSettings(n_iter=5))
+
+
+@pytest.fixture(scope="module")
+def ctx(problem):
+    return WorkerContext.build(problem.recipe, problem.prepared)
+
+
+@pytest.fixture(scope="module")
+def draws(ctx):
+    """Each draw with the predictor, without it, and a cold IPOPT solve of the same (7.9)."""
+    est = ctx.recipe.estimability
+    without = replace(ctx, predictor=None)
+    out = []
+    for k in DRAWS:
+        q2 = est.q2_of(trial_parameters(ctx.recipe, SEED, k))
+        cold = estimate_q1(ctx.prepared, est, q2)
+        out.append((evaluate_draw(ctx, SEED, k), evaluate_draw(without, SEED, k), cold))
+    return out
+
+
+def test_the_worker_forms_the_predictor(ctx):
+    assert isinstance(ctx.predictor, SolutionPredictor)
+    assert ctx.predictor.solution is ctx.reference.solution
+
+
+def test_each_draw_equals_a_cold_ipopt_solve(draws, ctx):
+    D = ctx.recipe.estimability.D
+    for predicted, _, cold in draws:
+        assert predicted.success and cold.success and cold.iterations >= 5
+        # the same minimum to IPOPT's tolerance: the parameters (in the scaled coordinates the
+        # sampling works in) and the objective of (7.9)
+        np.testing.assert_allclose(np.array(predicted.p) / D, cold.p / D, rtol=0, atol=1e-7)
+        assert abs(predicted.objective - cold.objective) <= 1e-9 * cold.objective
+
+
+def test_draws_are_unchanged_by_the_predictor(draws):
+    etas_with, etas_without = [], []
+    for predicted, plain, _ in draws:
+        assert predicted.success and plain.success
+        # eta to 1e-9 (relative for a poor draw's large eta: both solves stop within IPOPT's
+        # tolerance of the same minimum, and eta of the residuals magnifies what is left)
+        assert abs(predicted.eta - plain.eta) <= 1e-9 * max(1.0, plain.eta)
+        np.testing.assert_allclose(predicted.moments, plain.moments, rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(predicted.p, plain.p, rtol=1e-8, atol=0)
+        etas_with.append(predicted.eta)
+        etas_without.append(plain.eta)
+    assert int(np.argmin(etas_with)) == int(np.argmin(etas_without))   # the same best draw
+
+
+def test_ipopt_starts_at_the_prediction(draws):
+    its_with = [d[0].iterations for d in draws]
+    its_without = [d[1].iterations for d in draws]
+    # IPOPT accepts most predictions at iteration 0 and needs at most 2 iterations for any;
+    # from the reference itself it needs 3-4
+    assert max(its_with) <= 2 and sum(its_with) <= 3
+    assert min(its_without) >= 2 and sum(its_without) > 3 * sum(its_with) + len(draws)
+
+
+def test_first_order_prediction(ctx):
+    """One step with the reference factors is the first-order change of the solution: its
+    error against IPOPT's converged solution falls with the square of the change of q2."""
+    est, pred, ref = ctx.recipe.estimability, ctx.predictor, ctx.reference
+    q2_ref = ctx.recipe.reference_q2
+    direction = est.q2_of(trial_parameters(ctx.recipe, SEED, 1)) - q2_ref
+    errors, moves = [], []
+    for t in (0.02, 0.01):
+        q2 = q2_ref + t * direction
+        nlp = ref.nlp.with_offset(est.transform(q2).c)
+        first = pred.predict(nlp, max_steps=1)
+        solved = estimate_q1(ctx.prepared, est, q2)
+        assert first.steps == 1 and solved.success
+        errors.append(np.max(np.abs(nlp.layout.reduced(first.x) - nlp.layout.reduced(solved.x))))
+        moves.append(np.max(np.abs(nlp.layout.reduced(ref.x) - nlp.layout.reduced(solved.x))))
+    # the prediction is far better than the reference, and second order: halving the change
+    # divides its error by about 4 (while the solution moves by about half)
+    assert errors[0] < 0.05 * moves[0]
+    assert 0.4 < moves[1] / moves[0] < 0.6
+    assert 0.15 < errors[1] / errors[0] < 0.35
+
+
+def test_a_warm_restart_at_a_solution_takes_at_most_one_step(ra66_noisy_fit, ra66_spec, ra66_noisy):
+    """IPOPT caps warm-start multipliers at 1e6 unless told otherwise; RA-66's reach 1e8-1e11, and
+    the cap made a re-solve from the exact solution take 2 iterations (0 for (7.9), whose
+    parameters have no variable bounds, and 1 here)."""
+    fit = ra66_noisy_fit
+    assert np.max(np.abs(fit.solution.mult_g)) > 1e8   # IPOPT's default cap: 1e6
+    again = ri.estimate(ra66_spec, ra66_noisy, prepared=fit.prepared, warm_start=fit)
+    assert again.success and again.iterations <= 1
+    np.testing.assert_allclose(again.p, fit.p, rtol=1e-8)
+
+
+def test_predictor_refuses_what_it_cannot_predict(ctx, problem):
+    failed = replace(ctx.reference.solution, status=-1, message="Maximum_Iterations_Exceeded")
+    with pytest.raises(SensitivityError, match="did not converge"):
+        SolutionPredictor.at(ctx.reference.nlp, failed)
+    # another structure (the untransformed NLP): no prediction, IPOPT starts from the reference
+    assert ctx.predictor.predict(problem.prepared.nlp) is None
+    est = ctx.recipe.estimability
+    other = replace(ctx.reference, solution=replace(ctx.reference.solution))
+    with pytest.raises(SettingsError, match="another solution"):
+        estimate_q1(ctx.prepared, est, ctx.recipe.reference_q2, warm_start=other, predictor=ctx.predictor)
+
+
+def test_bordered_banded_solve_matches_a_dense_solve():
+    """The predictor's KKT solver against NumPy's dense solve: a symmetric matrix with a zero
+    block (like a KKT matrix), banded but for 3 dense border rows and columns, in a shuffled
+    order; and a matrix that is not banded, which it declines."""
+    import scipy.sparse as sps
+
+    from rocketid.sensitivity import _BorderedBanded
+    rng = np.random.default_rng(3)
+    nb, w, k = 300, 6, 3
+    band = sps.diags([rng.normal(size=nb - abs(d)) for d in range(-w, w + 1)], list(range(-w, w + 1)))
+    band = band + band.T + sps.diags(np.where(np.arange(nb) % 2 == 0, 0.0, 10.0))  # zero diagonal entries
+    B = rng.normal(size=(nb, k))
+    K = sps.bmat([[band, sps.csr_matrix(B)], [sps.csr_matrix(B.T), None]]).toarray()
+    shuffle = rng.permutation(nb + k)
+    Ks = sps.csc_matrix(K[shuffle][:, shuffle])
+    border = np.flatnonzero(shuffle >= nb)
+    solver = _BorderedBanded.factor(Ks, border)
+    assert solver is not None and solver.kl <= 4 * w
+    b = rng.normal(size=nb + k)
+    np.testing.assert_allclose(solver.solve(b), np.linalg.solve(Ks.toarray(), b), rtol=1e-8, atol=1e-10)
+    dense = sps.csc_matrix(rng.normal(size=(60, 60)))
+    assert _BorderedBanded.factor(dense, np.array([0])) is None

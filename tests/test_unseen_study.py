@@ -1,0 +1,132 @@
+"""``rocketid diagnose`` on a vehicle and hidden effects the team never tuned on (issue 8).
+
+Kestrel-S (``tests/vehicles/kestrel.py``) is a guided solid sounding rocket declared from the user
+documentation: a tabulated regressive thrust curve, the mass as a state, a rail launch at 35 m/s,
+CD and the lift slope as Mach tables, a sampled pitch program with the attack angle
+``theta_cmd - theta``, 25 Hz data with per-channel sigmas. Its truth (``tests/unseen_study/truth.py``)
+is written in another state space (velocity components) with every hidden effect in its own shape.
+
+The normal suite checks the instruments (about 15 s): the truth without effects reproduces the
+estimation model, the pressure table reproduces the 1976 standard, the vehicle fits clean data to
+the noise, and every hidden effect changes the flight by a stated amount. The diagnoses run
+``rocketid diagnose`` from the command line, one per case (10 s to a few minutes each), and are
+``slow``: ``pytest -m slow tests/test_unseen_study.py``. The results table and the command that
+made it are in docs/effects.md ("Evaluation on an unseen vehicle").
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+HERE = Path(__file__).resolve().parent
+for extra in (HERE, HERE / "vehicles"):
+    if str(extra) not in sys.path:
+        sys.path.insert(0, str(extra))
+
+import kestrel as K  # noqa: E402
+
+import rocketid as ri  # noqa: E402
+from rocketid.physics.atmosphere import us76_pressure  # noqa: E402
+from unseen_study import run, truth  # noqa: E402
+from unseen_study.cases import CASES, Hidden  # noqa: E402
+
+#: Cases measured not to meet the bar (``run.acceptable``), with the measured reason.
+KNOWN_FAILURES: dict[str, str] = {
+    "heavy-start": "main 5e37825: a 1.7 % start-mass error (not in the catalogue) is reported as an explained "
+                   "thrust_profile_3 (eps -1.6 .. -4.1 %, chi2/dof 1.016): a wrong effect called explained",
+    "misalignment+h-bias-drift": "main 5e37825: misalignment + bias_h + bias_v (b_v -0.13 m/s, truth 0) reach "
+                                 "chi2/dof 0.990, verdict explained: a speed bias invented for an altitude drift",
+    "h-bias-drift": "main 5e37825: bias_h + bias_v + thrust_level, chi2/dof 1.087 (band 1.082), partly "
+                    "explained: compensating effects added for a drift the catalogue lacks",
+    "back-pressure+headwind": "main 5e37825: a spurious misalignment (0.43 deg) added first, then back_pressure "
+                              "and wind; chi2/dof 1.043, h not white, partly explained",
+}
+
+
+@pytest.fixture(scope="module")
+def kestrel_spec():
+    return K.build_model()
+
+
+@pytest.fixture(scope="module")
+def clean_outputs():
+    return truth.exact_outputs(Hidden(), K.sample_times())
+
+
+def test_truth_reproduces_the_vehicle_model(kestrel_spec):
+    """Velocity components and vector forces (truth) against speed and path angle (model): < 1 mm."""
+    times = K.sample_times()
+    exact = truth.exact_outputs(Hidden(), times)
+    model = ri.simulate(kestrel_spec, K.truth(kestrel_spec), times).outputs()
+    for name in ("x", "h", "v"):
+        assert np.max(np.abs(exact[name] - model[name])) < 1e-3, name
+
+
+def test_pressure_table_is_the_1976_standard():
+    """The truth's own hydrostatic integration against the standard's pressure, 0-30 km."""
+    hs, p, _ = truth.pressure_table()
+    standard = np.array([float(us76_pressure(h)) for h in hs])
+    assert np.max(np.abs(p / standard - 1)) < 2e-5
+
+
+def test_vehicle_fits_clean_data_to_the_noise(kestrel_spec):
+    data = truth.measurements(Hidden(), seed=7)
+    fit = ri.estimate(kestrel_spec, data)
+    assert fit.success, fit.message
+    dof = data.n_samples * 3 - len(kestrel_spec.parameter_names)
+    assert abs(fit.chi2_per_dof - 1) < 4 * math.sqrt(2 / dof)
+    for name, true in K.truth(kestrel_spec).items():
+        assert abs(fit.value(name) / true - 1) < 0.03, name
+
+
+@pytest.mark.parametrize("hidden, channel, low, high", [         # measured: the largest change
+    (Hidden(hot_motor=1.03), "h", 400.0, 1000.0),                 # 684 m
+    (Hidden(A_e=0.05), "v", 60.0, 150.0),                          # 95.7 m/s
+    (Hidden(wind=(5.0, 20.0)), "x", 300.0, 800.0),                 # 520 m
+    (Hidden(warm_dT=8.0), "v", 1.0, 2.5),                          # 1.49 m/s
+    (Hidden(delta=math.radians(0.3)), "x", 20.0, 50.0),            # 32 m
+    (Hidden(rotation=(69.3, 45.0)), "x", 2.0, 6.0),                # 3.6 m
+    (Hidden(dm0=25.0), "v", 15.0, 40.0),                           # 25.7 m/s
+    (Hidden(bias_h=(3.0, 0.15)), "h", 8.99, 9.01),                 # 3 + 0.15 * 40 m
+    (Hidden(tau=0.02), "v", 0.35, 0.8),                            # 0.55 m/s
+])
+def test_each_hidden_effect_changes_the_flight(clean_outputs, hidden, channel, low, high):
+    """Every hidden effect moves the outputs by a realistic amount (largest change in range)."""
+    base = clean_outputs[channel]
+    moved = truth.exact_outputs(hidden, K.sample_times())[channel]
+    change = float(np.max(np.abs(moved - base)))
+    assert low < change < high, change
+
+
+def test_classification_rules():
+    """The outcome classes: a wrong family called explained is the worst outcome."""
+    case = next(c for c in CASES if c.name == "back-pressure")
+    final = {"effects": ["back_pressure"], "verdict": "explained", "parameters": {}}
+    assert run.classify(case, {"final": final}) == "right & explained"
+    assert run.classify(case, {"final": {**final, "effects": ["thrust_level"]}}) == "WRONG called explained"
+    assert run.classify(case, {"final": {**final, "effects": ["thrust_level"], "verdict": "partly explained"}}) \
+        == "wrong, not called explained"
+    assert run.classify(case, {"final": {**final, "effects": []}}) == "nothing found"
+    assert run.classify(case, {"final": {**final, "verdict": "partly explained"}}) == "right but partly"
+    clean = next(c for c in CASES if c.name.startswith("clean"))
+    assert not run.acceptable(clean, {"final": {**final}})
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case", CASES, ids=[c.name for c in CASES])
+def test_diagnose_on_unseen_case(case, tmp_path, monkeypatch, request):
+    """``rocketid diagnose`` (CLI) on the case: clean data add nothing, an effect the base fit does
+    not show may go unfound, a visible one is found and explained, and a wrong family is never
+    reported as explained."""
+    if case.name in KNOWN_FAILURES:
+        request.node.add_marker(pytest.mark.xfail(reason=KNOWN_FAILURES[case.name], strict=False))
+    monkeypatch.setenv("ROCKETID_UNSEEN_DIR", str(tmp_path))
+    record = run.diagnose_cli(case)
+    assert record["exit"] in (0, 1), record["stderr"]
+    assert run.classify(case, record) != "WRONG called explained", run.row(case, record)
+    assert run.acceptable(case, record), run.row(case, record)

@@ -1,0 +1,96 @@
+"""The cases of the unseen-vehicle evaluation: Kestrel-S with hidden effects at realistic sizes.
+
+Each case names the hidden effects (``truth.Hidden``), the noise seed, and which catalogue
+families count as the right answer (``right``: every family in the final model must be one of
+these, and each of ``needed`` must be there). Sizes, relative to Kestrel-S (thrust 55 -> 29 kN,
+1.5 t, 0.5 m diameter, Mach 0.1 -> 3.2, 12 m -> 18.6 km):
+
+- warm motor: thrust curve 3 % faster and higher (a grain about 15-20 K warm);
+- back-pressure: a 0.25 m exit diameter (A_e 0.05 m^2: 5 kN in vacuum, 4 kN = 13 % of the
+  thrust at burn-out altitude), thrust stated at sea level;
+- headwind: 5 m/s at the rail, 23 m/s at 10 km (shear from a surface value, monotone aloft);
+- warm day: +8 K over the whole column (density -2.7 % at the ground, +0.6 % at 10 km, +3.3 % at 15 km);
+- misalignment 0.3 deg from t = 0;
+- Earth rotation at Andoya (69.3 N), launched north-east (azimuth 45 deg);
+- altitude sensor bias drifting from 3 m to 9 m over the 40 s (0.15 m/s);
+- time-tag offset 20 ms (half a sample at 25 Hz);
+- a start mass 25 kg above the declared 1500 kg (1.7 %): no catalogue effect has this shape;
+- two pairs; eight clean seeds.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from .truth import Hidden
+
+THRUST = frozenset({"thrust_level", "thrust_profile", "mass_flow"})
+
+
+@dataclass(frozen=True)
+class Case:
+    """One evaluation case."""
+
+    name: str
+    hidden: Hidden
+    seed: int
+    truth: str                                  # in words, for the table
+    right: frozenset = frozenset()              # families allowed in the final model
+    needed: frozenset = frozenset()             # families that must be in it
+    sizes: tuple = ()                           # (parameter, true value) pairs to compare
+    out_of_catalogue: bool = False              # no catalogue family is right: only an honest verdict passes
+
+
+def family(effect: str) -> str:
+    """The catalogue family of an effect name (``wind_surface_6`` -> ``wind``)."""
+    for fam in ("thrust_profile", "wind", "density", "back_pressure"):
+        if effect == fam or effect.startswith(fam + "_"):
+            return fam
+    return effect
+
+
+MIS = math.radians(0.3)
+
+CASES = (
+    Case("hot-motor", Hidden(hot_motor=1.03), 301,
+         "thrust curve 3 % faster and higher, P(t) = 1.03 P_tab(1.03 t), mass flow with it",
+         right=THRUST, needed=frozenset({"thrust_level", "thrust_profile"})),
+    Case("back-pressure", Hidden(A_e=0.05), 302,
+         "back-pressure A_e 0.05 m^2 from the sea-level thrust table, pressure table",
+         right=frozenset({"back_pressure"}), needed=frozenset({"back_pressure"}), sizes=(("A_e", 0.05),)),
+    Case("headwind", Hidden(wind=(5.0, 20.0)), 303,
+         "headwind W(h) = -(5 + 20 (1 - exp(-h/5 km))) m/s",
+         right=frozenset({"wind"}), needed=frozenset({"wind"})),
+    Case("warm-day", Hidden(warm_dT=8.0), 304,
+         "density of an atmosphere 8 K warmer (-2.7 % at 0 km, +3.3 % at 15 km)",
+         right=frozenset({"density"}), needed=frozenset({"density"})),
+    Case("misalignment", Hidden(delta=MIS), 305,
+         "thrust misalignment 0.3 deg from t = 0",
+         right=frozenset({"misalignment"}), needed=frozenset({"misalignment"}), sizes=(("delta_thrust", MIS),)),
+    Case("earth-rotation", Hidden(rotation=(69.3, 45.0)), 306,
+         "Earth rotation, latitude 69.3 N, azimuth 45 deg (Coriolis and centrifugal)",
+         right=frozenset({"earth_rotation"}), needed=frozenset({"earth_rotation"})),
+    Case("h-bias-drift", Hidden(bias_h=(3.0, 0.15)), 307,
+         "altitude bias 3 m + 0.15 m/s t (3 -> 9 m)",
+         right=frozenset({"bias_h"}), needed=frozenset({"bias_h"})),
+    Case("time-offset", Hidden(tau=0.02), 308,
+         "time tags 20 ms late (exact shift)",
+         right=frozenset({"time_offset"}), needed=frozenset({"time_offset"}), sizes=(("tau", 0.02),)),
+    Case("heavy-start", Hidden(dm0=25.0), 309,
+         "start mass 25 kg (1.7 %) above the declared (no catalogue effect)",
+         out_of_catalogue=True),
+    Case("back-pressure+headwind", Hidden(A_e=0.05, wind=(5.0, 20.0)), 310,
+         "back-pressure A_e 0.05 m^2 + headwind 5 -> 25 m/s",
+         right=frozenset({"back_pressure", "wind"}), needed=frozenset({"back_pressure", "wind"}),
+         sizes=(("A_e", 0.05),)),
+    Case("misalignment+h-bias-drift", Hidden(delta=MIS, bias_h=(3.0, 0.15)), 311,
+         "misalignment 0.3 deg + altitude bias 3 m + 0.15 m/s t",
+         right=frozenset({"misalignment", "bias_h"}), needed=frozenset({"misalignment", "bias_h"}),
+         sizes=(("delta_thrust", MIS),)),
+    Case("clean-200", Hidden(), 200, "clean (seed 200)"),
+    Case("clean-201", Hidden(), 201, "clean (seed 201)"),
+    Case("clean-202", Hidden(), 202, "clean (seed 202)"),
+) + tuple(Case(f"clean-{seed}", Hidden(), seed, f"clean (seed {seed})") for seed in range(203, 208))
+
+BY_NAME = {c.name: c for c in CASES}
