@@ -408,6 +408,18 @@ def units_check(spec: ModelSpec, data: Measurements, times: np.ndarray, S: np.nd
     return out
 
 
+def _scale_gap(spec: ModelSpec, data: Measurements, times: np.ndarray, S: np.ndarray) -> list[str]:
+    """Channels whose values are over a million times larger than the model's at the guess."""
+    out = []
+    for sym, ch in _state_channels(spec, data).items():
+        j = spec.state_symbols.index(sym)
+        a, b = float(np.max(np.abs(S[:, j]))), float(np.max(np.abs(ch.values)))
+        if a > 0 and b > 1e6 * a:
+            out.append(f"channel {ch.name!r} reaches {b:.3g}, {b / a:.1g} times the model's {a:.3g} at the guess: "
+                       "check the data's units and scale")
+    return out
+
+
 def start_states(spec: ModelSpec, data: Measurements, times: np.ndarray, p: np.ndarray) -> StartPoint:
     """The node states to start from: the simulation at ``p`` when it runs and stays near the
     data, else the data (:func:`states_from_data`), with notes that say why.
@@ -429,6 +441,10 @@ def start_states(spec: ModelSpec, data: Measurements, times: np.ndarray, p: np.n
         units = units_check(spec, data, times[finite], S[finite])
         if units:
             raise DataError("; ".join(units))
+        scale = _scale_gap(spec, data, times[finite], S[finite])
+        if scale:
+            # data orders of magnitude off the model: starting from them would hide the mistake
+            return StartPoint(_held(S, spec, p), "simulation", tuple(problems + scale))
     if not problems:
         problems += start_checks(spec, data, times, S)
         far = {k: v for k, v in _misfit(spec, data, times, S).items() if v > FAR}
