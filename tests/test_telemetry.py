@@ -238,3 +238,36 @@ def test_sampled_input_simulates_like_restarting_at_every_sample(monkeypatch):
     every = ri.simulate(spec, [0.8], times, rtol=1e-10, atol=1e-10)
     assert fast.success and every.success
     assert np.max(np.abs(fast.states - every.states)) < 1e-6
+
+
+# ---------------------------------------------------------------------------
+# Quantized channels
+# ---------------------------------------------------------------------------
+
+
+def test_quantized_sigma_from_the_step(tmp_path, ra66_spec, ra66_p_true):
+    """Speed shown in whole km/h (steps of 1/3.6 m/s) and altitude in 0.1 m steps: the step is
+    found in the data and sigma = step / sqrt(12); the fit then reaches that noise level."""
+    from rocketid.data import quantization_step, resolve_quantized
+
+    clean = ri.simulate_measurements(ra66_spec, ra66_p_true, ri.ra66_times(), noise=False)
+    q = {"x": 0.5, "h": 0.1, "v": 1 / 3.6}
+    rounded = ri.Measurements(tuple(ri.Channel(c.name, c.times, np.round(c.values / q[c.name]) * q[c.name])
+                                    for c in clean.channels))
+    assert quantization_step(rounded["v"].values) == pytest.approx(1 / 3.6, rel=1e-9)
+    assert quantization_step(clean["v"].values) is None
+    sig = resolve_quantized({"x": "quantized", "h": "quantized:0.1", "v": "quantized"}, rounded)
+    assert sig == pytest.approx({k: v / np.sqrt(12) for k, v in q.items()}, rel=1e-9)
+    fit = ri.estimate(ra66_spec, rounded, sigma={"x": "quantized", "h": "quantized", "v": "quantized"})
+    assert fit.success and fit.sigma["v"] == pytest.approx(1 / 3.6 / np.sqrt(12), rel=1e-9)
+    assert 0.8 < fit.chi2_per_dof < 1.2        # rounding errors of a smooth signal are nearly uniform, white
+    assert np.allclose(fit.p, ra66_p_true, atol=0.01)
+    with pytest.raises(DataError, match="not on a common step"):
+        ri.estimate(ra66_spec, clean, sigma={"v": "quantized"})
+    with pytest.raises(DataError, match="quantized:STEP with a positive step"):
+        ri.estimate(ra66_spec, rounded, sigma={"v": "quantized:-1"})
+    path = rounded.to_csv(tmp_path / "q.csv")
+    r = CliRunner().invoke(main, ["estimate", str(path), "--sigma", "v=quantized", "--sigma", "h=quantized:0.1",
+                                  "--sigma", "x=quantized", "--out", str(tmp_path / "q.json")])
+    assert r.exit_code == 0, r.output
+    assert "v 0.08019" in r.output

@@ -136,6 +136,8 @@ class SigmaValue(click.ParamType):
             self.fail(f"{text!r} is not NAME=VALUE, NAME=estimate or estimate (for example h=2.5)", param, ctx)
         if raw.lower() == "estimate":
             return name, "estimate"
+        if raw.lower().startswith("quantized"):
+            return name, raw.lower()
         try:
             v = float(raw)
         except ValueError:
@@ -173,7 +175,8 @@ def sigma_argument(pairs: Iterable[tuple[str, Any]], spec: ModelSpec, option: st
 
 
 def given_sigmas(sigma) -> dict[str, float]:
-    """The numeric values of a ``sigma=`` argument (the ones not to be estimated)."""
+    """The numeric values of a ``sigma=`` argument (the ones not to be estimated nor taken from
+    a quantization step)."""
     if not isinstance(sigma, Mapping):
         return {}
     return {k: v for k, v in sigma.items() if not isinstance(v, str)}
@@ -329,7 +332,8 @@ def sigma_option_decl():
     """The ``--sigma`` option: a value, ``NAME=estimate`` or ``estimate``."""
     return click.option("--sigma", "sigmas", multiple=True, type=SigmaValue(), metavar="NAME=VALUE|NAME=estimate|estimate",
                         help="Noise standard deviation of an output (repeatable; default: the model's); "
-                             "NAME=estimate estimates it with the parameters, 'estimate' every output's.")
+                             "NAME=estimate estimates it with the parameters, 'estimate' every output's; "
+                             "NAME=quantized (or quantized:STEP) sets it to the rounding error STEP/sqrt(12).")
 
 
 def window_option_decl(name: str = "--window"):
@@ -439,8 +443,14 @@ def fit_inputs(spec: ModelSpec, data_file, *, guesses, columns, time_column, sig
     guess = parameter_values(spec, assignments(guesses, "--guess"), "--guess")
     check_guess(spec, guess, where="--guess", error=SettingsError)
     mesh = make_mesh(spec, n_elements, K)
+    sigma = sigma_argument(sigmas, spec)
     data = read_data(data_file, spec, time_column=time_column, columns=assignments(columns, "--column"),
-                     sigma=given_sigmas(sigma_argument(sigmas, spec)), unmeasured=tuple(unmeasured))
+                     sigma=given_sigmas(sigma), unmeasured=tuple(unmeasured))
+    if isinstance(sigma, Mapping):
+        from .data import resolve_quantized
+        quantized = {k: v for k, v in sigma.items() if isinstance(v, str) and v.startswith("quantized")}
+        if quantized:
+            data = data.with_sigma(resolve_quantized(quantized, data))
     return guess, mesh, data
 
 

@@ -22,11 +22,15 @@ import numpy as np
 from .errors import DataError
 from .output import write_csv
 
-__all__ = ["Channel", "Measurements", "read_csv", "read_channels", "sigma_request", "ESTIMATE", "MAX_VALUE", "SIGMA_RANGE"]
+__all__ = ["Channel", "Measurements", "read_csv", "read_channels", "sigma_request", "quantization_step",
+           "resolve_quantized", "QUANTIZED", "ESTIMATE", "MAX_VALUE", "SIGMA_RANGE"]
 
 #: The word that asks for a channel's noise level to be estimated (``sigma="estimate"``,
 #: ``sigma={"h": "estimate"}``, ``--sigma estimate``, ``--sigma h=estimate``).
 ESTIMATE = "estimate"
+#: The word that asks for a channel's sigma from its quantization step, ``q / sqrt(12)``
+#: (``"quantized"``: the step found in the data; ``"quantized:0.2778"``: the step given).
+QUANTIZED = "quantized"
 
 #: Largest magnitude of a measured value: squares of larger values overflow a double.
 MAX_VALUE = 1e150
@@ -242,6 +246,60 @@ def sigma_request(sigma, channels: Sequence[str], where: str = "sigma") -> tuple
             raise DataError(f"{where} {name}={value!r}: sigma must be positive and finite (or 'estimate')")
         given[name] = v
     return given, tuple(c for c in channels if c in estimated)
+
+
+def quantization_step(values: Sequence[float], *, rtol: float = 1e-6) -> float | None:
+    """The step of a quantized channel: the smallest gap between its distinct values, when every
+    value lies on that lattice (within ``rtol`` of the step); None otherwise."""
+    u = np.unique(np.asarray(values, float))
+    if u.size < 3:
+        return None
+    d = np.diff(u)
+    q = float(np.min(d))
+    if not q > 0:
+        return None
+    k = (u - u[0]) / q
+    if np.max(np.abs(k - np.round(k))) > max(rtol * max(1.0, float(np.max(k))), 1e-3):
+        return None
+    return q
+
+
+def resolve_quantized(sigma, data: "Measurements"):
+    """Replace ``"quantized"`` and ``"quantized:STEP"`` entries of a ``sigma=`` mapping by the
+    standard deviation of rounding to the step, ``STEP / sqrt(12)`` (the step found in the data
+    when it is not given).
+
+    Raises
+    ------
+    DataError
+        A channel whose values are not on a common step, or a step that is not a positive number.
+    """
+    if not isinstance(sigma, Mapping):
+        return sigma
+    out = dict(sigma)
+    for name, value in sigma.items():
+        if not (isinstance(value, str) and value.strip().lower().startswith(QUANTIZED)):
+            continue
+        text = value.strip().lower()
+        if text == QUANTIZED:
+            if name not in data.names:
+                raise DataError(f"sigma {name}={value}: there is no channel {name!r}; the channels are "
+                                f"{', '.join(data.names)}")
+            q = quantization_step(data[name].values)
+            if q is None:
+                raise DataError(f"sigma {name}=quantized: the values of channel {name!r} are not on a common step "
+                                f"(not quantized, or too few distinct values); give the step: {name}=quantized:STEP")
+        else:
+            head, _, step = text.partition(":")
+            try:
+                q = float(step)
+                if head != QUANTIZED or not (q > 0 and math.isfinite(q)):
+                    raise ValueError
+            except ValueError:
+                raise DataError(f"sigma {name}={value!r}: write quantized or quantized:STEP with a positive step "
+                                "(for example quantized:0.2778)") from None
+        out[name] = q / math.sqrt(12.0)
+    return out
 
 
 def read_csv(path: str | os.PathLike, channels: Sequence[str] = ("x", "h", "v"), *,

@@ -25,7 +25,7 @@ import sympy as sp
 
 from .codegen import generate
 from .collocation.transcription import Mesh, Transcription, transcribe
-from .data import Measurements, sigma_request
+from .data import Measurements, resolve_quantized, sigma_request
 from .errors import DataError, ModelError, SettingsError, SolverError
 from .model import ModelSpec, check_guess
 from .nlp import CollocationNLP, build_nlp
@@ -619,7 +619,9 @@ def estimate(spec: ModelSpec, data: Measurements, *, guess: Mapping | Sequence[f
     sigma : "estimate" or mapping, optional
         Noise levels: ``"estimate"`` estimates every channel's sigma with the
         parameters (:func:`relax_sigma`); a mapping ``{channel: value or
-        "estimate"}`` gives some and estimates others. Default: the data's sigma,
+        "estimate"}`` gives some and estimates others; ``"quantized"`` (or
+        ``"quantized:STEP"``) sets a channel's sigma to its rounding error
+        ``STEP / sqrt(12)``, the step found in its values unless given. Default: the data's sigma,
         else the model's.
     window : (float, float), optional
         A flight window ``(T0, T1)`` (s): the data and the model are cut to it
@@ -646,6 +648,8 @@ def estimate(spec: ModelSpec, data: Measurements, *, guess: Mapping | Sequence[f
         guess = window_guess(spec, spec_w, p_full)
         spec = spec_w
     check_determined(spec, data)
+    if isinstance(data, Measurements):
+        sigma = resolve_quantized(sigma, data)
     given, estimated = sigma_request(sigma, data.names if isinstance(data, Measurements) else ())
     if given:
         data = data.with_sigma(given)
