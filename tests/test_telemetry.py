@@ -271,3 +271,17 @@ def test_quantized_sigma_from_the_step(tmp_path, ra66_spec, ra66_p_true):
                                   "--sigma", "x=quantized", "--out", str(tmp_path / "q.json")])
     assert r.exit_code == 0, r.output
     assert "v 0.08019" in r.output
+
+
+def test_unmeasured_output_is_plotted_in_the_comparison(tmp_path, ra66_spec, ra66_seed5):
+    from rocketid.diagnostics.compare import compare
+
+    fit = ri.estimate(ra66_spec, ra66_seed5.subset(["h", "v"]))
+    comp = compare(fit)
+    assert comp.names == ("h", "v")
+    (name, t, y), = comp.predicted_only
+    assert name == "x" and t.shape == y.shape and y[-1] > 1000       # downrange grows to km
+    assert comp.to_dict()["predicted_only"] == ["x"]
+    assert any("x are not in the data" in n for n in comp.notes)
+    fig = comp.plot(tmp_path / "c.png")
+    assert len(fig.axes) == 6 and (tmp_path / "c.png").stat().st_size > 1000
