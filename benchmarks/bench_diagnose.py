@@ -14,9 +14,14 @@ check, the report files):
 
 Each data set hides a +2 % thrust error (``thrust_level``), seed 0.
 
+``--against SRC`` times another source tree (``SRC`` holds its ``rocketid`` package, e.g. an
+older commit unpacked with ``git archive``) in the same run: each row runs both trees one
+after the other (each with its own empty code cache), so that both see the same load.
+
 Run::
 
     python benchmarks/bench_diagnose.py [--model tests/vehicles/stage30.py] [--json out.json]
+                                        [--against /tmp/before/src]
 """
 
 from __future__ import annotations
@@ -55,8 +60,10 @@ def _data(model: str, out: Path) -> Path:
     return data.to_csv(out)
 
 
-def _run(csv: Path, model: str, cache: str, out: Path) -> tuple[float, str]:
+def _run(csv: Path, model: str, cache: str, out: Path, src: str | None = None) -> tuple[float, str]:
     env = dict(os.environ, ROCKETID_CACHE_DIR=cache)
+    if src is not None:
+        env["PYTHONPATH"] = os.pathsep.join([src] + [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p])
     t0 = time.perf_counter()
     cmd = [sys.executable, "-c", "from rocketid.cli import main; main()", "diagnose", str(csv), "--out", str(out),
            "--model", model]
@@ -68,29 +75,53 @@ def _run(csv: Path, model: str, cache: str, out: Path) -> tuple[float, str]:
     return dt, f"{final.get('verdict')} {final.get('effects')} chi2/dof {final.get('chi2_per_dof')}"
 
 
+def _rows(args, tmp: Path, trees: dict, csvs: dict) -> dict:
+    """``{tree: {row: (seconds, verdict)}}``; each step runs every tree in turn (``trees``: tag -> src)."""
+    rows = {tag: {} for tag in trees}
+
+    def each(label, csv, model, out):
+        for tag, src in trees.items():
+            res = _run(csv, model, str(tmp / f"cache-{tag}"), tmp / f"{tag}-{out}", src)
+            if label:
+                rows[tag][label] = res
+
+    if not args.only_ra66:
+        each("new model, empty cache", csvs["user"], args.model, "r1")
+        each("new model, warm cache", csvs["user"], args.model, "r2")
+    each(None, csvs["ra66"], "ra66", "r3")                                   # warm the cache
+    each("RA-66, warm cache", csvs["ra66"], "ra66", "r4")
+    return rows
+
+
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--model", default=str(ROOT / "tests" / "vehicles" / "stage30.py"))
     ap.add_argument("--json", default=None)
     ap.add_argument("--only-ra66", action="store_true", help="only the RA-66 row")
+    ap.add_argument("--against", default=None, help="another source tree to time in the same run (its src folder)")
     args = ap.parse_args(argv)
-    rows = {}
+    load0 = os.getloadavg()[0]
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        cold = tmp / "cache"
+        csvs = {"ra66": _data("ra66", tmp / "ra66.csv")}
         if not args.only_ra66:
-            user_csv = _data(args.model, tmp / "user.csv")
-            rows["new model, empty cache"] = _run(user_csv, args.model, str(cold), tmp / "r1")
-            rows["new model, warm cache"] = _run(user_csv, args.model, str(cold), tmp / "r2")
-        ra_csv = _data("ra66", tmp / "ra66.csv")
-        _run(ra_csv, "ra66", str(cold), tmp / "r3")                  # warm the cache
-        rows["RA-66, warm cache"] = _run(ra_csv, "ra66", str(cold), tmp / "r4")
+            csvs["user"] = _data(args.model, tmp / "user.csv")
+        trees = {"against": str(Path(args.against).resolve())} if args.against else {}
+        trees["this"] = None
+        # interleaved: each step of the other tree, then of this one, so that both see the same load
+        out = _rows(args, tmp, trees, csvs)
+        before, rows = out.get("against", {}), out["this"]
     load = os.getloadavg()[0]
     for k, (dt, verdict) in rows.items():
-        print(f"| {k} | {dt:.1f} s | {verdict} |")
-    print(f"(load average {load:.1f}, {os.cpu_count()} cores)")
+        if k in before:
+            print(f"| {k} | {before[k][0]:.1f} s -> {dt:.1f} s | {before[k][1]} -> {verdict} |")
+        else:
+            print(f"| {k} | {dt:.1f} s | {verdict} |")
+    print(f"(load average {load0:.1f} before, {load:.1f} after; {os.cpu_count()} cores)")
     result = {k: {"seconds": dt, "final": v} for k, (dt, v) in rows.items()}
-    result["load_average"] = load
+    if before:
+        result["against"] = {"src": args.against, **{k: {"seconds": dt, "final": v} for k, (dt, v) in before.items()}}
+    result["load_average"] = [load0, load]
     if args.json:
         Path(args.json).write_text(json.dumps(result, indent=2))
     return result

@@ -71,7 +71,8 @@ def table(records: list[dict]) -> str:
     for r in records:
         f, s = r["final"], r["score"]
         found = " + ".join(f["effects"]) or "nothing"
-        flag = "yes" if s["passed"] else ("**WRONG EXPLAINED**" if s["wrong_explained"] else "no")
+        flag = (("yes (data limit, named)" if s.get("at_data_limit") else "yes") if s["passed"] else
+                ("**WRONG EXPLAINED**" if s["wrong_explained"] else "no"))
         rows.append(f"| {r['case']}{r.get('run', '')} | {r['vehicle']} | {r['truth']} | {found} | {r['base']['chi2_per_dof']:.4f} -> "
                     f"{f['chi2_per_dof']:.4f} | {sizes_text(r)} | {f['verdict']} | {flag} | {r['seconds']:.0f} |")
     return "\n".join(rows)
@@ -82,7 +83,9 @@ def summary(records: list[dict]) -> str:
     clean = [r for r in records if not r["true_effects"]]
     lines = [f"- cases with hidden effects: {sum(r['score']['passed'] for r in eff)} of {len(eff)} pass "
              "(true effects held and nothing else, chi2/dof < 1.05, verdict explained, scalar sizes within 25 % or 3 std, "
-             "CD and CL within 10 % or 3 std of the truth)",
+             "CD and CL within 10 % or 3 std of the truth; for a case at the limit of what its data can show, "
+             "harness.DATA_LIMITS: nothing outside the truth and every true effect named in the explanation), "
+             f"{sum(bool(r['score'].get('at_data_limit')) for r in eff)} of them at that limit",
              f"- wrong effect reported as explained: {sum(r['score']['wrong_explained'] for r in records)}"]
     if clean:
         lines.append(f"- clean data: {sum(bool(r['final']['effects']) for r in clean)} of {len(clean)} add an effect")

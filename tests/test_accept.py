@@ -190,3 +190,25 @@ def test_a_final_model_at_the_noise_with_a_coefficient_at_a_bound_is_not_explain
     assert final_verdict(True, False, False, good)[0] == "partly explained"
     assert final_verdict(False, False, True, None)[0] == "nothing missing"
     assert final_verdict(False, False, False, None)[0] == "not explained by the catalogue"
+
+
+def test_identifiability_reports_a_coefficient_the_effect_inflates():
+    """Issue 8, item 8: a wind knot pinned within its realistic size can still trade off against the lift
+    slope. With a correlation r between them, the lift slope's standard error with the knot free is
+    1/sqrt(1 - r^2) times its error with the knot held (5.03x for r = 0.98): reported, named."""
+    from rocketid.diagnostics.refit import identifiability
+    names = ["CL_alpha", "CD_0", "W_1"]
+    a, b, r = 0.05, 5.0, 0.98          # W_1's error 5 m/s: well inside its realistic 30 m/s
+    cov = np.diag([a ** 2, 0.01 ** 2, b ** 2])
+    cov[0, 2] = cov[2, 0] = r * a * b
+    text = identifiability(names, cov, ["W_1"], {"W_1": 30.0})
+    assert "W_1 trades off against CL_alpha" in text
+    assert f"CL_alpha {1 / np.sqrt(1 - r ** 2):.1f}x" in text and "CD_0" not in text
+    assert "not separately identifiable" in text
+    # with values: CL_alpha = 0.5 is then known to 10 % only (reported, with that share); CL_alpha = 2.5
+    # stays pinned to 2 % (not a trade-off worth a caution)
+    assert "CL_alpha 5.0x to 10 %" in identifiability(names, cov, ["W_1"], {"W_1": 30.0}, values=[0.5, 0.3, 10.0])
+    assert identifiability(names, cov, ["W_1"], {"W_1": 30.0}, values=[2.5, 0.3, 10.0]) == ""
+    # a weak correlation (r = 0.5: 1.15x) is no trade-off
+    cov[0, 2] = cov[2, 0] = 0.5 * a * b
+    assert identifiability(names, cov, ["W_1"], {"W_1": 30.0}) == ""

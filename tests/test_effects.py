@@ -39,7 +39,7 @@ def _random_point(spec: ri.ModelSpec, rng: np.random.Generator) -> dict:
     vals = {spec.t: rng.uniform(5, 60)}
     typical = {"x": (0, 1e4), "h": (100, 2e4), "v": (50, 800), "theta": (0.8, 1.5), "wind_speed": (0, 0)}
     for s in spec.states:
-        lo, hi = typical.get(str(s.symbol), (0, 1))
+        lo, hi = typical.get(str(s.symbol), (0, 0) if str(s.symbol).endswith("_speed") else (0, 1))
         vals[s.symbol] = rng.uniform(lo, hi)
         vals[s.derivative] = rng.uniform(-1, 1)
     for u in spec.input_symbols:
@@ -261,3 +261,131 @@ def test_sizes_are_relative_to_the_vehicle():
     assert CATALOGUE["time_offset"].sizes(veh)["tau"] == pytest.approx(0.02)   # one sample
     assert CATALOGUE["back_pressure"].sizes()["A_e"] == pytest.approx(0.4)     # RA-66's without a vehicle
     assert CATALOGUE["earth_rotation"].least["k_rot"] == pytest.approx(0.2)
+
+
+def test_piecewise_linear_interpolates_exactly_with_flat_ends():
+    """The ramp form against numpy's interpolation (an independent implementation)."""
+    from rocketid.diagnostics.effects import piecewise_linear
+    x = sp.Symbol("x")
+    knots, vals = [0.0, 1.5, 2.0, 4.0], [1.0, -2.0, 0.5, 3.0]
+    f = sp.lambdify(x, piecewise_linear(x, knots, vals))
+    pts = np.linspace(-1.0, 6.0, 57)
+    np.testing.assert_allclose([float(f(p)) for p in pts], np.interp(pts, knots, vals), rtol=0, atol=1e-12)
+    with pytest.raises(ModelError, match="strictly increasing"):
+        piecewise_linear(x, [0.0, 0.0], [1.0, 2.0])
+
+
+def _refined(spec, name):
+    """Every refined shape of a catalogue family, for a vehicle flying 0-16 km at Mach 0-4.5 with the
+    model's drag table knots."""
+    from rocketid.diagnostics.effects import Vehicle
+    from rocketid.diagnostics.screen import _mach_knots
+    veh = Vehicle(thrust=9e5, mass=3e4, mass_flow=300.0, speed=1400.0, start_speed=0.0, duration=66.0,
+                  altitude=(0.0, 16000.0), mach=(0.0, 4.5), sigma={"x": 1.0, "h": 1.0, "v": 1.0}, sample_interval=0.01,
+                  knot_times=tuple(np.linspace(0, 66, 67)), mach_knots=_mach_knots(spec))
+    return CATALOGUE[name].refinements(veh)
+
+
+@pytest.mark.parametrize("family", ["wind", "density", "transonic_drag"])
+def test_refined_profiles_give_back_the_base_model_at_zero(family, ra66m_spec):
+    """The piecewise-linear wind (with a surface value), density and drag-in-Mach shapes: zero gives the
+    base model exactly; realistic values change it; more knots come later in the list (BIC picks)."""
+    shapes = _refined(ra66m_spec, family)
+    assert len(shapes) >= 2
+    counts = [len(e.realistic) for e in shapes]
+    assert counts == sorted(counts) and counts[0] < counts[-1]
+    rng = np.random.default_rng(5)
+    for e in shapes:
+        spec = with_effects(ra66m_spec, [e])
+        base = ra66m_spec
+        point = _random_point(spec, rng)
+        np.testing.assert_allclose(_values(spec, spec.equations[:len(base.states)], point),
+                                   _values(base, base.equations, point), rtol=1e-12, atol=1e-9)
+        moved = dict(point)
+        for n, v in e.realistic.items():
+            moved[spec.symbol(n)] = v
+        assert np.max(np.abs(_values(spec, spec.equations, moved) - _values(spec, spec.equations, point))) > 0, e.name
+
+
+def test_wind_profile_has_a_surface_value_and_hat_knots(ra66m_spec):
+    from rocketid.diagnostics.effects import wind_profile_effect
+    e = wind_profile_effect([0.0, 4.0, 8.0])
+    assert e.name == "wind_pl_3" and set(e.realistic) == {"W_0", "W_1", "W_2"}
+    assert e.realistic["W_0"] == pytest.approx(10.0)
+    spec = with_effects(ra66m_spec, [e], {"W_0": 5.0, "W_1": 20.0, "W_2": 40.0})
+    h = spec.symbol("h")
+    expr = [d for s, d in spec.definitions if str(s) == "wind_pl_3_airspeed"]
+    assert expr, "the airspeed definition is named after the effect"
+    # W(h) itself: the wind at the knots and between them, against numpy's interpolation
+    from rocketid.diagnostics.effects import piecewise_linear
+    W = sp.lambdify(h, piecewise_linear(h, [0.0, 4000.0, 8000.0], [5.0, 20.0, 40.0]))
+    np.testing.assert_allclose([W(z) for z in (0.0, 2000.0, 6000.0, 12000.0)], [5.0, 12.5, 30.0, 40.0])
+    no_surface = wind_profile_effect([0.0, 4.0, 8.0], surface=False)
+    assert set(no_surface.realistic) == {"W_1", "W_2"}
+
+
+def test_drag_correction_is_pinned_at_the_tables_knots(ra66m_spec):
+    """The CD(M) refinement adds shape between the model's own Mach knots: at those knots it is 0 whatever
+    its values, so it cannot trade with the table's values."""
+    from rocketid.diagnostics.screen import _mach_knots
+    table = _mach_knots(ra66m_spec)
+    assert len(table) >= 3
+    shapes = _refined(ra66m_spec, "transonic_drag")
+    first = shapes[0]
+    spec = with_effects(ra66m_spec, [first], {n: 0.3 for n in first.realistic})
+    # the drag coefficient's definition as a function of the Mach symbol (not expanded further)
+    sym = spec.role("drag_coefficient")
+    mach = spec.role("mach")
+    cd = dict(spec.definitions)[sym]
+    cd_base = dict(ra66m_spec.definitions)[ra66m_spec.role("drag_coefficient")]
+    values = {p.symbol: 0.3 + 0.01 * j for j, p in enumerate(ra66m_spec.parameters)}
+    values.update({spec.symbol(n): 0.3 for n in first.realistic})
+    f = sp.lambdify(mach, cd.xreplace(values))
+    g = sp.lambdify(mach, cd_base.xreplace(values))
+    for k in table:
+        assert float(f(k)) == pytest.approx(float(g(k)), abs=1e-12)
+    # between two knots it differs by the correction's hat (0.3 at the midpoint of the first interval)
+    mid = 0.5 * (table[0] + table[1])
+    assert float(f(mid)) - float(g(mid)) == pytest.approx(0.3, abs=1e-12)
+
+
+def test_misalignment_fade_time_is_estimated_only_from_rest(ra66m_spec):
+    """From rest (RA-66M) the misalignment's refined shape estimates its fade time t_r e^s (zero gives
+    the base model; s = 0 is the catalogue's 3 s fade); a vehicle released at speed has no such shape."""
+    from rocketid.diagnostics.effects import LIFTOFF_FADE_TIME, Vehicle
+    veh = Vehicle(thrust=9e5, mass=3e4, mass_flow=300.0, speed=1400.0, start_speed=0.0, duration=66.0,
+                  altitude=(0.0, 16000.0), mach=(0.0, 4.5), sigma={"x": 1.0}, sample_interval=0.01)
+    (fade,) = CATALOGUE["misalignment"].refinements(veh)
+    assert set(fade.realistic) == {"delta_thrust", "s_fade"}
+    moving = Vehicle(**{**veh.__dict__, "start_speed": 5.0})
+    assert CATALOGUE["misalignment"].refinements(moving) == []
+    spec = with_effects(ra66m_spec, [fade])
+    rng = np.random.default_rng(7)
+    point = _random_point(spec, rng)
+    np.testing.assert_allclose(_values(spec, spec.equations[:len(ra66m_spec.states)], point),
+                               _values(ra66m_spec, ra66m_spec.equations, point), rtol=1e-12, atol=1e-9)
+    # at s = 0 the thrust direction is the catalogue's faded misalignment: half of delta at t0 + 3 s
+    at = dict(spec.definitions)[spec.role("thrust_direction")]
+    at0 = dict(ra66m_spec.definitions)[ra66m_spec.role("thrust_direction")]
+    d = (at - at0).xreplace({spec.symbol("delta_thrust"): 0.01, spec.symbol("s_fade"): 0.0,
+                             spec.t: spec.t0 + LIFTOFF_FADE_TIME})
+    assert float(d) == pytest.approx(0.005, rel=1e-12)
+    d2 = (at - at0).xreplace({spec.symbol("delta_thrust"): 0.01, spec.symbol("s_fade"): math.log(2.0),
+                              spec.t: spec.t0 + 2 * LIFTOFF_FADE_TIME})
+    assert float(d2) == pytest.approx(0.005, rel=1e-12)
+
+
+@pytest.mark.parametrize("channel", ["x", "h", "v"])
+def test_a_sensor_bias_refines_to_a_drifting_bias(channel, ra66m_spec):
+    """z = y + b + db (t - t0): the output moves by b at t0 and by b + 10 db ten seconds later."""
+    from rocketid.diagnostics.effects import Vehicle
+    veh = Vehicle(thrust=9e5, mass=3e4, mass_flow=300.0, speed=1400.0, start_speed=0.0, duration=66.0,
+                  altitude=(0.0, 16000.0), mach=(0.0, 4.5), sigma={channel: 1.0}, sample_interval=0.01)
+    (drift,) = CATALOGUE[f"bias_{channel}"].refinements(veh)
+    assert drift.name == f"bias_{channel}_drift" and set(drift.realistic) == {f"b_{channel}", f"db_{channel}"}
+    spec = with_effects(ra66m_spec, [drift], {f"b_{channel}": 2.0, f"db_{channel}": 0.3})
+    out = next(o for o in spec.outputs if o.name == channel).expr
+    base = next(o for o in ra66m_spec.outputs if o.name == channel).expr
+    for t, want in ((spec.t0, 2.0), (spec.t0 + 10.0, 5.0)):
+        diff = (out - base).xreplace({spec.symbol(f"b_{channel}"): 2.0, spec.symbol(f"db_{channel}"): 0.3, spec.t: t})
+        assert float(diff) == pytest.approx(want, abs=1e-12)

@@ -136,3 +136,37 @@ def test_cli_estimates_several_files_jointly(two_flights, tmp_path):
                for n, v in zip(spec_a.parameter_names, truth))
     bad = CliRunner().invoke(main, ["estimate", str(f1), "--per-flight", "CL_alpha"])
     assert bad.exit_code == 2 and "several data files" in bad.output
+
+
+def test_cli_estimability_of_several_files(two_flights, tmp_path):
+    spec_a, spec_b, data_a, data_b, truth = two_flights
+    f1 = data_a.to_csv(tmp_path / "f1.csv")
+    f2 = ri.simulate_measurements(spec_a, truth, ra66_times(), seed=14).to_csv(tmp_path / "f2.csv")
+    out = tmp_path / "est.json"
+    res = CliRunner().invoke(main, ["estimability", str(f1), str(f2), "--model", "ra66m", "--at", "fit",
+                                    "--scaling", "nominal", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    est = json.loads(out.read_text())
+    assert set(est["flight_eigenvalues"]) == {"f1", "f2"} and est["shared"] == list(spec_a.parameter_names)
+    # two flights of the same program and size bring about half of each direction each
+    for k in range(len(est["eigenvalues"])):
+        assert est["shares"]["f1"][k] + est["shares"]["f2"][k] == pytest.approx(1.0, abs=1e-8)
+        assert 0.3 < est["shares"]["f1"][k] < 0.7
+    # Weyl: adding a flight's information never lowers any eigenvalue
+    for lam_f in est["flight_eigenvalues"].values():
+        assert all(j >= f * (1 - 1e-9) for j, f in zip(est["eigenvalues"], lam_f))
+
+
+def test_eliminating_a_flights_own_parameters_is_the_marginal_information():
+    """The information on the shared parameters with the others eliminated is the inverse of the
+    shared block of the covariance (an identity of Gaussian marginals), also when the eliminated
+    block is singular in some direction."""
+    from rocketid.joint import _schur
+    rng = np.random.default_rng(0)
+    A = rng.standard_normal((6, 6))
+    H = A @ A.T
+    keep, drop = np.array([0, 1, 2]), np.array([3, 4, 5])
+    assert np.allclose(_schur(H, keep, drop), np.linalg.inv(np.linalg.inv(H)[np.ix_(keep, keep)]))
+    B = np.zeros((5, 5))
+    B[:3, :3] = H[:3, :3]                                   # parameters 3 and 4 have no information
+    assert np.allclose(_schur(B, keep, np.array([3, 4])), H[:3, :3])

@@ -444,7 +444,12 @@ def _schur(H: np.ndarray, keep: np.ndarray, drop: np.ndarray) -> np.ndarray:
     if drop.size == 0:
         return Hkk
     Hkd = H[np.ix_(keep, drop)]
-    return Hkk - Hkd @ np.linalg.pinv(H[np.ix_(drop, drop)], hermitian=True) @ Hkd.T
+    Hdd = H[np.ix_(drop, drop)]
+    lam, U = np.linalg.eigh(0.5 * (Hdd + Hdd.T))
+    keep_ev = lam > lam.max() * 1e-12 if lam.size and lam.max() > 0 else np.zeros(lam.size, bool)
+    W = U[:, keep_ev] / np.sqrt(lam[keep_ev])       # the pseudo-inverse, directions of no information dropped
+    S = Hkk - (Hkd @ W) @ (Hkd @ W).T
+    return 0.5 * (S + S.T)
 
 
 def joint_estimability(layout: JointLayout, flight_information: Sequence[np.ndarray], *,
@@ -464,17 +469,22 @@ def joint_estimability(layout: JointLayout, flight_information: Sequence[np.ndar
     sh = layout.shared_columns
     if sh.size == 0:
         raise SettingsError("the flights share no parameter: nothing to analyse jointly")
-    D = layout.nominal[sh] if scaling == "nominal" else np.ones(sh.size)
-    prior_full = np.diag(layout.prior_weight)
+    # every joint parameter is divided by its nominal value before eliminating a flight's own ones
+    # (their scales differ by orders of magnitude: kilograms beside throttle fractions), so that
+    # the elimination is well conditioned; the shared ones are then rescaled as asked
+    Dall = np.where(layout.nominal != 0, np.abs(layout.nominal), 1.0)
+    D = Dall[sh] if scaling == "nominal" else np.ones(sh.size)
+    back = D / Dall[sh]
+    prior_full = np.diag(layout.prior_weight * Dall ** 2)
     per_flight = []
     for f, Hf in enumerate(flight_information):
         A = layout.selection(f)
         own = layout.own_columns(f)
-        Hfull = A.T @ Hf @ A
+        Hfull = Dall[:, None] * (A.T @ Hf @ A) * Dall[None, :]
         # the flight's own priors belong to its block (they change what it can say about the shared)
         Hfull[np.ix_(own, own)] += prior_full[np.ix_(own, own)]
-        per_flight.append(D[:, None] * _schur(Hfull, sh, own) * D[None, :])
-    prior_sh = D[:, None] * prior_full[np.ix_(sh, sh)] * D[None, :]
+        per_flight.append(back[:, None] * _schur(Hfull, sh, own) * back[None, :])
+    prior_sh = back[:, None] * prior_full[np.ix_(sh, sh)] * back[None, :]
     Hj = sum(per_flight) + prior_sh
     lam, V = np.linalg.eigh(0.5 * (Hj + Hj.T))
     lam, V = lam[::-1], V[:, ::-1]

@@ -539,15 +539,23 @@ class ModelSpec:
 
     def fingerprint(self) -> str:
         """A content hash of everything generated code depends on."""
-        parts = [
-            "states", [(s.symbol, s.derivative) for s in self.states],
-            "inputs", [u.symbol for u in self.inputs],
-            "locals", list(self.local_symbols),
-            "equations", [self.expand(e) for e in self.equations],
-            "outputs", [(o.name, self.expand(o.expr)) for o in self.outputs],
-            "time", self.t,
-        ]
-        return hashlib.sha256(sp.srepr(parts).encode()).hexdigest()
+        states = tuple((s.symbol, s.derivative) for s in self.states)
+        inputs = tuple(u.symbol for u in self.inputs)
+        local = tuple(self.local_symbols)
+        equations = tuple(self.expand(e) for e in self.equations)
+        outputs = tuple((o.name, self.expand(o.expr)) for o in self.outputs)
+        # the hash of a large expression's text costs 0.1-0.4 s on an ascent model with effects, and the
+        # same model is prepared many times (each refit, its retry, the hold-out): kept by content
+        key = (states, inputs, local, equations, outputs, self.t)
+        hit = _FINGERPRINTS.get(key)
+        if hit is None:
+            parts = ["states", list(states), "inputs", list(inputs), "locals", list(local),
+                     "equations", list(equations), "outputs", list(outputs), "time", self.t]
+            hit = hashlib.sha256(sp.srepr(parts).encode()).hexdigest()
+            if len(_FINGERPRINTS) >= 256:
+                _FINGERPRINTS.clear()
+            _FINGERPRINTS[key] = hit
+        return hit
 
     def to_model(self) -> "Model":
         """An editable :class:`Model` with this specification's content."""
@@ -1233,6 +1241,9 @@ class Model:
 #: SymPy about 0.1 s each time. Results are the same SymPy objects xreplace would build.
 _SUBSTITUTED: dict = {}
 _SUBSTITUTED_MAX = 20000
+
+#: Fingerprints by model content (:meth:`ModelSpec.fingerprint`).
+_FINGERPRINTS: dict = {}
 
 
 def _substituted(expr: sp.Expr, sub: Mapping[sp.Symbol, sp.Expr]) -> sp.Expr:

@@ -22,7 +22,7 @@ from dataclasses import replace
 import click
 
 from ..cli import (EXIT_NOT_CONVERGED, NameValue, data_options, fit_inputs, flight_window, ipopt_options, load_model,
-                   model_option, prepare_verbosely, sigma_argument, status, verbose_option, windowed_inputs,
+                   given_sigmas, model_option, prepare_verbosely, sigma_argument, status, verbose_option, windowed_inputs,
                    write_json)
 from ..errors import SettingsError
 from ..output import check_file
@@ -31,7 +31,7 @@ __all__ = ["command"]
 
 
 @click.command("estimability")
-@click.argument("data_file", metavar="DATA.csv", type=click.Path(dir_okay=False))
+@click.argument("data_files", metavar="DATA.csv...", nargs=-1, required=True, type=click.Path(dir_okay=False))
 @model_option
 @click.option("--scaling", type=click.Choice(["none", "nominal"]), default="none", show_default=True,
               help="Decompose H_r in physical units, or with each parameter divided by its nominal value.")
@@ -44,6 +44,8 @@ __all__ = ["command"]
 @click.option("--guess", "guesses", multiple=True, type=NameValue(float), metavar="NAME=VALUE",
               help="Change a parameter of the guess (repeatable; default: the model's p0).")
 @data_options
+@click.option("--per-flight", "per_flight", multiple=True, metavar="NAME",
+              help="With several data files: a parameter each flight has for itself (repeatable).")
 @click.option("--ipopt", "ipopt", multiple=True, type=NameValue(str, "value"), metavar="NAME=VALUE",
               help="IPOPT option for the full fit of --at fit (repeatable).")
 @click.option("--out", "out", required=True, type=click.Path(dir_okay=False), metavar="EST.json",
@@ -51,11 +53,15 @@ __all__ = ["command"]
 @click.option("--plot", "plot", type=click.Path(dir_okay=False), default=None, metavar="EST.png",
               help="Plot the eigenvalue spectrum and the directions' composition.")
 @verbose_option
-def command(data_file, model, scaling, threshold, n_estimated, at, guesses, columns, time_column, sigmas,
-            unmeasured, window_text, n_elements, K, ipopt, out, plot):
+def command(data_files, model, scaling, threshold, n_estimated, at, guesses, columns, time_column, sigmas,
+            unmeasured, window_text, n_elements, K, per_flight, ipopt, out, plot):
     """Estimability report: eigenvalues of the reduced Hessian, ratios, np, directions.
 
     Prints the report; writes EST.json (and EST.png with --plot).
+
+    Several files are several flights of one vehicle: the report gives the eigenvalues of the
+    information on the shared parameters for each flight alone and jointly, and each flight's
+    share of every joint direction (which directions each flight adds).
     """
     from ..estimability import analyze, select_np
     from ..sensitivity import sensitivity_at, sensitivity_of
@@ -82,6 +88,17 @@ def command(data_file, model, scaling, threshold, n_estimated, at, guesses, colu
         raise SettingsError("--sigma estimate needs a fit to estimate the noise from: add --at fit (or give the "
                             "sigma as a number)")
     window = flight_window(window_text)
+    if len(data_files) > 1:
+        if given_sigmas(sigma) != (sigma or {}):
+            raise SettingsError("--sigma estimate is not available yet for several flights: give the sigmas as "
+                                "numbers")
+        _joint(spec, data_files, scaling=scaling, at=at, guesses=guesses, columns=columns, time_column=time_column,
+               sigmas=sigmas, n_elements=n_elements, K=K, per_flight=per_flight, options=options, out=out,
+               unmeasured=unmeasured, window=window)
+        return
+    if per_flight:
+        raise SettingsError("--per-flight needs several data files (one per flight)")
+    data_file = data_files[0]
     guess, mesh, data = fit_inputs(spec, data_file, guesses=guesses, columns=columns, time_column=time_column,
                                    sigmas=sigmas, n_elements=n_elements, K=K, unmeasured=unmeasured)
     spec, data, guess, mesh, window_notes = windowed_inputs(spec, data, guess, window, n_elements, K)
@@ -136,3 +153,40 @@ def command(data_file, model, scaling, threshold, n_estimated, at, guesses, colu
         fig = est.plot(plot)
         plt.close(fig)
         status(f"wrote {plot}")
+
+
+def _joint(spec, data_files, *, scaling, at, guesses, columns, time_column, sigmas, n_elements, K, per_flight,
+           unmeasured=(), window=None,
+           options, out):
+    """The joint estimability report of several flights (``rocketid.joint.joint_estimability``)."""
+    from ..cli import assignments, read_flights
+    from ..joint import joint_estimability, joint_estimate, joint_prepare
+    from ..sensitivity import sensitivity_at
+
+    flights = read_flights(data_files, spec, columns=columns, time_column=time_column, sigmas=sigmas,
+                           unmeasured=unmeasured, window=window,
+                           n_elements=n_elements, K=K)
+    guess = assignments(guesses, "--guess")
+    prep = joint_prepare(flights, per_flight=per_flight)
+    lay = prep.layout
+    payload = {"model": spec.name, "data": [str(p) for p in data_files], "at": at}
+    if at == "fit":
+        joint = joint_estimate(flights, per_flight=per_flight, guess=guess, options=options, prepared=prep)
+        payload["fit"] = {"success": bool(joint.success), "iterations": int(joint.iterations),
+                          "chi2_per_dof": float(joint.chi2_per_dof)}
+        if not joint.success:
+            click.echo(f"Error: the joint fit did not converge ({joint.message}); use --at guess or --ipopt",
+                       err=True)
+            click.get_current_context().exit(EXIT_NOT_CONVERGED)
+        est = joint.estimability(scaling=scaling)
+    else:
+        theta = lay.guess.copy()
+        for name, value in guess.items():
+            if name not in lay.names:
+                raise SettingsError(f"--guess {name}: not a joint parameter; they are {', '.join(lay.names)}")
+            theta[lay.names.index(name)] = value
+        infos = [sensitivity_at(pr, lay.flight_parameters(theta, f)).H_data for f, pr in enumerate(prep.prepared)]
+        est = joint_estimability(lay, infos, scaling=scaling)
+    click.echo(est.summary().text())
+    payload.update(est.to_dict())
+    write_json(out, payload)

@@ -425,7 +425,7 @@ def _confirm_final(fit, disc, holdout, level, timeout, options, notes: list) -> 
     guess = dict(zip(spec_f.parameter_names, (float(v) for v in start)))
     try:
         conf = confirm(fit, list(disc.effects), guess=guess, holdout=holdout, level=level, options=options,
-                       timeout=timeout)
+                       timeout=timeout, fitted=disc.fit)
     except RocketidError as exc:
         notes.append(f"the final model could not be confirmed: {exc}")
         return (), (), ()
@@ -458,13 +458,30 @@ def _suggest(ranking) -> str:
         return ("a thrust error in time (rocketid.diagnostics.thrust_profile_effect on the mesh's element boundaries) "
                 "or your own propulsion term (custom_effect)")
     if kind == "environment":
-        return ("a wind profile with a surface value and more basis functions (wind_effect(..., surface=True)) or a "
-                "density profile on more knots (density_effect(...))")
+        return ("a wind piecewise linear in altitude with a surface value on more knots "
+                "(rocketid.diagnostics.wind_profile_effect) or a density deviation piecewise linear in altitude "
+                "(density_profile_effect)")
     if kind == "aero":
-        return "a drag correction piecewise linear in Mach on more knots (Model.table on the Mach role)"
+        return ("a drag correction piecewise linear in Mach on more knots (rocketid.diagnostics.drag_mach_effect, "
+                "or Model.table on the Mach role)")
     if kind == "sensor":
         return "a sensor model of the failing channel (custom_effect redefining that output)"
     return "a term of your own written with custom_effect"
+
+
+def _blind_spots(ranking, exclude=()) -> str:
+    """The candidates the base fit's coefficients absorb so far that, at a realistic size, they would go
+    unseen (score test: expected statistic below ``DETECTABLE``), with what absorbs them; "" when none."""
+    from .score import DETECTABLE
+    out = []
+    for c in (ranking.candidates if ranking is not None else ()):
+        lam = c.realistic_statistic
+        if c.name in exclude or not c.absorbed_by or lam is None or not lam < DETECTABLE:
+            continue
+        who = ", ".join(c.absorbed_by[:3]) + (" ..." if len(c.absorbed_by) > 3 else "")
+        out.append(f"{c.name} (absorbed by {who}; at a realistic size it would raise the score statistic by only "
+                   f"about {lam:.2g})")
+    return "; ".join(out)
 
 
 def _where(fit, level, window) -> str:
@@ -496,6 +513,9 @@ def _final(disc, ranking, level, window) -> FinalModel | None:
     if disc.verdict == "nothing missing":
         text = (f"{fit.spec.name} reaches the noise (chi2/dof {fit.chi2_per_dof:.4g}, band <= {band.upper:.4g}); "
                 "no candidate effect is both significant and needed.")
+        blind = _blind_spots(ranking)
+        if blind:
+            text += (f" These data cannot show whether these are present, as their coefficients take them up: {blind}.")
     elif disc.verdict == "explained":
         r = disc.refit
         base_names = set(disc.base_fit.spec.parameter_names)
@@ -507,12 +527,29 @@ def _final(disc, ranking, level, window) -> FinalModel | None:
         text = f"the model with {names} reaches the noise (chi2/dof {fit.chi2_per_dof:.4g}): {est}."
         if r is not None and r.identifiability:
             text += f" Caution: {r.identifiability}."
-        ties = [n.split(": ", 1)[1] for n in disc.notes if "BIC within" in n and ": " in n and "ambiguous" not in n]
+        if any(e.kind == "mass" or e.name == "thrust_level" or e.name.startswith("thrust_profile") for e in disc.effects):
+            text += (" Note: x, h and v see the thrust and the mass only through their ratio (the acceleration): an "
+                     "error of the vehicle's mass (its start mass or its consumption) would fit much alike, the drag "
+                     "coefficients taking up the rest; a measured thrust or mass tells them apart.")
+        blind = _blind_spots(ranking, exclude=disc.effect_names)
+        if blind:
+            text += f" These data cannot show whether these are present too, as the coefficients take them up: {blind}."
+        further = [n.split("; ", 1)[1] for n in disc.notes if "a further effect may be present" in n]
+        ties = [n.split(": ", 1)[1] for n in disc.notes if "BIC within" in n and ": " in n and "ambiguous" not in n
+                and "a further effect may be present" not in n]
         if ties:
             text += f" Rivals: {ties[-1]}."
+        if further:
+            text += f" {further[-1][0].upper()}{further[-1][1:]}."
     elif disc.verdict == "partly explained":
-        text = (f"the model with {names} still leaves chi2/dof {fit.chi2_per_dof:.4g} (band <= {band.upper:.4g}), "
-                f"located in: {_where(fit, level, window)}.{amb} Try {_suggest(ranking)}.")
+        if disc.fits_to_noise:
+            why = next((n.split(": ", 1)[1] for n in disc.notes
+                        if n.startswith("the final model reaches the noise but is not an explanation")), "")
+            text = (f"the model with {names} reaches the noise (chi2/dof {fit.chi2_per_dof:.4g}, band <= "
+                    f"{band.upper:.4g}) but is not an explanation{': ' + why if why else ''}.{amb}")
+        else:
+            text = (f"the model with {names} does not reach the noise ({disc.noise_detail}); the residual is "
+                    f"located in: {_where(fit, level, window)}.{amb} Try {_suggest(ranking)}.")
     elif disc.ambiguous:
         text = (f"{disc.ambiguous} (chi2/dof {fit.chi2_per_dof:.4g} without them, band <= {band.upper:.4g}); the "
                 f"residual sits in: {_where(fit, level, window)}. Other data (another channel, a measured thrust or "

@@ -56,7 +56,8 @@ from ..model import ROLES, Model, ModelSpec, missing_role_message
 from ..physics.atmosphere import us76_pressure
 from ..physics.gravity import EARTH_RADIUS
 
-__all__ = ["Effect", "Vehicle", "back_pressure_effect", "thrust_profile_effect", "throttle_effect", "CATALOGUE", "KINDS", "custom_effect", "with_effects", "apply_effect", "resolve_effects",
+__all__ = ["Effect", "Vehicle", "back_pressure_effect", "thrust_profile_effect", "throttle_effect", "wind_profile_effect",
+           "density_profile_effect", "drag_mach_effect", "piecewise_linear", "CATALOGUE", "KINDS", "custom_effect", "with_effects", "apply_effect", "resolve_effects",
            "is_present", "check_effect_parameters", "effect_parameter_problems", "wind_effect", "density_effect", "earth_rotation_effect",
            "liftoff_fade", "EARTH_RATE", "LIFTOFF_FADE_TIME"]
 
@@ -169,6 +170,12 @@ class Vehicle:
         Median time between samples, s.
     knot_times : tuple of float
         Element boundaries of the fit's mesh (where time knots of a refined shape may sit).
+    mach_knots : tuple of float
+        Knots of the model's drag table in Mach (``Model.table`` on the Mach role), empty when it has none.
+    aero_altitudes : tuple of float
+        The altitudes by which the aerodynamic action ``integral |qbar| dt`` reaches 0, 1, ..., 100 %
+        of its total, m (empty when unknown): refined wind and density profiles put their knots at
+        equal shares of it, where the data can pin them.
     """
 
     thrust: float
@@ -182,6 +189,8 @@ class Vehicle:
     sigma: Mapping[str, float]
     sample_interval: float
     knot_times: tuple = ()
+    mach_knots: tuple = ()
+    aero_altitudes: tuple = ()
 
 
 # ---------------------------------------------------------------------------
@@ -397,6 +406,27 @@ def _misalignment(m: Model) -> tuple:
     return (delta,)
 
 
+def _misalignment_fade(m: Model) -> tuple:
+    """Misalignment phased in over an estimated time: ``f(t) = t^4 / (t^4 + (t_r e^s)^4)``, ``t_r`` = 3 s."""
+    sym, at = _role_definition(m, "thrust_direction", "misalignment_fade")
+    delta = m.parameter("delta_thrust", 0.0, nominal=math.radians(0.25))
+    s = m.parameter("s_fade", 0.0, bounds=(-3.0, 3.0), nominal=1.0)
+    tt = m.t - m.t0
+    m.redefine(sym, at + delta * tt ** 4 / (tt ** 4 + (LIFTOFF_FADE_TIME * sp.exp(s)) ** 4))
+    return (delta, s)
+
+
+def _refine_misalignment(vehicle: "Vehicle | None") -> list[Effect]:
+    """From rest the misalignment is phased in at lift-off; its fade time is then estimated (a moving
+    start takes the misalignment from t0 and needs no fade)."""
+    if vehicle is not None and math.isfinite(vehicle.start_speed) and vehicle.start_speed > 0:
+        return []
+    return [Effect("misalignment_fade", "thrust misalignment, fade time estimated", "propulsion", _misalignment_fade,
+                   "thrust direction alpha_thrust = alpha + delta_thrust t^4 / (t^4 + (t_r exp(s_fade))^4), "
+                   f"t_r = {LIFTOFF_FADE_TIME:g} s: the time the launcher holds the path vertical, estimated",
+                   {"delta_thrust": math.radians(0.25), "s_fade": 1.0})]
+
+
 _CHANNEL_ROLE = {"x": "downrange", "h": "altitude", "v": "speed"}
 
 
@@ -408,6 +438,29 @@ def _bias(channel: str) -> Callable[[Model], tuple]:
         return (b,)
     apply.__name__ = f"_bias_{channel}"
     return apply
+
+
+def _bias_drift(channel: str) -> Callable[[Model], tuple]:
+    def apply(m: Model) -> tuple:
+        name, expr = _output_of(m, _CHANNEL_ROLE[channel], channel, f"bias_{channel}_drift")
+        b = m.parameter(f"b_{channel}", 0.0, nominal=1.0)
+        d = m.parameter(f"db_{channel}", 0.0, nominal=0.1)
+        m.redefine_output(name, m.output_expression(name) + b + d * (m.t - m.t0))
+        return (b, d)
+    apply.__name__ = f"_bias_{channel}_drift"
+    return apply
+
+
+def _refine_bias(channel: str, unit: str, floor: float, sigmas: float) -> Callable:
+    """A sensor bias that drifts linearly in time: ``z = y + b + db (t - t0)`` (realistic drift: the
+    realistic bias over the flight's duration)."""
+    def refine(vehicle: "Vehicle | None") -> list[Effect]:
+        size = floor if vehicle is None else max(floor, sigmas * float(vehicle.sigma.get(channel, 0.0)))
+        dur = vehicle.duration if vehicle is not None and math.isfinite(vehicle.duration) and vehicle.duration > 0 else 66.0
+        return [Effect(f"bias_{channel}_drift", f"{_CHANNEL_ROLE[channel]} sensor bias drifting in time", "sensor",
+                       _bias_drift(channel), f"z_{channel} = {channel} + b_{channel} + db_{channel} (t - t0), {unit}",
+                       {f"b_{channel}": size, f"db_{channel}": size / dur})]
+    return refine
 
 
 def _scale(channel: str) -> Callable[[Model], tuple]:
@@ -453,6 +506,58 @@ SURFACE_LAYER_M = 500.0
 WIND_SPEED_EPS = 0.1
 
 
+def _air_relative(m: Model, name: str, wind: Callable, air_mach: bool = True, air_alpha: bool = True) -> tuple:
+    """Apply a horizontal wind ``W`` to ``m`` (air-relative velocity, forces, Mach, attack angle; see
+    :func:`wind_effect`). ``wind(m, h, v, theta) -> (W, parameters)`` builds the wind profile."""
+    h = _role_state(m, "altitude", name)
+    v = _role_state(m, "speed", name)
+    th = _role_state(m, "flight_path_angle", name)
+    rho = _role(m, "density", name)
+    qbar, qdef = _role_definition(m, "dynamic_pressure", name)
+    mach, mdef = _role_definition(m, "mach", name)
+    dsym, drag = _role_definition(m, "drag", name)
+    lsym, lift = _role_definition(m, "lift", name)
+    clsym, cl = _role_definition(m, "lift_coefficient", name)
+    for what, expr in (("drag", drag), ("lift", lift)):
+        if sp.diff(expr, qbar, 2) != 0 or expr.xreplace({qbar: 0}) != 0:
+            raise ModelError(f"effect {name!r} needs {what} proportional to the dynamic pressure {qbar}; model "
+                             f"{m.name!r} has {what} = {expr}")
+    alpha = m.role("attack_angle")
+    if air_alpha and alpha is None:
+        raise ModelError(missing_role_message(m.name, "attack_angle", f"effect {name!r} (the lift coefficient at "
+                                              "the air-relative attack angle)"))
+    W, params = wind(m, h, v, th)
+    # air-relative velocity (u, w) = (v cos theta - W, v sin theta); its norm V_a written so that
+    # W = 0 gives V_a = v exactly and derivatives exist at v = 0:
+    # V_a = v + Q / (v + sqrt(v^2 + Q + eps^2)), Q = V_a^2 - v^2 = W (W - 2 v cos theta)
+    Q = W * (W - 2 * v * sp.cos(th))
+    Va = m.define(f"{name}_airspeed", v + Q / (v + sp.sqrt(v ** 2 + Q + WIND_SPEED_EPS ** 2)))
+    along = v - W * sp.cos(th)      # V_a cos(Delta): air-relative velocity along the flight path
+    across = W * sp.sin(th)         # V_a sin(Delta)
+    m.redefine(qbar, qdef.xreplace({v: Va}))
+    if air_mach:
+        m.redefine(mach, mdef.xreplace({v: Va}))
+    if air_alpha:
+        # alpha_air = alpha + (theta - theta_air) = alpha - Delta
+        delta = sp.atan2(across, along)
+        new_cl = cl.xreplace({alpha: alpha - delta})
+        if new_cl == cl and not isinstance(alpha, sp.Symbol):
+            new_cl = cl.subs(alpha, alpha - delta)
+        if new_cl == cl and _expanded(m, alpha).free_symbols & _expanded(m, cl).free_symbols:
+            raise ModelError(f"effect {name!r}: the lift coefficient {cl} of model {m.name!r} does not contain "
+                             f"its attack angle {alpha} (role 'attack_angle') as such, so the air-relative "
+                             "attack angle cannot replace it; write the lift coefficient with that expression, or "
+                             "declare the role as the expression it uses")
+        m.redefine(clsym, new_cl)
+    # forces along the air-relative velocity (drag) and normal to it (lift), projected on the
+    # flight path (drag) and its normal (lift):
+    # per unit (rho/2 V_a) the tangential force is -(cd along + cl across) S, the normal (cl along - cd across) S
+    half = rho * Va / 2
+    m.redefine(dsym, drag.xreplace({qbar: half * along}) + lift.xreplace({qbar: half * across}))
+    m.redefine(lsym, lift.xreplace({qbar: half * along}) - drag.xreplace({qbar: half * across}))
+    return params
+
+
 def wind_effect(centres_km: Sequence[float] = WIND_CENTRES_KM, width_km: float = WIND_WIDTH_KM, *,
                 name: str = "wind", prefix: str = "wind_", realistic_speed: float = 30.0,
                 air_mach: bool = True, air_alpha: bool = True, surface: bool = False) -> Effect:
@@ -489,24 +594,7 @@ def wind_effect(centres_km: Sequence[float] = WIND_CENTRES_KM, width_km: float =
     width = float(width_km) * 1000.0
     names = tuple(f"{prefix}{j + 1}" for j in range(len(centres)))
 
-    def apply(m: Model) -> tuple:
-        h = _role_state(m, "altitude", name)
-        v = _role_state(m, "speed", name)
-        th = _role_state(m, "flight_path_angle", name)
-        rho = _role(m, "density", name)
-        qbar, qdef = _role_definition(m, "dynamic_pressure", name)
-        mach, mdef = _role_definition(m, "mach", name)
-        dsym, drag = _role_definition(m, "drag", name)
-        lsym, lift = _role_definition(m, "lift", name)
-        clsym, cl = _role_definition(m, "lift_coefficient", name)
-        for what, expr in (("drag", drag), ("lift", lift)):
-            if sp.diff(expr, qbar, 2) != 0 or expr.xreplace({qbar: 0}) != 0:
-                raise ModelError(f"effect {name!r} needs {what} proportional to the dynamic pressure {qbar}; model "
-                                 f"{m.name!r} has {what} = {expr}")
-        alpha = m.role("attack_angle")
-        if air_alpha and alpha is None:
-            raise ModelError(missing_role_message(m.name, "attack_angle", f"effect {name!r} (the lift coefficient at "
-                                                  "the air-relative attack angle)"))
+    def build(m: Model, h, v, th) -> tuple:
         ws = tuple(m.parameter(n, 0.0, nominal=realistic_speed) for n in names)
         w0 = m.parameter(f"{prefix}0", 0.0, nominal=realistic_speed / 3) if surface else sp.S.Zero
         profile = sp.tanh(h / SURFACE_LAYER_M) * sum((w * _gauss(h, c, width) for w, c in zip(ws, centres)), sp.S.Zero)
@@ -516,35 +604,10 @@ def wind_effect(centres_km: Sequence[float] = WIND_CENTRES_KM, width_km: float =
         Wv = m.state(f"{name}_speed", 0.0)
         m.ode({Wv: sp.diff(profile, h) * v * sp.sin(th)})
         W = Wv + w0
-        # air-relative velocity (u, w) = (v cos theta - W, v sin theta); its norm V_a written so that
-        # W = 0 gives V_a = v exactly and derivatives exist at v = 0:
-        # V_a = v + Q / (v + sqrt(v^2 + Q + eps^2)), Q = V_a^2 - v^2 = W (W - 2 v cos theta)
-        Q = W * (W - 2 * v * sp.cos(th))
-        Va = m.define(f"{name}_airspeed", v + Q / (v + sp.sqrt(v ** 2 + Q + WIND_SPEED_EPS ** 2)))
-        along = v - W * sp.cos(th)      # V_a cos(Delta): air-relative velocity along the flight path
-        across = W * sp.sin(th)         # V_a sin(Delta)
-        m.redefine(qbar, qdef.xreplace({v: Va}))
-        if air_mach:
-            m.redefine(mach, mdef.xreplace({v: Va}))
-        if air_alpha:
-            # alpha_air = alpha + (theta - theta_air) = alpha - Delta
-            delta = sp.atan2(across, along)
-            new_cl = cl.xreplace({alpha: alpha - delta})
-            if new_cl == cl and not isinstance(alpha, sp.Symbol):
-                new_cl = cl.subs(alpha, alpha - delta)
-            if new_cl == cl and _expanded(m, alpha).free_symbols & _expanded(m, cl).free_symbols:
-                raise ModelError(f"effect {name!r}: the lift coefficient {cl} of model {m.name!r} does not contain "
-                                 f"its attack angle {alpha} (role 'attack_angle') as such, so the air-relative "
-                                 "attack angle cannot replace it; write the lift coefficient with that expression, or "
-                                 "declare the role as the expression it uses")
-            m.redefine(clsym, new_cl)
-        # forces along the air-relative velocity (drag) and normal to it (lift), projected on the
-        # flight path (drag) and its normal (lift):
-        # per unit (rho/2 V_a) the tangential force is -(cd along + cl across) S, the normal (cl along - cd across) S
-        half = rho * Va / 2
-        m.redefine(dsym, drag.xreplace({qbar: half * along}) + lift.xreplace({qbar: half * across}))
-        m.redefine(lsym, lift.xreplace({qbar: half * along}) - drag.xreplace({qbar: half * across}))
-        return ws + ((w0,) if surface else ())
+        return W, ws + ((w0,) if surface else ())
+
+    def apply(m: Model) -> tuple:
+        return _air_relative(m, name, build, air_mach, air_alpha)
 
     desc = (f"horizontal wind W(h) = {'w_0 + ' if surface else ''}tanh(h/{SURFACE_LAYER_M:g} m) sum_j {prefix}j "
             f"exp(-((h - c_j)/{width_km:g} km)^2/2), c_j = {', '.join(f'{c:g}' for c in centres_km)} km (positive "
@@ -556,6 +619,140 @@ def wind_effect(centres_km: Sequence[float] = WIND_CENTRES_KM, width_km: float =
         realistic[f"{prefix}0"] = realistic_speed / 3
     return Effect(name, "horizontal wind profile" + (" with a surface wind" if surface else ""), "environment",
                   apply, desc, realistic)
+
+
+def piecewise_linear(x: sp.Expr, knots: Sequence[float], values: Sequence) -> sp.Expr:
+    """Exact piecewise-linear interpolation of ``values`` at ``knots`` in ``x``, flat beyond the ends.
+
+    Written with ramps ``max(x - k_j, 0)`` (as :meth:`~rocketid.model.Model.table` does): cheap to
+    differentiate, and a value of 0 at a knot pins the function there.
+    """
+    kn = [float(k) for k in knots]
+    if len(kn) < 2 or any(b <= a for a, b in zip(kn, kn[1:])):
+        raise ModelError(f"piecewise-linear knots must be strictly increasing, at least two; got {kn}")
+    vals = [sp.sympify(v) for v in values]
+    slopes = [(vals[j + 1] - vals[j]) / (kn[j + 1] - kn[j]) for j in range(len(kn) - 1)]
+    expr, prev = vals[0], sp.S.Zero
+    for j in range(len(kn) - 1):
+        expr += (slopes[j] - prev) * sp.Max(x - kn[j], 0)
+        prev = slopes[j]
+    return expr - prev * sp.Max(x - kn[-1], 0)
+
+
+def wind_profile_effect(knots_km: Sequence[float], *, name: str | None = None, prefix: str = "W_",
+                        realistic_speed: float = 30.0, surface: bool = True) -> Effect:
+    """A horizontal wind piecewise linear in altitude: ``W(h)`` through ``W_j`` at ``knots_km``.
+
+    Parameters
+    ----------
+    knots_km : sequence of float
+        Knot altitudes, km, increasing; the first is the ground (0), where ``W_0`` is the
+        surface wind. ``W`` is held constant above the last knot.
+    name : str, optional
+        Default ``wind_pl_<number of knots>``.
+    prefix : str
+        Parameter names ``<prefix>0`` (surface) ... ``<prefix>n``.
+    realistic_speed : float
+        Realistic magnitude of each knot value, m/s (a third of it for the surface wind).
+    surface : bool
+        Estimate the surface wind ``W_0``; without it the wind is 0 at the first knot.
+
+    Notes
+    -----
+    The wind acts as :func:`wind_effect`'s does (air-relative velocity, drag along it, lift normal
+    to it, the air-relative attack angle in the lift coefficient, Mach and dynamic pressure from
+    the airspeed). Hat functions do not overlap beyond their neighbours, so the knot values are far
+    better conditioned than overlapping Gaussians of width equal to their spacing, which can reach
+    the noise with alternating +-500 m/s coefficients traded against the lift slope.
+    """
+    knots = tuple(float(k) for k in knots_km)
+    if len(knots) < 2 or any(b <= a for a, b in zip(knots, knots[1:])):
+        raise ModelError(f"wind knots must be increasing altitudes in km, at least two; got {list(knots)}")
+    name = name or f"wind_pl_{len(knots)}"
+    first = 0 if surface else 1
+    names = tuple(f"{prefix}{j}" for j in range(first, len(knots)))
+
+    def build(m: Model, h, v, th) -> tuple:
+        ws = tuple(m.parameter(n, 0.0, nominal=realistic_speed) for n in names)
+        vals = ((ws[0],) if surface else (sp.S.Zero,)) + (ws[1:] if surface else ws)
+        profile = piecewise_linear(h, [1000.0 * k for k in knots], vals)
+        # as wind_effect does: W(h) - W(0) carried as a state, dW/dt = W'(h) dh/dt from 0 at the pad (h = 0),
+        # plus the surface value -- far smaller derivative expressions than W(h) inlined in every force term
+        Wv = m.state(f"{name}_speed", 0.0)
+        m.ode({Wv: sp.diff(profile, h) * v * sp.sin(th)})
+        return Wv + vals[0], ws
+
+    def apply(m: Model) -> tuple:
+        return _air_relative(m, name, build)
+
+    realistic = {n: realistic_speed for n in names}
+    if surface:
+        realistic[names[0]] = realistic_speed / 3
+    desc = (f"horizontal wind W(h) piecewise linear in altitude through {prefix}j at "
+            f"{', '.join(f'{k:g}' for k in knots)} km ({prefix}0 the surface wind{'' if surface else ', fixed at 0'}; "
+            "constant above the last knot), positive downrange; air-relative velocity, drag along it, lift normal "
+            "to it, alpha_air in the lift coefficient, qbar and Mach from the airspeed")
+    return Effect(name, f"wind piecewise linear in altitude ({len(knots)} knots)", "environment", apply, desc, realistic)
+
+
+def density_profile_effect(knots_km: Sequence[float], *, name: str | None = None, prefix: str = "rho_",
+                           realistic: float = 0.05) -> Effect:
+    """A relative density deviation piecewise linear in altitude: ``rho (1 + d(h))``, ``d`` through
+    ``<prefix>j`` at ``knots_km`` (constant beyond the ends)."""
+    knots = tuple(float(k) for k in knots_km)
+    if len(knots) < 2 or any(b <= a for a, b in zip(knots, knots[1:])):
+        raise ModelError(f"density knots must be increasing altitudes in km, at least two; got {list(knots)}")
+    name = name or f"density_pl_{len(knots)}"
+    names = tuple(f"{prefix}{j}" for j in range(len(knots)))
+
+    def apply(m: Model) -> tuple:
+        sym, rho = _role_definition(m, "density", name)
+        h = _role_state(m, "altitude", name)
+        ds = tuple(m.parameter(n, 0.0, nominal=realistic) for n in names)
+        m.redefine(sym, rho * (1 + piecewise_linear(h, [1000.0 * k for k in knots], ds)))
+        return ds
+
+    desc = (f"air density rho(h) (1 + d(h)), d piecewise linear in altitude through {prefix}j at "
+            f"{', '.join(f'{k:g}' for k in knots)} km")
+    return Effect(name, f"density deviation piecewise linear in altitude ({len(knots)} knots)", "environment",
+                  apply, desc, {n: realistic for n in names})
+
+
+def drag_mach_effect(knots: Sequence[float], zeros: Sequence[float] = (), *, name: str | None = None,
+                     prefix: str = "dCD_M", realistic: float = 0.1) -> Effect:
+    """A drag-coefficient correction piecewise linear in Mach: ``cd + c(M)``.
+
+    Parameters
+    ----------
+    knots : sequence of float
+        Mach numbers where the correction has a free value ``<prefix><j>``.
+    zeros : sequence of float
+        Mach numbers where it is pinned at 0 -- the knots of the model's own CD(Mach) table, so that
+        the correction adds shape *between* them (the table on a finer grid) instead of trading
+        with the table's values. Beyond the outermost knot the correction is constant.
+    """
+    free = tuple(sorted(float(k) for k in knots))
+    pins = tuple(sorted(float(z) for z in zeros if all(abs(z - k) > 1e-9 for k in free)))
+    if not free:
+        raise ModelError("a drag correction in Mach needs at least one free knot")
+    name = name or f"drag_mach_{len(free)}"
+    names = tuple(f"{prefix}{j}" for j in range(len(free)))
+    allk = sorted([(k, j) for j, k in enumerate(free)] + [(z, None) for z in pins])
+
+    def apply(m: Model) -> tuple:
+        sym, cd = _role_definition(m, "drag_coefficient", name)
+        mach = _role(m, "mach", name)
+        ps = tuple(m.parameter(n, 0.0, nominal=realistic) for n in names)
+        ks = [k for k, _ in allk]
+        vals = [sp.S.Zero if j is None else ps[j] for _, j in allk]
+        m.redefine(sym, cd + piecewise_linear(mach, ks, vals))
+        return ps
+
+    desc = (f"drag coefficient cd + c(M), c piecewise linear in Mach with free values {prefix}j at "
+            f"{', '.join(f'{k:g}' for k in free)}" + (f" and 0 at {', '.join(f'{z:g}' for z in pins)} (the model's "
+                                                       "table knots)" if pins else ""))
+    return Effect(name, f"drag correction in Mach ({len(free)} knots)", "aero", apply, desc,
+                  {n: realistic for n in names})
 
 
 DENSITY_CENTRES_KM = (0.0, 6.0, 12.0, 18.0)
@@ -695,22 +892,69 @@ def _spread(lo: float, hi: float, n: int) -> list[float]:
     return [lo + (hi - lo) * (j + 0.5) / n for j in range(n)]
 
 
+WIND_KNOT_INTERVALS = (4, 8, 12)
+"""Refined wind and density profiles: knot counts tried (intervals holding equal shares of the
+aerodynamic action, :func:`_profile_knots_km`), fewest first; the stepwise search keeps the count BIC
+prefers."""
+
+DENSITY_KNOT_INTERVALS = (3, 6, 9)
+
+
+def _profile_knots_km(vehicle: "Vehicle | None", n: int) -> list[float]:
+    """``n + 1`` knot altitudes, km, from the ground: at equal shares of the aerodynamic action along the
+    flight (:attr:`Vehicle.aero_altitudes`) -- a knot where the air barely acts on the vehicle cannot be
+    pinned by the data (measured on Stage-30, flying to 31 km: with knots of equal height the top one went
+    to -196 m/s) -- or of equal height up to the highest altitude flown when that is unknown."""
+    lev = list(vehicle.aero_altitudes) if vehicle is not None else []
+    if len(lev) == 101 and lev[-1] > 0:
+        raw = [0.0] + [lev[round(100 * k / n)] for k in range(1, n + 1)]
+    else:
+        top = vehicle.altitude[1] if vehicle is not None and math.isfinite(vehicle.altitude[1]) else 30000.0
+        raw = list(np.linspace(0.0, max(top, 2000.0), n + 1))
+    knots = [0.0]
+    for z in raw[1:]:
+        if z - knots[-1] >= 100.0:
+            knots.append(float(z))
+    return [k / 1000.0 for k in knots]
+
+
 def _refine_wind(vehicle: "Vehicle | None") -> list[Effect]:
-    top = (vehicle.altitude[1] if vehicle is not None else 30000.0) / 1000.0
     out = []
-    for n in (4, 6, 8):
-        centres = _spread(0.0, max(top, 4.0), n)
-        width = max(top, 4.0) / n
-        out.append(wind_effect(centres, width, name=f"wind_surface_{n}", prefix="wind_", surface=True))
+    for n in WIND_KNOT_INTERVALS:
+        k = _profile_knots_km(vehicle, n)
+        if len(k) >= 2 and all(len(k) > len(e.realistic) for e in out):
+            out.append(wind_profile_effect(k, name=f"wind_pl_{len(k)}"))
     return out
 
 
 def _refine_density(vehicle: "Vehicle | None") -> list[Effect]:
-    top = (vehicle.altitude[1] if vehicle is not None else 30000.0) / 1000.0
     out = []
-    for n in (6, 8):
-        centres = [0.0] + _spread(0.0, max(top, 4.0), n - 1)
-        out.append(density_effect(centres, max(top, 4.0) / (n - 1), name=f"density_{n}", prefix="drho_"))
+    for n in DENSITY_KNOT_INTERVALS:
+        k = _profile_knots_km(vehicle, n)
+        if len(k) >= 2 and all(len(k) > len(e.realistic) for e in out):
+            out.append(density_profile_effect(k, name=f"density_pl_{len(k)}"))
+    return out
+
+
+def _refine_drag(vehicle: "Vehicle | None") -> list[Effect]:
+    """CD(M) on a finer grid: the model's Mach table with its intervals halved, then quartered (a
+    correction pinned at 0 on the table's own knots); without a table, interior knots spread over
+    the Mach range flown, pinned at 0 at its ends."""
+    if vehicle is None or vehicle.mach is None:
+        return []
+    lo, hi = (float(x) for x in vehicle.mach)
+    table = sorted(float(k) for k in vehicle.mach_knots)
+    if len(table) >= 2:
+        segs = [(a, b) for a, b in zip(table, table[1:]) if b > lo and a < hi]
+        zeros = table
+    else:
+        segs, zeros = [(lo + (hi - lo) * j / 4, lo + (hi - lo) * (j + 1) / 4) for j in range(4)], [lo, hi]
+    out = []
+    for level in (1, 2):
+        parts = 2 ** level
+        free = sorted({a + (b - a) * i / parts for a, b in segs for i in range(1, parts)})
+        if free:
+            out.append(drag_mach_effect(free, zeros, name=f"drag_mach_{len(free)}"))
     return out
 
 
@@ -742,19 +986,21 @@ def _build_catalogue() -> dict[str, Effect]:
                "mass m(t0) - (m(t0) - m(t)) (1 + eps_mdot): the mass flow scaled by 1 + eps_mdot",
                {"eps_mdot": 0.02}),
         Effect("transonic_drag", "transonic drag rise", "aero", _transonic_drag,
-               f"cd + dCD_transonic exp(-((M - {TRANSONIC_MACH:g})/{TRANSONIC_WIDTH:g})^2/2)", {"dCD_transonic": 0.2}),
+               f"cd + dCD_transonic exp(-((M - {TRANSONIC_MACH:g})/{TRANSONIC_WIDTH:g})^2/2)", {"dCD_transonic": 0.2},
+               refine=_refine_drag),
         replace(wind_effect(), refine=_refine_wind),
         earth_rotation_effect(),
         Effect("misalignment", "thrust misalignment", "propulsion", _misalignment,
                "thrust direction alpha_thrust = alpha + delta_thrust, rad, from t0 when the vehicle starts moving "
-               "(start speed > 0), else phased in by the lift-off fade f_lo(t)", {"delta_thrust": math.radians(0.25)}),
+               "(start speed > 0), else phased in by the lift-off fade f_lo(t)", {"delta_thrust": math.radians(0.25)},
+               refine=_refine_misalignment),
         replace(density_effect(), refine=_refine_density),
         Effect("bias_x", "downrange sensor bias", "sensor", _bias("x"), "z_x = x + b_x, m", {"b_x": 5.0},
-               relative=rel_bias("x", 5.0, 5.0)),
+               relative=rel_bias("x", 5.0, 5.0), refine=_refine_bias("x", "m", 5.0, 5.0)),
         Effect("bias_h", "altitude sensor bias", "sensor", _bias("h"), "z_h = h + b_h, m", {"b_h": 5.0},
-               relative=rel_bias("h", 5.0, 5.0)),
+               relative=rel_bias("h", 5.0, 5.0), refine=_refine_bias("h", "m", 5.0, 5.0)),
         Effect("bias_v", "speed sensor bias", "sensor", _bias("v"), "z_v = v + b_v, m/s", {"b_v": 0.5},
-               relative=rel_bias("v", 0.5, 0.5)),
+               relative=rel_bias("v", 0.5, 0.5), refine=_refine_bias("v", "m/s", 0.5, 0.5)),
         Effect("scale_v", "speed scale factor", "sensor", _scale("v"), "z_v = (1 + k_v) v", {"k_v": 1e-3}),
         Effect("time_offset", "time-tag offset", "sensor", _time_offset,
                "every output z(t) = y(t - tau) ~ y - tau dy/dt, tau in s", {"tau": 0.01},

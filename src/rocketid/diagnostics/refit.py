@@ -289,7 +289,7 @@ def holdout_window(spec, holdout) -> tuple[float, float] | None:
 def confirm(fit: EstimationResult, effect: Effect | str | Sequence[Effect | str], *,
             holdout: tuple[float, float] | str | None = "auto", guess: Mapping | None = None,
             level: float = 0.05, lags: int | None = None, options: Mapping[str, Any] | None = None,
-            timeout: float | None = None) -> Confirmation:
+            timeout: float | None = None, fitted: EstimationResult | None = None) -> Confirmation:
     """Add ``effect`` to ``fit``'s model, refit from nominal values and compare (module notes).
 
     Parameters
@@ -313,6 +313,10 @@ def confirm(fit: EstimationResult, effect: Effect | str | Sequence[Effect | str]
     timeout : float, optional
         Seconds each solve and each hold-out prediction may take; one that exceeds
         it is given up, and a note says so (default :data:`REFIT_TIMEOUT`).
+    fitted : EstimationResult, optional
+        A converged fit of the model with ``effect`` to the same data on the same mesh, made
+        already (the stepwise search's final fit): taken as the refit instead of solving the
+        same problem again from its estimate.
 
     Returns
     -------
@@ -335,7 +339,10 @@ def confirm(fit: EstimationResult, effect: Effect | str | Sequence[Effect | str]
     spec = with_effects(base_spec, effects)
     data = fit.prepared.measurements
     mesh = fit.prepared.transcription.mesh
-    new = estimate(spec, data, guess=guess, mesh=mesh, options=options)
+    if fitted is not None and _same_problem(fitted, spec, data, mesh):
+        new = fitted
+    else:
+        new = estimate(spec, data, guess=guess, mesh=mesh, options=options)
     t1 = time.perf_counter()
     notes: list[str] = []
     if not new.success:
@@ -452,6 +459,16 @@ def confirm(fit: EstimationResult, effect: Effect | str | Sequence[Effect | str]
         level=float(level), lags=int(lags or DEFAULT_LAGS), notes=tuple(notes),
         timings={"refit_s": t1 - t0, "checks_s": t2 - t1, "holdout_s": t3 - t2, "total_s": t3 - t0},
         holdout_fits=hold_fits, effect_covariance=cov, acceptance=acceptance)
+
+
+def _same_problem(fitted: EstimationResult, spec, data: Measurements, mesh) -> bool:
+    """``fitted`` is a converged fit of ``spec``'s model to ``data`` on ``mesh``."""
+    m = fitted.prepared.transcription.mesh
+    return bool(fitted.success and fitted.spec.fingerprint() == spec.fingerprint()
+                and tuple(fitted.spec.parameter_names) == tuple(spec.parameter_names)
+                and np.array_equal(fitted.spec.lower, spec.lower) and np.array_equal(fitted.spec.upper, spec.upper)
+                and fitted.prepared.measurements is data and m.K == mesh.K
+                and np.array_equal(m.boundaries, mesh.boundaries))
 
 
 def _acceptance(fit: EstimationResult, new: EstimationResult, effects: Sequence[Effect], base_spec, D: float,
@@ -596,7 +613,9 @@ class Refit:
         for n, v0 in self.base_values.items():
             if n in self.parameter_names and n not in self.effect_parameters:
                 v = self.estimate(n)[0]
-                rel = abs(v - v0) / max(abs(v0), 1e-12)
+                # relative to the start value; a coefficient that started at (or near) 0 -- held at a bound --
+                # counts as a change of at most 200 %, not 2e10 %
+                rel = abs(v - v0) / max(abs(v0), 0.5 * abs(v), 1e-12)
                 if rel > worst[1]:
                     worst = (n, rel)
         return worst
@@ -622,51 +641,93 @@ class Refit:
                 "identifiability": self.identifiability, "seconds": float(self.seconds), "notes": list(self.notes)}
 
 
+INFLATION = 3.0
+"""A base coefficient whose standard error the added effect multiplies by more than this trades off
+against the effect ...""" 
+
+LOOSE = 0.05
+"""... when that standard error is also more than this share of the coefficient's value: the data then
+no longer pin the coefficient (a lift slope known to 0.1 % before and 2 % after is still pinned)."""
+
+
 def identifiability(names: Sequence[str], cov: np.ndarray, effect_parameters: Sequence[str],
-                    sizes: Mapping[str, float]) -> str:
+                    sizes: Mapping[str, float], values: Sequence[float] | None = None) -> str:
     """What of an added effect the data do not pin down, in the estimability analysis' terms.
 
-    The covariance of the effect's parameters, in units of their realistic sizes, is split
-    into eigen-directions: a direction whose standard error exceeds one realistic size is
-    not identifiable from these data (it trades off against the coefficients it correlates
-    with); the best-determined direction is the combination that is. Returns "" when every
-    direction is identifiable.
+    Two views of the same covariance:
+
+    * the covariance of the effect's parameters, in units of their realistic sizes, split into
+      eigen-directions: a direction whose standard error exceeds one realistic size is not
+      identifiable from these data (it trades off against the coefficients it correlates with);
+      the best-determined direction is the combination that is;
+    * each base coefficient's standard error against its standard error with the effect's
+      parameters held (the conditional covariance ``C_bb - C_be C_ee^-1 C_eb``): a coefficient
+      whose error the effect inflates by more than :data:`INFLATION` times, to more than
+      :data:`LOOSE` of its value (``values``; without them any inflation counts), trades off
+      against the effect (a wind profile against the lift slope), even when each knot alone looks
+      determined.
+
+    Returns "" when every direction is identifiable and no coefficient is inflated.
     """
-    idx = [names.index(n) for n in effect_parameters]
+    idx = [names.index(n) for n in effect_parameters if n in names]
+    if not idx or not np.all(np.isfinite(cov[np.ix_(idx, idx)])):
+        return ""
+    parts = []
     scale = np.array([sizes.get(n) or 0.0 for n in effect_parameters])
-    if not idx or not np.all(scale > 0) or not np.all(np.isfinite(cov[np.ix_(idx, idx)])):
-        return ""
-    C = cov[np.ix_(idx, idx)] / np.outer(scale, scale)
-    w, V = np.linalg.eigh(C)
-    sd = np.sqrt(np.clip(w, 0.0, None))
-    if sd[-1] <= 1.0:
-        return ""
     d = np.sqrt(np.clip(np.diag(cov), 1e-300, None))
-    corr = cov / np.outer(d, d)
     others = [i for i in range(len(names)) if i not in idx]
-    worst = V[:, -1]
-    trade = ""
+    if np.all(scale > 0):
+        C = cov[np.ix_(idx, idx)] / np.outer(scale, scale)
+        w, V = np.linalg.eigh(C)
+        sd = np.sqrt(np.clip(w, 0.0, None))
+        if sd[-1] > 1.0:
+            worst = V[:, -1]
+            trade = ""
+            if others:
+                # correlation of the poorly determined combination with each coefficient
+                u = worst / scale
+                cu = cov[np.ix_(idx, others)].T @ u
+                su = math.sqrt(max(float(u @ cov[np.ix_(idx, idx)] @ u), 1e-300))
+                r = cu / (su * d[others])
+                j = int(np.argmax(np.abs(r)))
+                trade = f", trading off against {names[others[j]]} (correlation {r[j]:+.2f})"
+
+            def combo(v):
+                v = v / np.max(np.abs(v))
+                return " ".join(f"{c:+.2f} {n}/{s:g}" for c, n, s in zip(v, effect_parameters, scale) if abs(c) >= 0.05)
+
+            bad = int(np.sum(sd > 1.0))
+            if len(idx) == 1:
+                parts.append(f"{effect_parameters[0]} is not identifiable from these data: its standard error is "
+                             f"{sd[0]:.2g} realistic sizes{trade}")
+            else:
+                parts.append(f"{bad} of {len(idx)} directions of {', '.join(effect_parameters)} are not identifiable "
+                             f"from these data (standard error up to {sd[-1]:.2g} realistic sizes, along "
+                             f"{combo(worst)}{trade}); the identifiable combination is {combo(V[:, 0])} (standard "
+                             f"error {sd[0]:.2g} realistic sizes)")
     if others:
-        # correlation of the poorly determined combination with each coefficient
-        u = worst / scale
-        cu = cov[np.ix_(idx, others)].T @ u
-        su = math.sqrt(max(float(u @ cov[np.ix_(idx, idx)] @ u), 1e-300))
-        r = cu / (su * d[others])
-        j = int(np.argmax(np.abs(r)))
-        trade = f", trading off against {names[others[j]]} (correlation {r[j]:+.2f})"
-
-    def combo(v):
-        v = v / np.max(np.abs(v))
-        return " ".join(f"{c:+.2f} {n}/{s:g}" for c, n, s in zip(v, effect_parameters, scale) if abs(c) >= 0.05)
-
-    bad = int(np.sum(sd > 1.0))
-    good = sd[0]
-    if len(idx) == 1:
-        return (f"{effect_parameters[0]} is not identifiable from these data: its standard error is {sd[0]:.2g} "
-                f"realistic sizes{trade}")
-    return (f"{bad} of {len(idx)} directions of {', '.join(effect_parameters)} are not identifiable from these data "
-            f"(standard error up to {sd[-1]:.2g} realistic sizes, along {combo(worst)}{trade}); the identifiable "
-            f"combination is {combo(V[:, 0])} (standard error {good:.2g} realistic sizes)")
+        Cee = cov[np.ix_(idx, idx)]
+        Ceb = cov[np.ix_(idx, others)]
+        try:
+            cond = np.diag(cov)[others] - np.einsum("ij,ij->j", Ceb, np.linalg.solve(Cee, Ceb))
+        except np.linalg.LinAlgError:
+            cond = np.full(len(others), np.nan)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            infl = np.sqrt(np.diag(cov)[others] / np.clip(cond, 1e-300, None))
+        loose = [values is None or d[i] > LOOSE * abs(float(values[i])) for i in others]
+        hit = [(float(infl[k]), names[others[k]]) for k in range(len(others))
+               if np.isfinite(infl[k]) and infl[k] > INFLATION and loose[k]]
+        if hit:
+            hit.sort(reverse=True)
+            what = ", ".join(f"{n} {f:.1f}x" + ("" if values is None else
+                                                  f" to {100 * d[names.index(n)] / max(abs(float(values[names.index(n)])), 1e-300):.2g} %")
+                             for f, n in hit[:3])
+            who = (", ".join(effect_parameters) if len(effect_parameters) <= 3 else
+                   f"{effect_parameters[0]} .. {effect_parameters[-1]}")
+            parts.append(f"{who} {'trades' if len(effect_parameters) == 1 else 'trade'} off against {', '.join(n for _, n in hit[:3])}: adding it multiplies their standard "
+                         f"errors ({what}): the effect and {'that coefficient' if len(hit) == 1 else 'those coefficients'} "
+                         "are not separately identifiable from these data, only their combined action is")
+    return "; ".join(parts)
 
 
 def summarize_refit(new: EstimationResult, base_objective: float, base_n_estimated: int, effects: Sequence[Effect],
@@ -691,7 +752,8 @@ def summarize_refit(new: EstimationResult, base_objective: float, base_n_estimat
     try:
         unc = uncertainty(new)
         std = np.asarray(unc.standard_errors, float)
-        ident = identifiability(list(names), np.asarray(unc.parameter_covariance), eff_params, sizes)
+        ident = identifiability(list(names), np.asarray(unc.parameter_covariance), eff_params, sizes,
+                                values=np.asarray(new.p, float))
         try:
             pl = check_plausibility(new, uncertainty=unc, level=level, realistic=dict(sizes))
             base_flags = [f for f in pl.flagged(severity="fail") if not set(f.parameters) & set(declared)]
@@ -788,9 +850,10 @@ class RefitTask:
     base_chi2_per_dof: float = float("nan")
 
 
-def refit_spec(task: RefitTask, start: Mapping | None = None):
-    """The model of a task, with its starting values (within bounds)."""
-    spec = with_effects(task.base_spec, list(task.effects))
+def refit_spec(task: RefitTask, start: Mapping | None = None, *, model=None):
+    """The model of a task, with its starting values (within bounds); ``model``: the task's model
+    already built (``refit_spec(task, {})``), to set other starting values on."""
+    spec = with_effects(task.base_spec, list(task.effects)) if model is None else model
     guess = {}
     for n, v in (task.start if start is None else start).items():
         if n in spec.parameter_names:
@@ -804,13 +867,16 @@ def run_refit(task: RefitTask) -> tuple[Refit, EstimationResult | None]:
     t0 = time.perf_counter()
     notes = []
     try:
-        spec = refit_spec(task)
+        model = refit_spec(task, {})
+        spec = refit_spec(task, model=model)
         opts = {"max_wall_time": float(task.timeout)}
         opts.update(task.options or {})
         new = estimate(spec, task.data, mesh=task.mesh, options=opts)
         if not (new.success and new.chi2_per_dof <= task.band_upper):
-            # warm start from a fit the missing effect distorted: also from the model's own guesses
-            cold = estimate(refit_spec(task, {}), task.data, mesh=task.mesh, options=opts)
+            # warm start from a fit the missing effect distorted: also from the model's own guesses (the
+            # same model and NLP: only the start differs)
+            cold = estimate(model, task.data, mesh=task.mesh, options=opts,
+                            prepared=replace(new.prepared, spec=model))
             if cold.success and (not new.success or cold.objective < new.objective):
                 notes.append(f"refitted from the model's guesses (chi2/dof {cold.chi2_per_dof:.4g}; from the current "
                              f"estimate {new.chi2_per_dof:.4g})")
@@ -834,6 +900,11 @@ def _failed(task: RefitTask, message: str, seconds: float, gave_up: bool = False
                  objective=float("nan"), n_data=0, n_estimated=0, chi2_per_dof=float("nan"),
                  base_objective=task.base_objective, base_n_estimated=task.base_n_estimated, whiteness={},
                  sizes=dict(task.sizes), seconds=seconds, notes=(message,))
+
+
+def _weight(task: RefitTask) -> int:
+    """The expected cost of a refit, for the order the workers take them in: its added parameters."""
+    return sum(max(1, len(e.parameter_names)) for e in task.effects if e.name in set(task.added))
 
 
 _TASKS: list = []   # read by forked workers (the tasks are not pickled: effects may be closures)
@@ -878,7 +949,9 @@ def refit_all(tasks: Sequence[RefitTask], *, workers: int | None = None) -> tupl
     _TASKS = tasks
     ctx = mp.get_context("fork")
     results: list = [None] * len(tasks)
-    pending = list(range(len(tasks)))
+    # the refits with the most added parameters first (they take longest: a wind profile), so that no
+    # worker is left with a long one at the end while the other idles; the results keep the tasks' order
+    pending = sorted(range(len(tasks)), key=lambda i: -_weight(tasks[i]))
     running: dict = {}
     try:
         while pending or running:

@@ -179,16 +179,31 @@ def _compact(names) -> str:
 
 
 class _Figures:
-    """Collects figures: embeds each as a data URI and writes it to ``figures/``."""
+    """Collects figures: embeds each as a data URI and writes it to ``figures/``.
 
-    def __init__(self, folder: Path | None):
+    A figure is given as a function that makes it (or as the figure); :meth:`add` returns a
+    placeholder, and :meth:`render` makes and renders them all -- half of them in a forked
+    worker process when there is more than one core (matplotlib's text layout and PNG encoding
+    are most of a report's time) -- and puts each figure's HTML in place of its placeholder.
+    """
+
+    def __init__(self, folder: Path | None, workers: int | None = None):
         self.folder = folder
         self.files: list[Path] = []
+        self.workers = workers
+        self._jobs: list = []
 
     def add(self, name: str, fig, caption: str) -> str:
         if fig is None:
             return ""
-        return self.add_png(name, figure_png(fig), caption)
+        return self.defer(lambda: _png_of(fig), lambda png: self.add_png(name, png, caption))
+
+    def defer(self, make, html_of, error=None) -> str:
+        """A placeholder for ``html_of(make())`` (``make`` returns PNG bytes or None); ``error(exc)``
+        is the HTML when ``make`` raises (None: the exception propagates from :meth:`render`)."""
+        token = f"\x00figure-{len(self._jobs)}\x00"
+        self._jobs.append((token, make, html_of, error))
+        return token
 
     def add_png(self, name: str, png: bytes, caption: str) -> str:
         if self.folder is not None:
@@ -196,6 +211,92 @@ class _Figures:
             self.files.append(path)
         return (f'<figure><img alt="{_e(caption)}" src="{data_uri(png)}">'
                 f"<figcaption>{_e(caption)}</figcaption></figure>")
+
+    def render(self, page: str) -> str:
+        """``page`` with every placeholder replaced by its figure's HTML."""
+        results = _make_all([make for _, make, _, _ in self._jobs], self.workers)
+        for (token, make, html_of, error), (ok, value) in zip(self._jobs, results):
+            if ok:
+                text = "" if value is None else html_of(value)
+            elif error is not None:
+                text = error(value)
+            else:
+                raise value
+            page = page.replace(token, text)
+        self._jobs = []
+        return page
+
+
+def _png_of(fig) -> bytes | None:
+    """PNG bytes of a figure, or of the figure a function makes (None: no figure)."""
+    if not hasattr(fig, "savefig") and callable(fig):
+        fig = fig()
+    return None if fig is None else figure_png(fig)
+
+
+def _attempt(make) -> tuple:
+    try:
+        return True, make()
+    except Exception as exc:  # noqa: BLE001 - handed to the job's error handler (or re-raised)
+        return False, exc
+
+
+def _make_child(makes, indices, conn, parent_pid) -> None:   # pragma: no cover - runs in a worker process
+    from ..sampling.executors import die_with_parent
+    die_with_parent(parent_pid)
+    out = []
+    try:
+        for i in indices:
+            ok, value = _attempt(makes[i])
+            if ok:
+                out.append((i, value))
+        conn.send(out)
+    finally:
+        conn.close()
+
+
+def _make_all(makes: Sequence, workers: int | None = None) -> list:
+    """``[(ok, value)]`` of each job, every other one made in a forked worker process when there are
+    two cores (a job the worker could not make is made here, so its exception is genuine)."""
+    import multiprocessing as mp
+    import os
+
+    n = len(makes)
+    workers = min(2, os.cpu_count() or 1) if workers is None else int(workers)
+    results: list = [None] * n
+    proc = recv = None
+    mine = list(range(n))
+    if workers > 1 and n > 1 and "fork" in mp.get_all_start_methods():
+        ctx = mp.get_context("fork")
+        recv, send = ctx.Pipe(duplex=False)
+        theirs = list(range(1, n, 2))
+        proc = ctx.Process(target=_make_child, args=(makes, theirs, send, os.getpid()), daemon=True)
+        try:
+            proc.start()
+            mine = list(range(0, n, 2))
+        except OSError:
+            proc = None
+        send.close()
+    try:
+        for i in mine:
+            results[i] = _attempt(makes[i])
+        if proc is not None:
+            try:
+                for i, value in recv.recv():
+                    results[i] = (True, value)
+            except (EOFError, OSError):
+                pass
+            proc.join(10.0)
+    finally:
+        if proc is not None:
+            if proc.is_alive():
+                proc.terminate()
+                proc.join(5.0)
+            recv.close()
+    for i in range(n):
+        if results[i] is None:
+            results[i] = _attempt(makes[i])
+    return results
 
 
 # ---------------------------------------------------------------------------
@@ -226,9 +327,9 @@ def _compare_section(comp, figs: _Figures, name: str = "compare", heading: str =
                         left=0),
              f"<p class=\"info\">eta computed by {_e(comp.criterion_source)}. eta tests skewness and kurtosis, "
              "not whiteness: the Ljung-Box test (20 lags) is the whiteness test.</p>",
-             figs.add(name, comp.plot(), "Per channel: measured and model against time (left); normalized residual "
+             figs.add(name, comp.plot, "Per channel: measured and model against time (left); normalized residual "
                                           "with the +-2 sigma band and a 1 s running mean (right)."),
-             figs.add(f"{name}_acf", comp.plot_autocorrelation(),
+             figs.add(f"{name}_acf", comp.plot_autocorrelation,
                       "Autocorrelation of the normalized residuals against the lag, with the +-2/sqrt(n) band of white noise.")]
     if comp.notes:
         parts.append('<ul class="notes">' + "".join(f"<li>{_e(n)}</li>" for n in comp.notes) + "</ul>")
@@ -269,7 +370,7 @@ def _locate_section(loc, figs: _Figures) -> str:
     parts += ["<h3>Cumulative sums</h3>",
               html_table(["channel", "change point t (s)", "max |bridge|", "p (white noise)",
                           "leaves the +-3 band at t (s)"], cus),
-              figs.add("locate", loc.plot(), "Window bias z (flagged windows marked), scatter ratio, cumulative sums "
+              figs.add("locate", loc.plot, "Window bias z (flagged windows marked), scatter ratio, cumulative sums "
                                              "with the +-2 sqrt(k/n) band of white noise, and the flight conditions; "
                                              "flight phases shaded.")]
     if loc.notes:
@@ -303,7 +404,7 @@ def _plausibility_section(pl, figs: _Figures) -> str:
                                 [[k, f"{t:.1f}", f"{m:.2f}", f"{v:.4f}", _num(s, ".2g"), f"{c:.4f}", f"{z:+.2f}"]
                                  for k, t, m, v, s, c, z in zip(mc.knots, mc.times, mc.mach, mc.values,
                                                                 mc.standard_errors, mc.smooth, mc.standardized)]))
-    parts.append(figs.add("plausibility", pl.plot(),
+    parts.append(figs.add("plausibility", pl.plot,
                           "Time-knot drag against the Mach number at the knot times, with the best smooth drag curve "
                           "and +-2 sqrt(se^2 + tau^2) bars (left), and against time (right); flagged knots in red."
                           if pl.mach_checks else "Estimates between their bounds with 2-sigma bars; flagged in red."))
@@ -372,7 +473,7 @@ def _candidates_section(report, figs: _Figures) -> str:
                                  "</li>" for k, v in multi) + "</ul>")
         except Exception:  # noqa: BLE001 - an unexpected shape is shown as text
             parts.append(f"<pre>{_e(groups)}</pre>")
-    parts.append(figs.add("candidates", _ranking_plot(r), "Score statistic of each candidate; red: significant after the correction."))
+    parts.append(figs.add("candidates", lambda: _ranking_plot(r), "Score statistic of each candidate; red: significant after the correction."))
     try:
         parts.append(f"<details><summary>ranking summary</summary><pre>{_e(r.summary())}</pre></details>")
     except Exception:  # noqa: BLE001
@@ -471,20 +572,24 @@ def _history_section(report, figs: _Figures) -> str:
         parts.append(f"<p class=\"warn\">history table unavailable: {_e(exc)}</p>")
     if figs.folder is not None:
         path = figs.folder / "history.png"
-        try:
+
+        def make():
             res = h.plot_residuals(path)
             if res is not None and hasattr(res, "savefig"):
                 if not path.is_file():
                     save_figure(res, path, dpi=100)
                 import matplotlib.pyplot as plt
                 plt.close(res)
-            if path.is_file():
-                parts.append(f'<figure><img alt="history residuals" src="{data_uri(path.read_bytes())}">'
-                             "<figcaption>Residuals of the base model and after each step of the stepwise search: "
-                             "samples and 1 s moving average.</figcaption></figure>")
-                figs.files.append(path)
-        except Exception as exc:  # noqa: BLE001 - a report must not fail on one plot
-            parts.append(f"<p class=\"warn\">history plot unavailable: {_e(exc)}</p>")
+            return path.read_bytes() if path.is_file() else None
+
+        def html_of(png):
+            figs.files.append(path)
+            return (f'<figure><img alt="history residuals" src="{data_uri(png)}">'
+                    "<figcaption>Residuals of the base model and after each step of the stepwise search: "
+                    "samples and 1 s moving average.</figcaption></figure>")
+
+        # a report must not fail on one plot
+        parts.append(figs.defer(make, html_of, lambda exc: f"<p class=\"warn\">history plot unavailable: {_e(exc)}</p>"))
     return "\n".join(parts)
 
 
@@ -514,7 +619,7 @@ def render_html(report, figures_folder: Path | None = None) -> tuple[str, list[P
         fit_summary=_e(str(fit.summary())),
         footer=_e(f"Made by rocketid {_version()} on {_dt.datetime.now().strftime('%Y-%m-%d %H:%M')}; "
                   f"timings: {tm}. Self-contained: no network needed."))
-    return page, figs.files
+    return figs.render(page), figs.files
 
 
 def _version() -> str:

@@ -106,6 +106,7 @@ def vehicle_of(fit: EstimationResult) -> Vehicle:
 
     thrust, mass, speed = along("thrust"), along("mass"), along("speed")
     alt, mach = along("altitude"), along("mach")
+    qbar = along("dynamic_pressure")
     nan = math.nan
     span = float(t[-1] - t[0]) if t.size > 1 else nan
     flow = abs(float(mass[0] - mass[-1])) / span if mass is not None and span > 0 else nan
@@ -120,7 +121,32 @@ def vehicle_of(fit: EstimationResult) -> Vehicle:
         altitude=(float(np.min(alt)), float(np.max(alt))) if alt is not None else (0.0, 30000.0),
         mach=(float(np.min(mach)), float(np.max(mach))) if mach is not None and np.all(np.isfinite(mach)) else None,
         sigma=sig, sample_interval=dt,
-        knot_times=tuple(float(b) for b in fit.prepared.transcription.mesh.boundaries))
+        knot_times=tuple(float(b) for b in fit.prepared.transcription.mesh.boundaries),
+        mach_knots=_mach_knots(spec), aero_altitudes=_aero_altitudes(np.asarray(t, float), alt, qbar))
+
+
+def _aero_altitudes(t, alt, qbar) -> tuple:
+    """Altitudes by which the aerodynamic action ``integral |qbar| dt`` reaches 0, 1, ..., 100 % of its
+    total along the flight (empty without the altitude and dynamic-pressure roles)."""
+    if alt is None or qbar is None or len(t) < 2 or not np.all(np.isfinite(qbar)) or not np.all(np.isfinite(alt)):
+        return ()
+    q = np.abs(np.asarray(qbar, float))
+    cum = np.concatenate([[0.0], np.cumsum(0.5 * (q[1:] + q[:-1]) * np.diff(t))])
+    if cum[-1] <= 0:
+        return ()
+    cum = cum / cum[-1]
+    keep = np.concatenate([[True], np.diff(cum) > 0])
+    return tuple(float(x) for x in np.interp(np.linspace(0.0, 1.0, 101), cum[keep], np.maximum.accumulate(alt)[keep]))
+
+
+def _mach_knots(spec) -> tuple:
+    """Knots of the model's drag-coefficient table in Mach (empty when it has none)."""
+    cd = spec.role("drag_coefficient")
+    used = spec.expand(cd).free_symbols if cd is not None else set()
+    for tab in getattr(spec, "tables", ()):
+        if tab.variable_role == "mach" and set(tab.parameters) & used:
+            return tuple(float(k) for k in tab.knots)
+    return ()
 
 
 def _finite_sizes(effect: Effect, vehicle: Vehicle | None) -> dict:

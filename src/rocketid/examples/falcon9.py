@@ -50,7 +50,7 @@ from ..physics.ascent import AscentStates, ascent_dynamics, flight_conditions
 from ..physics.atmosphere import us76_pressure
 from ..physics.gravity import G0
 
-__all__ = ["FLIGHTS", "falcon9_data_path", "falcon9_events", "falcon9_measurements", "falcon9_model",
+__all__ = ["FLIGHTS", "falcon9_data_path", "falcon9_events", "falcon9_measurements", "falcon9_model", "reading_noise",
            "LIFTOFF_MASS", "THRUST_VAC", "THRUST_SL", "ISP_VAC", "AREA", "MACH_KNOTS", "QUANTIZATION"]
 
 #: The flights shipped: label -> file stem.
@@ -155,3 +155,31 @@ def falcon9_model(data: Measurements | None = None, *, t0: float = 20.0, tf: flo
         for j in range(len(MACH_KNOTS)):
             m.prior(f"CD_{j}", 0.4, 0.1, source="generic wind-tunnel drag")
     return m.freeze()
+
+
+def reading_noise(data: Measurements, window: float = 2.0) -> dict:
+    """An estimate of each channel's reading noise from the data alone (no model).
+
+    A cubic is fitted to the samples of each ``window``-second piece; the standard deviation of
+    the scatter about the cubics is the noise. It includes the quantization and the screen's
+    refresh jitter, and is what a model that follows the flight can reach.
+
+    Returns
+    -------
+    dict
+        ``{channel: sigma}``.
+    """
+    out = {}
+    for ch in data.channels:
+        t, y = ch.times, ch.values
+        res = []
+        for a in np.arange(t[0], t[-1], window):
+            k = (t >= a) & (t < a + window)
+            if k.sum() > 8:
+                c = np.polyfit(t[k] - a, y[k], 3)
+                res.append(y[k] - np.polyval(c, t[k] - a))
+        if not res:
+            raise DataError(f"channel {ch.name!r}: too few samples per {window:g} s to estimate the noise")
+        r = np.concatenate(res)
+        out[ch.name] = float(np.sqrt(np.sum(r ** 2) / max(1, r.size - 4 * len(res))))
+    return out
