@@ -240,8 +240,12 @@ def test_mesh_not_spanning_the_horizon(ra66_spec, ra66_noisy):
 
 
 def test_model_output_missing_from_the_data(ra66_spec, ra66_noisy):
-    data = ra66_noisy.subset(["x", "h"])
-    _raises(DataError, lambda: ri.prepare(ra66_spec, data), "output 'v'", "x, h")
+    """Issue 11: an output the data lack is predicted, not fitted (it was an error); data with
+    none of the model's outputs are still refused, naming both sides."""
+    prepared = ri.prepare(ra66_spec, ra66_noisy.subset(["x", "h"]))
+    assert prepared.nlp.channel_names == ("x", "h")
+    other = ri.Measurements.from_arrays(ra66_noisy["x"].times, {"alt": ra66_noisy["h"].values})
+    _raises(DataError, lambda: ri.prepare(ra66_spec, other), "none of model 'RA-66''s outputs (x, h, v)", "alt")
 
 
 def test_data_outside_the_horizon():
