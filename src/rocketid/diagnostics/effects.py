@@ -922,6 +922,11 @@ def _refine_wind(vehicle: "Vehicle | None") -> list[Effect]:
     out = []
     for n in WIND_KNOT_INTERVALS:
         k = _profile_knots_km(vehicle, n)
+        # a knot at the top of the surface layer (500 m), where a wind grows from its ground value (measured:
+        # RA-66M, launched from rest into a wind grown over 300 m, took a spurious misalignment to follow the
+        # lift-off when the first knot above the ground was at 2.3 km)
+        if len(k) > 1 and k[1] > 2 * SURFACE_LAYER_M / 1000.0:
+            k = [0.0, SURFACE_LAYER_M / 1000.0] + k[1:]
         if len(k) >= 2 and all(len(k) > len(e.realistic) for e in out):
             out.append(wind_profile_effect(k, name=f"wind_pl_{len(k)}"))
     return out
