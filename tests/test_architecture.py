@@ -33,6 +33,7 @@ LAYERS: list[tuple[str, ...]] = [
     ("collocation",),
     ("cases",),
     ("examples",),       # shipped real data and the models that go with them
+    ("start",),          # starting points from the data, flight windows, sanity checks
     ("nlp",),
     ("solve",),
     ("sensitivity",),

@@ -58,10 +58,28 @@ def test_csv_round_trip_is_the_baseline(tmp_path, ra66_noisy):
     assert ri.read_csv(_csv(tmp_path, "t,x,h,v\n" + GOOD_ROWS))["v"].values[-1] == 4.0
 
 
-@pytest.mark.parametrize("cell", ["nan", "NaN", "", "inf"])
+@pytest.mark.parametrize("cell", ["nan", "NaN", "inf"])
 def test_csv_with_nan(tmp_path, cell):
     path = _csv(tmp_path, f"t,x,h,v\n0.1,1,2,3\n0.2,1,{cell},3\n0.3,1,2,3\n")
     _raises(DataError, lambda: ri.read_csv(path), "'h'", "t = 0.2")
+
+
+def test_csv_empty_cell_is_not_measured(tmp_path):
+    """An empty cell means "not measured at that time" (multi-rate telemetry): the channel
+    has one sample fewer; an explicit NaN stays an error (above)."""
+    data = ri.read_csv(_csv(tmp_path, "t,x,h,v\n0.1,1,2,3\n0.2,1,,3\n0.3,1,2,3\n"))
+    np.testing.assert_array_equal(data["h"].times, [0.1, 0.3])
+    np.testing.assert_array_equal(data["x"].times, [0.1, 0.2, 0.3])
+
+
+def test_csv_empty_time_cell(tmp_path):
+    path = _csv(tmp_path, "t,x,h,v\n0.1,1,2,3\n,1,2,3\n")
+    _raises(DataError, lambda: ri.read_csv(path), "line 3", "time cell ('t') is empty")
+
+
+def test_csv_column_without_values(tmp_path):
+    path = _csv(tmp_path, "t,x,h,v\n0.1,1,,3\n0.2,1,,3\n")
+    _raises(DataError, lambda: ri.read_csv(path), "column(s) h have no values")
 
 
 def test_csv_with_nan_time(tmp_path):
@@ -222,8 +240,12 @@ def test_mesh_not_spanning_the_horizon(ra66_spec, ra66_noisy):
 
 
 def test_model_output_missing_from_the_data(ra66_spec, ra66_noisy):
-    data = ra66_noisy.subset(["x", "h"])
-    _raises(DataError, lambda: ri.prepare(ra66_spec, data), "output 'v'", "x, h")
+    """Issue 11: an output the data lack is predicted, not fitted (it was an error); data with
+    none of the model's outputs are still refused, naming both sides."""
+    prepared = ri.prepare(ra66_spec, ra66_noisy.subset(["x", "h"]))
+    assert prepared.nlp.channel_names == ("x", "h")
+    other = ri.Measurements.from_arrays(ra66_noisy["x"].times, {"alt": ra66_noisy["h"].values})
+    _raises(DataError, lambda: ri.prepare(ra66_spec, other), "none of model 'RA-66''s outputs (x, h, v)", "alt")
 
 
 def test_data_outside_the_horizon():

@@ -69,7 +69,7 @@ from .model import ModelSpec, check_guess
 __all__ = [
     "main", "simulate_command", "estimate_command",
     "ModelSource", "BUILTIN_MODELS", "load_model", "model_option", "data_options", "fit_inputs", "verbose_option",
-    "NameValue", "assignments", "parameter_values", "ipopt_options", "read_data", "make_mesh", "write_json",
+    "NameValue", "SigmaValue", "sigma_argument", "given_sigmas", "flight_window", "windowed_inputs", "assignments", "parameter_values", "ipopt_options", "read_data", "make_mesh", "write_json",
     "status", "progress", "LAZY_COMMANDS",
 ]
 
@@ -116,6 +116,70 @@ class NameValue(click.ParamType):
         if isinstance(converted, float) and not math.isfinite(converted):
             self.fail(f"in {text!r}, the value must be finite", param, ctx)
         return name, converted
+
+
+class SigmaValue(click.ParamType):
+    """A ``--sigma`` value: ``NAME=VALUE`` (a number), ``NAME=estimate``, or ``estimate``
+    (every channel), parsed to ``(name, value)`` with name ``"*"`` for every channel."""
+
+    name = "NAME=VALUE|NAME=estimate|estimate"
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, tuple):
+            return value
+        text = str(value).strip()
+        if text.lower() == "estimate":
+            return "*", "estimate"
+        name, sep, raw = text.partition("=")
+        name, raw = name.strip(), raw.strip()
+        if not sep or not name or not raw:
+            self.fail(f"{text!r} is not NAME=VALUE, NAME=estimate or estimate (for example h=2.5)", param, ctx)
+        if raw.lower() == "estimate":
+            return name, "estimate"
+        if raw.lower().startswith("quantized"):
+            return name, raw.lower()
+        try:
+            v = float(raw)
+        except ValueError:
+            self.fail(f"in {text!r}, {raw!r} is not a number or 'estimate'", param, ctx)
+        if not math.isfinite(v):
+            self.fail(f"in {text!r}, the value must be finite", param, ctx)
+        return name, v
+
+
+def sigma_argument(pairs: Iterable[tuple[str, Any]], spec: ModelSpec, option: str = "--sigma"):
+    """The ``sigma=`` argument of :func:`rocketid.estimate` from ``--sigma`` values:
+    None, ``"estimate"`` (every channel) or ``{output: value or "estimate"}``.
+
+    Raises
+    ------
+    SettingsError
+        A name given twice, an output the model does not have, or ``estimate`` for every
+        channel together with a value for one.
+    """
+    raw = assignments(pairs, option)
+    if "*" in raw:
+        if len(raw) > 1:
+            others = ", ".join(k for k in raw if k != "*")
+            raise SettingsError(f"{option} estimate (every channel) cannot be combined with {option} for {others}; "
+                                f"name the channels to estimate instead ({option} NAME=estimate)")
+        return "estimate"
+    outputs = spec.output_names
+    for name, value in raw.items():
+        if name not in outputs:
+            raise SettingsError(f"{option} {name}={value:g}: {name!r} is not one of {', '.join(outputs)} (model "
+                                f"{spec.name!r} has no output {name!r})" if not isinstance(value, str) else
+                                f"{option} {name}={value}: {name!r} is not one of {', '.join(outputs)} (model "
+                                f"{spec.name!r} has no output {name!r})")
+    return raw or None
+
+
+def given_sigmas(sigma) -> dict[str, float]:
+    """The numeric values of a ``sigma=`` argument (the ones not to be estimated nor taken from
+    a quantization step)."""
+    if not isinstance(sigma, Mapping):
+        return {}
+    return {k: v for k, v in sigma.items() if not isinstance(v, str)}
 
 
 def assignments(pairs: Iterable[tuple[str, Any]], option: str, allowed: Sequence[str] | None = None) -> dict[str, Any]:
@@ -175,16 +239,29 @@ def ipopt_options(pairs: Iterable[tuple[str, str]]) -> dict[str, Any]:
 
 
 def read_data(path: str | os.PathLike, spec: ModelSpec, *, time_column: str = "t",
-              columns: Mapping[str, str] | None = None, sigma: Mapping[str, float] | None = None) -> Measurements:
+              columns: Mapping[str, str] | None = None, sigma: Mapping[str, float] | None = None,
+              unmeasured: Sequence[str] = (), window: tuple[float, float] | None = None) -> Measurements:
     """Read a CSV with one column per model output (see :func:`rocketid.data.read_csv`);
-    ``columns`` and ``sigma`` are keyed by output name, checked against the model."""
+    ``columns`` and ``sigma`` are keyed by output name, checked against the model.
+
+    An output without a column is left out (predicted, not fitted) when it is named in
+    ``unmeasured`` or when the file has no column that goes unread; an empty cell means
+    "not measured then". ``window`` keeps the samples in ``[t0, t1]``.
+    """
     outputs = spec.output_names
-    for option, mapping in (("--column", columns), ("--sigma", sigma)):
-        for name in mapping or {}:
+    for option, names in (("--column", columns), ("--sigma", sigma), ("--unmeasured", unmeasured)):
+        for name in names or {}:
             if name not in outputs:
                 raise SettingsError(f"{option} {name}: model {spec.name!r} has no output {name!r}; "
                                     f"its outputs are {', '.join(outputs)}")
-    return read_csv(path, outputs, time_column=time_column, column_map=columns, sigma=sigma)
+    wanted = [o for o in outputs if o not in set(unmeasured)]
+    if not wanted:
+        raise SettingsError(f"--unmeasured names every output of model {spec.name!r}: nothing is left to fit")
+    data = read_csv(path, wanted, time_column=time_column, column_map=columns,
+                    sigma={k: v for k, v in (sigma or {}).items() if k in wanted}, missing="auto")
+    if window is not None:
+        data = data.window(*window)
+    return data
 
 
 def make_mesh(spec: ModelSpec, n_elements: int | None = None, K: int = 4):
@@ -251,15 +328,61 @@ def verbose_option(f):
                         help="Show progress and full tracebacks.")(f)
 
 
+def sigma_option_decl():
+    """The ``--sigma`` option: a value, ``NAME=estimate`` or ``estimate``."""
+    return click.option("--sigma", "sigmas", multiple=True, type=SigmaValue(), metavar="NAME=VALUE|NAME=estimate|estimate",
+                        help="Noise standard deviation of an output (repeatable; default: the model's); "
+                             "NAME=estimate estimates it with the parameters, 'estimate' every output's; "
+                             "NAME=quantized (or quantized:STEP) sets it to the rounding error STEP/sqrt(12).")
+
+
+def window_option_decl(name: str = "--window"):
+    """The flight-window option ``--window T0:T1``."""
+    return click.option(name, "window_text", default=None, metavar="T0:T1",
+                        help="Fit only the flight window T0:T1 (s; '20:' to the end). A window that starts in "
+                             "flight estimates the initial states the data determine (guesses from the data).")
+
+
+def unmeasured_option_decl():
+    """``--unmeasured NAME``: a model output the data do not measure (predicted, not fitted)."""
+    return click.option("--unmeasured", "unmeasured", multiple=True, metavar="NAME",
+                        help="A model output the data do not measure: predicted, not fitted (repeatable). An "
+                             "output without a column is taken as unmeasured anyway when every column of the "
+                             "file is read.")
+
+
+def flight_window(text: str | None, option: str = "--window"):
+    """``--window`` text -> ``(T0, T1)`` (NaN for an open end) or None."""
+    from .start import parse_window
+
+    if text is None:
+        return None
+    return parse_window(text, option)
+
+
+def windowed_inputs(spec: ModelSpec, data: Measurements, guess, window, n_elements, K):
+    """Cut the model and the data to ``window`` (:func:`rocketid.start.apply_window`):
+    ``(spec, data, guess, mesh, notes)``, the guess extended by the initial states' guesses."""
+    from .start import apply_window, window_guess
+
+    if window is None:
+        return spec, data, guess, make_mesh(spec, n_elements, K), []
+    spec_w, data_w, notes = apply_window(spec, data, window, guess)
+    guess_w = window_guess(spec, spec_w, guess)
+    return spec_w, data_w, guess_w, make_mesh(spec_w, n_elements, K), notes
+
+
 def data_options(f):
-    """``--column``, ``--time-column``, ``--sigma`` (reading DATA.csv) and ``--elements``,
-    ``--K`` (the mesh): the options of every command that fits a model to a data file."""
+    """``--column``, ``--time-column``, ``--sigma``, ``--unmeasured``, ``--window`` (reading
+    DATA.csv) and ``--elements``, ``--K`` (the mesh): the options of every command that fits a
+    model to a data file."""
     for opt in reversed([
         click.option("--column", "columns", multiple=True, type=NameValue(str, "CSV column name"),
                      metavar="NAME=CSVCOL", help="Read output NAME from column CSVCOL (repeatable)."),
         click.option("--time-column", default="t", show_default=True, help="Name of the time column."),
-        click.option("--sigma", "sigmas", multiple=True, type=NameValue(float), metavar="NAME=VALUE",
-                     help="Noise standard deviation of an output (repeatable; default: the model's)."),
+        sigma_option_decl(),
+        unmeasured_option_decl(),
+        window_option_decl(),
         click.option("--elements", "n_elements", type=click.IntRange(min=1), default=None, metavar="N",
                      help="About N finite elements (default: elements of about 1 s)."),
         click.option("--K", "K", type=click.IntRange(1, MAX_DEGREE), default=4, show_default=True, metavar="K",
@@ -312,14 +435,22 @@ def prepare_verbosely(spec: ModelSpec, data: Measurements, mesh):
     return prepared
 
 
-def fit_inputs(spec: ModelSpec, data_file, *, guesses, columns, time_column, sigmas, n_elements, K):
+def fit_inputs(spec: ModelSpec, data_file, *, guesses, columns, time_column, sigmas, n_elements, K,
+               unmeasured=()):
     """``(guess, mesh, data)`` from the options of a command that fits ``spec`` to DATA.csv
-    (``--guess`` checked against the bounds, :func:`data_options`)."""
+    (``--guess`` checked against the bounds, :func:`data_options`; the window is applied by
+    :func:`windowed_inputs`)."""
     guess = parameter_values(spec, assignments(guesses, "--guess"), "--guess")
     check_guess(spec, guess, where="--guess", error=SettingsError)
     mesh = make_mesh(spec, n_elements, K)
+    sigma = sigma_argument(sigmas, spec)
     data = read_data(data_file, spec, time_column=time_column, columns=assignments(columns, "--column"),
-                     sigma=assignments(sigmas, "--sigma"))
+                     sigma=given_sigmas(sigma), unmeasured=tuple(unmeasured))
+    if isinstance(sigma, Mapping):
+        from .data import resolve_quantized
+        quantized = {k: v for k, v in sigma.items() if isinstance(v, str) and v.startswith("quantized")}
+        if quantized:
+            data = data.with_sigma(resolve_quantized(quantized, data))
     return guess, mesh, data
 
 
@@ -490,18 +621,20 @@ def flight_labels(paths: Sequence[str]) -> list[str]:
     return [s if stems.count(s) == 1 else f"{s}_{i + 1}" for i, s in enumerate(stems)]
 
 
-def read_flights(paths: Sequence[str], spec: ModelSpec, *, columns, time_column, sigmas, n_elements, K):
-    """:class:`rocketid.joint.Flight` values for several data files fitted with one model."""
+def read_flights(paths: Sequence[str], spec: ModelSpec, *, columns, time_column, sigmas, n_elements, K,
+                 unmeasured=(), window=None):
+    """:class:`rocketid.joint.Flight` values for several data files fitted with one model
+    (each cut to ``window`` with its own initial states, :func:`windowed_inputs`)."""
     from .joint import Flight
     from .solve import check_determined
 
-    mesh = make_mesh(spec, n_elements, K)
     flights = []
     for label, path in zip(flight_labels(paths), paths):
         data = read_data(path, spec, time_column=time_column, columns=assignments(columns, "--column"),
-                         sigma=assignments(sigmas, "--sigma"))
-        check_determined(spec, data)
-        flights.append(Flight(label, spec, data, mesh))
+                         sigma=given_sigmas(sigma_argument(sigmas, spec)), unmeasured=tuple(unmeasured))
+        spec_f, data, _, mesh, _ = windowed_inputs(spec, data, spec.guess, window, n_elements, K)
+        check_determined(spec_f, data)
+        flights.append(Flight(label, spec_f, data, mesh))
     return flights
 
 
@@ -519,7 +652,8 @@ def read_flights(paths: Sequence[str], spec: ModelSpec, *, columns, time_column,
 @click.option("--out", "out", type=click.Path(dir_okay=False), default=None, metavar="FIT.json",
               help="Write the result as JSON.")
 @verbose_option
-def estimate_command(data_files, model, columns, time_column, sigmas, n_elements, K, guesses, per_flight, ipopt, out):
+def estimate_command(data_files, model, columns, time_column, sigmas, unmeasured, window_text, n_elements, K, guesses,
+                     per_flight, ipopt, out):
     """Estimate the model's parameters from measurements in DATA.csv.
 
     Prints the summary; with --out writes FIT.json (success, parameters,
@@ -530,19 +664,26 @@ def estimate_command(data_files, model, columns, time_column, sigmas, n_elements
     parameters are shared except those named by --per-flight (and free initial
     states), which FIT.json names NAME[flight], the flight being the file's name.
     """
+    from dataclasses import replace
+
     from .solve import check_determined, estimate
 
     options = ipopt_options(ipopt)
+    window = flight_window(window_text)
     if out is not None:
         output.check_file(out, "--out")
     src = load_model(model)
     spec = src.spec
+    sigma = sigma_argument(sigmas, spec)
     if len(data_files) > 1:
         from .joint import joint_estimate
 
+        if given_sigmas(sigma) != (sigma or {}):
+            raise SettingsError("--sigma estimate is not available yet for several flights fitted jointly: give the "
+                                "sigmas as numbers (an estimate from a fit of each flight alone, for example)")
         guess = assignments(guesses, "--guess")
         flights = read_flights(data_files, spec, columns=columns, time_column=time_column, sigmas=sigmas,
-                               n_elements=n_elements, K=K)
+                               n_elements=n_elements, K=K, unmeasured=unmeasured, window=window)
         status(f"fitting {len(flights)} flights jointly")
         result = joint_estimate(flights, per_flight=per_flight, guess=guess, options=options)
         click.echo(result.summary().text())
@@ -555,18 +696,40 @@ def estimate_command(data_files, model, columns, time_column, sigmas, n_elements
         raise SettingsError("--per-flight needs several data files (one per flight)")
     data_file = data_files[0]
     guess, mesh, data = fit_inputs(spec, data_file, guesses=guesses, columns=columns, time_column=time_column,
-                                   sigmas=sigmas, n_elements=n_elements, K=K)
+                                   sigmas=sigmas, n_elements=n_elements, K=K, unmeasured=unmeasured)
     status(f"read {data.n_samples} values of {', '.join(data.names)} from {data_file}")
+    spec, data, guess, mesh, wnotes = windowed_inputs(spec, data, guess, window, n_elements, K)
     check_determined(spec, data)
     prepared = prepare_verbosely(spec, data, mesh)
     status("solving with IPOPT")
-    result = estimate(spec, data, guess=guess, prepared=prepared, options=options)
+    result = estimate(spec, data, guess=guess, prepared=prepared, options=options, sigma=sigma)
+    if wnotes:
+        result = replace(result, notes=tuple(wnotes) + result.notes)
     click.echo(result.summary().text())
+    payload = result.to_dict()
+    if result.success:
+        payload["std_err"] = _print_standard_errors(result)
     if out is not None:
-        path = write_json(out, result.to_dict())
+        path = write_json(out, payload)
         status(f"wrote {path}")
-    if not result.success:
+    if not result.success or result.sanity:
         click.get_current_context().exit(EXIT_NOT_CONVERGED)
+
+
+def _print_standard_errors(result) -> dict:
+    """Print the estimates' standard errors and 95 % intervals (from the reduced Hessian at the
+    estimate, with the sigmas of the fit); ``{name: std err}`` for FIT.json, empty when they
+    cannot be formed (the reason is printed)."""
+    from .estimability import uncertainty
+
+    try:
+        unc = uncertainty(result)
+    except RocketidError as exc:
+        click.echo(f"\nStandard errors: not available ({_one_line(exc)})")
+        return {}
+    click.echo("")
+    click.echo(unc.summary().text())
+    return {str(n): output.finite_or_none(float(s)) for n, s in zip(unc.parameter_names, unc.standard_errors)}
 
 
 if __name__ == "__main__":  # pragma: no cover

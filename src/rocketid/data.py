@@ -22,7 +22,15 @@ import numpy as np
 from .errors import DataError
 from .output import write_csv
 
-__all__ = ["Channel", "Measurements", "read_csv", "MAX_VALUE", "SIGMA_RANGE"]
+__all__ = ["Channel", "Measurements", "read_csv", "read_channels", "sigma_request", "quantization_step",
+           "resolve_quantized", "QUANTIZED", "ESTIMATE", "MAX_VALUE", "SIGMA_RANGE"]
+
+#: The word that asks for a channel's noise level to be estimated (``sigma="estimate"``,
+#: ``sigma={"h": "estimate"}``, ``--sigma estimate``, ``--sigma h=estimate``).
+ESTIMATE = "estimate"
+#: The word that asks for a channel's sigma from its quantization step, ``q / sqrt(12)``
+#: (``"quantized"``: the step found in the data; ``"quantized:0.2778"``: the step given).
+QUANTIZED = "quantized"
 
 #: Largest magnitude of a measured value: squares of larger values overflow a double.
 MAX_VALUE = 1e150
@@ -145,6 +153,22 @@ class Measurements:
         """Total number of measured values over all channels."""
         return sum(c.times.size for c in self.channels)
 
+    def with_sigma(self, sigma: Mapping[str, float]) -> "Measurements":
+        """A copy whose named channels have the noise standard deviations ``sigma``.
+
+        Raises
+        ------
+        DataError
+            A name that is not a channel, or a sigma that is not positive and finite.
+        """
+        sigma = dict(sigma)
+        unknown = [k for k in sigma if k not in self.names]
+        if unknown:
+            raise DataError(f"sigma is given for {', '.join(map(repr, unknown))}, which is not a channel; "
+                            f"the channels are {', '.join(self.names)}")
+        return Measurements(tuple(Channel(c.name, c.times, c.values, sigma[c.name]) if c.name in sigma else c
+                                  for c in self.channels))
+
     def subset(self, names: Sequence[str]) -> "Measurements":
         """Only the named channels (in that order)."""
         return Measurements(tuple(self[n] for n in names))
@@ -160,18 +184,127 @@ class Measurements:
         return Measurements(tuple(out))
 
     def to_csv(self, path: str | os.PathLike) -> Path:
-        """Write a CSV with columns ``t`` and one per channel (channels must share times)."""
-        t0 = self.channels[0].times
-        for c in self.channels[1:]:
-            if c.times.shape != t0.shape or np.any(c.times != t0):
-                raise DataError("to_csv needs channels with common sample times; write channels separately")
-        cols = [t0] + [c.values for c in self.channels]
-        return write_csv(path, ["t", *self.names], ([repr(float(v)) for v in row] for row in zip(*cols)))
+        """Write a CSV with columns ``t`` and one per channel; a channel not measured at a row's
+        time has an empty cell there (channels sampled at other times, drop-outs)."""
+        t = np.unique(np.concatenate([c.times for c in self.channels]))
+        cols = [[repr(float(v)) for v in t]]
+        for c in self.channels:
+            cell = [""] * t.size
+            for i, v in zip(np.searchsorted(t, c.times), c.values):
+                cell[i] = repr(float(v))
+            cols.append(cell)
+        return write_csv(path, ["t", *self.names], zip(*cols))
+
+
+def sigma_request(sigma, channels: Sequence[str], where: str = "sigma") -> tuple[dict[str, float], tuple[str, ...]]:
+    """Split a noise-level request into given values and channels to estimate.
+
+    Parameters
+    ----------
+    sigma : None, "estimate", or mapping
+        None: nothing requested (the data's or the model's sigma). ``"estimate"``: every
+        channel's sigma is estimated. A mapping ``{channel: value or "estimate"}``.
+    channels : sequence of str
+        The channels that may be named.
+    where : str
+        How the request is called in messages (``"sigma"``, ``"--sigma"``).
+
+    Returns
+    -------
+    given : dict
+        ``{channel: sigma}`` given as numbers.
+    estimated : tuple of str
+        Channels whose sigma is estimated, in the order of ``channels``.
+
+    Raises
+    ------
+    DataError
+        An unknown channel, or a value that is neither a positive number nor "estimate".
+    """
+    channels = tuple(channels)
+    if sigma is None:
+        return {}, ()
+    if isinstance(sigma, str):
+        if sigma.strip().lower() != ESTIMATE:
+            raise DataError(f"{where} = {sigma!r}: give 'estimate' or a mapping {{channel: value or 'estimate'}}")
+        return {}, channels
+    if not isinstance(sigma, Mapping):
+        raise DataError(f"{where} must be 'estimate' or a mapping {{channel: value or 'estimate'}}, "
+                        f"got {type(sigma).__name__} {sigma!r}")
+    given, estimated = {}, []
+    for name, value in sigma.items():
+        if name not in channels:
+            raise DataError(f"{where} {name}: there is no channel {name!r}; the channels are {', '.join(channels)}")
+        if isinstance(value, str) and value.strip().lower() == ESTIMATE:
+            estimated.append(name)
+            continue
+        try:
+            v = float(value)
+        except (TypeError, ValueError):
+            raise DataError(f"{where} {name}={value!r}: give a positive number or 'estimate'") from None
+        if not (v > 0 and math.isfinite(v)):
+            raise DataError(f"{where} {name}={value!r}: sigma must be positive and finite (or 'estimate')")
+        given[name] = v
+    return given, tuple(c for c in channels if c in estimated)
+
+
+def quantization_step(values: Sequence[float], *, rtol: float = 1e-6) -> float | None:
+    """The step of a quantized channel: the smallest gap between its distinct values, when every
+    value lies on that lattice (within ``rtol`` of the step); None otherwise."""
+    u = np.unique(np.asarray(values, float))
+    if u.size < 3:
+        return None
+    d = np.diff(u)
+    q = float(np.min(d))
+    if not q > 0:
+        return None
+    k = (u - u[0]) / q
+    if np.max(np.abs(k - np.round(k))) > max(rtol * max(1.0, float(np.max(k))), 1e-3):
+        return None
+    return q
+
+
+def resolve_quantized(sigma, data: "Measurements"):
+    """Replace ``"quantized"`` and ``"quantized:STEP"`` entries of a ``sigma=`` mapping by the
+    standard deviation of rounding to the step, ``STEP / sqrt(12)`` (the step found in the data
+    when it is not given).
+
+    Raises
+    ------
+    DataError
+        A channel whose values are not on a common step, or a step that is not a positive number.
+    """
+    if not isinstance(sigma, Mapping):
+        return sigma
+    out = dict(sigma)
+    for name, value in sigma.items():
+        if not (isinstance(value, str) and value.strip().lower().startswith(QUANTIZED)):
+            continue
+        text = value.strip().lower()
+        if text == QUANTIZED:
+            if name not in data.names:
+                raise DataError(f"sigma {name}={value}: there is no channel {name!r}; the channels are "
+                                f"{', '.join(data.names)}")
+            q = quantization_step(data[name].values)
+            if q is None:
+                raise DataError(f"sigma {name}=quantized: the values of channel {name!r} are not on a common step "
+                                f"(not quantized, or too few distinct values); give the step: {name}=quantized:STEP")
+        else:
+            head, _, step = text.partition(":")
+            try:
+                q = float(step)
+                if head != QUANTIZED or not (q > 0 and math.isfinite(q)):
+                    raise ValueError
+            except ValueError:
+                raise DataError(f"sigma {name}={value!r}: write quantized or quantized:STEP with a positive step "
+                                "(for example quantized:0.2778)") from None
+        out[name] = q / math.sqrt(12.0)
+    return out
 
 
 def read_csv(path: str | os.PathLike, channels: Sequence[str] = ("x", "h", "v"), *,
              time_column: str = "t", column_map: Mapping[str, str] | None = None,
-             sigma: Mapping[str, float] | None = None) -> Measurements:
+             sigma: Mapping[str, float] | None = None, missing: str = "error") -> Measurements:
     """Read measurements from a CSV file with a header row.
 
     Parameters
@@ -185,10 +318,16 @@ def read_csv(path: str | os.PathLike, channels: Sequence[str] = ("x", "h", "v"),
         ``{output name: CSV column}`` where the file's names differ.
     sigma : mapping, optional
         Noise standard deviation per channel (default: the model's).
+    missing : {"error", "skip", "auto"}
+        A channel without a column: an error; left out (an output the data do not measure,
+        predicted but not fitted); or left out only when the file has no column that goes
+        unread (otherwise the missing one is probably misnamed: an error).
 
     Returns
     -------
     Measurements
+        An empty cell means "not measured at that time": each channel has its own sample
+        times (multi-rate telemetry, drop-outs).
 
     Raises
     ------
@@ -218,38 +357,101 @@ def read_csv(path: str | os.PathLike, channels: Sequence[str] = ("x", "h", "v"),
         if any(cell.strip() for cell in r):
             rows.append(r)
             lines.append(reader.line_num)
+    if missing not in ("error", "skip", "auto"):
+        raise DataError(f"missing must be 'error', 'skip' or 'auto', got {missing!r}")
     wanted = {time_column: time_column, **{c: column_map.get(c, c) for c in channels}}
-    missing = [col for col in wanted.values() if col not in header]
-    if missing:
+    absent = [col for col in wanted.values() if col not in header]
+    unread = [h for h in header if h and h not in wanted.values()]
+    skip = time_column not in absent and len(absent) < len(channels) and (
+        missing == "skip" or (missing == "auto" and not unread))
+    if absent and skip:
+        channels = [c for c in channels if wanted[c] in header]
+        wanted = {time_column: time_column, **{c: column_map.get(c, c) for c in channels}}
+    elif absent:
         hint = ""
         if delimiter == "," and len(header) == 1:
             hint = " (the header has no commas: is the file separated by commas?)"
-        raise DataError(f"{path}: missing column(s) {', '.join(missing)}; the file has {', '.join(header)}{hint}. "
-                        "Rename the columns or map them (CLI: --column NAME=COLUMN, API: column_map=)")
+        unmeasured = ""
+        if missing == "auto" and time_column not in absent and len(absent) < len(channels):
+            names = [c for c in channels if wanted[c] in absent]
+            unmeasured = (f"; if {', '.join(names)} {'is' if len(names) == 1 else 'are'} not measured, say so "
+                          f"(CLI: --unmeasured {names[0]})")
+        raise DataError(f"{path}: missing column(s) {', '.join(absent)}; the file has {', '.join(header)}{hint}. "
+                        f"Rename the columns or map them (CLI: --column NAME=COLUMN, API: column_map=){unmeasured}")
     twice = sorted({col for col in wanted.values() if header.count(col) > 1})
     if twice:
         raise DataError(f"{path}: column(s) {', '.join(twice)} appear more than once in the header; rename or "
                         "remove the extra column so that it is clear which one to read")
     idx = {key: header.index(col) for key, col in wanted.items()}
     data = {key: np.empty(len(rows)) for key in idx}
+    empty = {key: np.zeros(len(rows), bool) for key in idx}
     for i, (r, line) in enumerate(zip(rows, lines)):
         if len(r) < len(header) and max(idx.values()) >= len(r):
             raise DataError(f"{path}, line {line}: {len(r)} cells, but the header has {len(header)} columns; "
                             "complete the row or remove it")
         for key, j in idx.items():
-            cell = r[j].strip()
+            cell = r[j].strip() if j < len(r) else ""
+            if not cell:
+                if key == time_column:
+                    raise DataError(f"{path}, line {line}: the time cell ({time_column!r}) is empty; every row needs "
+                                    "its time (an empty channel cell means 'not measured then')")
+                empty[key][i] = True
+                data[key][i] = math.nan
+                continue
             try:
-                data[key][i] = float(cell) if cell else math.nan
+                data[key][i] = float(cell)
             except ValueError:
                 hint = ("; decimal commas are not read: use a point (1.5, not 1,5)"
                         if delimiter != "," and "," in cell else "")
                 raise DataError(f"{path}, line {line}, column {wanted[key]!r}: {cell!r} is not a number{hint}") from None
     if not rows:
         raise DataError(f"{path}: no data rows")
+    never = [wanted[c] for c in channels if empty[c].all()]
+    if never:
+        raise DataError(f"{path}: column(s) {', '.join(never)} have no values (every cell is empty); fill them or "
+                        "leave the output out of the model's measured outputs")
+    sigma = dict(sigma or {})
+    unknown = [k for k in sigma if k not in channels]
+    if unknown:
+        raise DataError(f"sigma is given for {', '.join(map(repr, unknown))}, which is not a channel; "
+                        f"the channels are {', '.join(channels)}")
+    t = data[time_column]
     try:
-        return Measurements.from_arrays(data[time_column], {c: data[c] for c in channels}, sigma)
+        # an empty cell: that channel was not measured at that time (multi-rate telemetry, drop-outs)
+        return Measurements(tuple(Channel(c, t[~empty[c]], data[c][~empty[c]], sigma.get(c)) for c in channels))
     except DataError as exc:
         raise DataError(f"{path}: {exc}") from None
+
+
+def read_channels(files: Mapping[str, str | os.PathLike], *, time_column: str = "t",
+                  column_map: Mapping[str, str] | None = None,
+                  sigma: Mapping[str, float] | None = None) -> Measurements:
+    """Read measurements from one CSV file per channel, each with its own sample times.
+
+    Parameters
+    ----------
+    files : mapping
+        ``{output name: CSV path}``; each file has the time column and the channel's column
+        (named like the output, or mapped by ``column_map``).
+    time_column, column_map, sigma
+        As for :func:`read_csv`.
+
+    Returns
+    -------
+    Measurements
+        The same as one CSV with the channels side by side and empty cells where a channel
+        was not measured.
+    """
+    if not isinstance(files, Mapping) or not files:
+        raise DataError("files must be a non-empty mapping {output name: CSV path}")
+    column_map = dict(column_map or {})
+    sigma = dict(sigma or {})
+    channels = []
+    for name, path in files.items():
+        one = read_csv(path, [name], time_column=time_column, column_map={name: column_map.get(name, name)},
+                       sigma={name: sigma[name]} if name in sigma else None)
+        channels.append(one[name])
+    return Measurements(tuple(channels))
 
 
 def _decode(path: Path) -> str:

@@ -575,6 +575,94 @@ class ModelSpec:
         check_guess(new)
         return new
 
+    def windowed(self, t0: float, tf: float, *, initial: Mapping[sp.Symbol | str, float] | None = None,
+                 free: Iterable[sp.Symbol | str] = ()) -> "ModelSpec":
+        """The same model on the window ``[t0, tf]`` of its horizon, starting in flight.
+
+        Parameters
+        ----------
+        t0, tf : float
+            The window, inside ``[self.t0, self.tf]``.
+        initial : mapping, optional
+            ``{state: value at t0}`` (default: the declared initial values); for a free state,
+            its guess.
+        free : iterable of states
+            States whose value at ``t0`` is estimated: each gets a parameter ``<state>_0``
+            (appended to the parameters, unbounded) with the guess from ``initial``. States
+            that were free stay free.
+
+        Returns
+        -------
+        ModelSpec
+            Tables and inputs are unchanged. A time family's knot whose hat function vanishes
+            on the window (it acts only outside it) is no longer a parameter: the knot takes
+            the parameter of the nearest knot that acts in the window (the family is
+            unchanged inside the window); :meth:`idle_knots` names them beforehand.
+
+        Raises
+        ------
+        ModelError
+            A window outside the horizon or empty, an unknown state, a non-finite value.
+        """
+        t0, tf = _float(t0, "window start"), _float(tf, "window end")
+        tol = 1e-9 * max(1.0, abs(self.tf))
+        if not tf > t0:
+            raise ModelError(f"the window [{t0:g}, {tf:g}] is empty: its end must be after its start")
+        if t0 < self.t0 - tol or tf > self.tf + tol:
+            raise ModelError(f"the window [{t0:g}, {tf:g}] is not inside model {self.name!r}'s horizon "
+                             f"[{self.t0:g}, {self.tf:g}]; choose a window inside it")
+        t0, tf = max(t0, self.t0), min(tf, self.tf)
+        init = {self.symbol(k) if isinstance(k, str) else k: _float(v, f"initial value of {k}")
+                for k, v in (initial or {}).items()}
+        free_syms = {self.symbol(k) if isinstance(k, str) else k for k in free}
+        unknown = [str(k) for k in list(init) + list(free_syms) if k not in self.state_symbols]
+        if unknown:
+            raise ModelError(f"{', '.join(unknown)} is not a state of model {self.name!r}; its states are "
+                             f"{', '.join(map(str, self.state_symbols))}")
+        bad = [str(k) for k, v in init.items() if not math.isfinite(v)]
+        if bad:
+            raise ModelError(f"the initial value of {', '.join(bad)} at t = {t0:g} is not finite")
+        builder = self.to_model()
+        builder.t0, builder.tf = t0, tf
+        states = []
+        for st in self.states:
+            value = init.get(st.symbol, st.initial)
+            if st.free:
+                builder._parameters = [replace(ps, guess=value) if ps.symbol == st.initial_parameter else ps
+                                       for ps in builder._parameters]
+                states.append(replace(st, initial=value))
+            elif st.symbol in free_syms:
+                ipar = builder._add_parameter(f"{st.symbol}_0", value, (-math.inf, math.inf), None)
+                states.append(replace(st, initial=value, initial_parameter=ipar))
+            else:
+                states.append(replace(st, initial=value))
+        builder._states = states
+        idle = set(self.idle_knots(t0, tf))
+        if idle:
+            families = []
+            for f in builder._families:
+                active = [i for i, k in enumerate(f.knots) if k not in idle]
+                knots = tuple(k if k not in idle else f.knots[min(active, key=lambda a: abs(a - i))]
+                              for i, k in enumerate(f.knots))
+                families.append(replace(f, knots=knots))
+            builder._families = families
+            builder._parameters = [ps for ps in builder._parameters if ps.symbol not in idle]
+            for k in idle:
+                builder._names.pop(str(k), None)
+        return builder.freeze()
+
+    def idle_knots(self, t0: float, tf: float) -> list[sp.Symbol]:
+        """Knot parameters of time families whose hat functions all vanish on ``(t0, tf)``."""
+        out = []
+        for f in self.families:
+            bp = np.asarray(f.breakpoints, float)
+            idle: dict = {}
+            for i, sym in enumerate(f.knots):
+                lo, hi = bp[max(i - 1, 0)], bp[min(i + 1, bp.size - 1)]
+                idle[sym] = idle.get(sym, True) and not (hi > t0 and lo < tf)
+            out += [k for k, v in idle.items() if v and k not in out]
+        return out
+
     def with_priors(self, priors: Mapping[sp.Symbol | str, Sequence]) -> "ModelSpec":
         """A copy with Gaussian priors added (or replaced): ``{parameter: (mean, sd)}`` or
         ``{parameter: (mean, sd, source)}`` (see :meth:`Model.prior`)."""

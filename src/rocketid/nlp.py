@@ -472,8 +472,8 @@ def _build_structure(tr: Transcription, g: GeneratedModel, measurements: Measure
     chans = []
     for k, omap in enumerate(tr.outputs):
         ch = measurements[omap.name]
-        sigma = ch.sigma if ch.sigma is not None else spec.outputs[k].sigma
-        fn = g.outputs[k]
+        sigma = ch.sigma if ch.sigma is not None else spec.outputs[omap.index].sigma
+        fn = g.outputs[omap.index]
         Mu = (omap.Mu @ T).tocsr()
         Mu.sort_indices()
         nsamp = omap.times.size

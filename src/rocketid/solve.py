@@ -25,7 +25,7 @@ import sympy as sp
 
 from .codegen import generate
 from .collocation.transcription import Mesh, Transcription, transcribe
-from .data import Measurements
+from .data import Measurements, resolve_quantized, sigma_request
 from .errors import DataError, ModelError, SettingsError, SolverError
 from .model import ModelSpec, check_guess
 from .nlp import CollocationNLP, build_nlp
@@ -33,7 +33,7 @@ from .output import finite_or_none
 from .summary import Section, Summary, Table
 
 __all__ = ["IPOPT_OPTIONS", "check_ipopt_options", "NLPSolution", "solve_nlp", "EstimationResult",
-           "estimate", "prepare", "default_mesh", "Prepared"]
+           "estimate", "prepare", "default_mesh", "Prepared", "relax_sigma", "ml_sigma"]
 
 _S, _I, _F = "str", "int", "float"
 IPOPT_OPTIONS: dict[str, str] = {
@@ -251,8 +251,9 @@ def default_mesh(spec: ModelSpec, K: int = 4, element_length: float | None = Non
     """
     span = spec.tf - spec.t0
     h = element_length if element_length is not None else min(1.0, span / 20)
-    fam_bps = sorted({float(b) for f in spec.families for b in f.breakpoints} | {spec.t0, spec.tf}
-                     | {float(e) for e in spec.events if spec.t0 < e < spec.tf})
+    # a model cut to a window keeps its families' breakpoints outside it
+    fam_bps = sorted({float(b) for f in spec.families for b in f.breakpoints if spec.t0 < b < spec.tf}
+                     | {spec.t0, spec.tf} | {float(e) for e in spec.events if spec.t0 < e < spec.tf})
     bounds = [fam_bps[0]]
     for a, b in zip(fam_bps[:-1], fam_bps[1:]):
         n = max(1, int(math.ceil((b - a) / h - 1e-9)))
@@ -293,6 +294,14 @@ class Prepared:
             S[~good] = last
             note = f"the initial-guess simulation failed ({traj.message}); states initialized by holding its last value"
         return S, note
+
+    def with_sigma(self, sigma: Mapping[str, float]) -> "Prepared":
+        """The same collocation with the channels' noise levels ``sigma`` (``{channel: value}``):
+        the NLP is rebuilt on the same transcription (code generation is not repeated)."""
+        data = self.measurements.with_sigma(sigma)
+        t0 = time.perf_counter()
+        nlp = build_nlp(self.transcription, generate(self.spec), data)
+        return replace(self, measurements=data, nlp=nlp, setup_s=self.setup_s + time.perf_counter() - t0)
 
 
 def prepare(spec: ModelSpec, data: Measurements, *, mesh: Mesh | None = None) -> Prepared:
@@ -337,6 +346,11 @@ class EstimationResult:
     notes : tuple of str
     retried : bool
         A warm-started solve failed and this is the cold solve that repeated it.
+    sigma_estimated : tuple of str
+        Channels whose noise level was estimated with the parameters (:func:`relax_sigma`);
+        their sigma in :attr:`sigma` is the maximum-likelihood estimate.
+    sigma_iterations : int
+        Fits of the relaxation (0 when no sigma was estimated).
     """
 
     success: bool
@@ -351,6 +365,8 @@ class EstimationResult:
     timings: dict
     notes: tuple = ()
     retried: bool = False
+    sigma_estimated: tuple = ()
+    sigma_iterations: int = 0
 
     @property
     def spec(self) -> ModelSpec:
@@ -388,6 +404,34 @@ class EstimationResult:
         """The collocation polynomial's states at ``times``, shape (n, n_states)."""
         return self.prepared.transcription.states_at(self.nlp.full_vector(self.x), np.asarray(times, float))
 
+    @property
+    def unmeasured_outputs(self) -> tuple[str, ...]:
+        """The model's outputs that the data do not measure (predicted, not fitted)."""
+        return tuple(n for n in self.spec.output_names if n not in self.nlp.channel_names)
+
+    def predict(self, output: str, times: Sequence[float] | None = None) -> np.ndarray:
+        """An output's values along the fitted trajectory (the collocation polynomial) at
+        ``times`` (default: the mesh nodes); works for outputs the data do not measure.
+
+        Raises
+        ------
+        ModelError
+            ``output`` is not an output of the model.
+        """
+        from .simulate import evaluate_along
+
+        expr = next((o.expr for o in self.spec.outputs if o.name == output), None)
+        if expr is None:
+            raise ModelError(f"model {self.spec.name!r} has no output {output!r}; its outputs are "
+                             f"{', '.join(self.spec.output_names)}")
+        times = self.node_times if times is None else np.asarray(times, float)
+        tr = self.prepared.transcription
+        w = self.nlp.full_vector(self.x)
+        ns = tr.layout.n_states
+        S = (tr.interpolation_matrix(times) @ w).reshape(times.size, ns)
+        dS = (tr.interpolation_matrix(times, derivative=True) @ w).reshape(times.size, ns)
+        return evaluate_along(self.spec, expr, times, S, self.p, dS)
+
     @cached_property
     def residuals(self) -> dict[str, np.ndarray]:
         """Model minus measurement at each channel's samples."""
@@ -422,6 +466,19 @@ class EstimationResult:
         is J without the priors' penalty, :attr:`data_objective`)."""
         return 2.0 * self.data_objective / max(1, self.n_data - self.n_estimated)
 
+    @property
+    def sigma(self) -> dict[str, float]:
+        """The noise standard deviation of each channel used in the fit (estimated ones included)."""
+        return {k: float(v) for k, v in zip(self.nlp.channel_names, self.nlp.channel_sigmas)}
+
+    @property
+    def sigma_std(self) -> dict[str, float]:
+        """Standard error of each estimated sigma, ``sigma / sqrt(2 n)`` (the inverse Fisher
+        information of a Gaussian channel's sigma with ``n`` samples; the parameters' and the
+        sigmas' information are uncorrelated, so the parameters do not change it)."""
+        n = {k: r.size for k, r in self.residuals.items()}
+        return {k: self.sigma[k] / math.sqrt(2.0 * n[k]) for k in self.sigma_estimated}
+
     @cached_property
     def rms(self) -> dict[str, float]:
         """Root-mean-square residual per channel."""
@@ -449,7 +506,7 @@ class EstimationResult:
                     f"{len(nlp.hessianstructure()[0])} Hessian non-zeros"),
             ("data", f"{self.n_data} values in {len(nlp.channel_names)} channels ({', '.join(nlp.channel_names)})")))
         solver = Section("Solver", (
-            ("status", f"{'converged' if self.success else 'FAILED'} ({self.status}: {self.message})"),
+            ("status", f"{self._status_word()} ({self.status}: {self.message})"),
             ("iterations", str(self.iterations)),
             ("time", f"setup {self.timings['setup_s']:.3f} s, IPOPT {self.timings['solve_s']:.3f} s")))
         parameters = Section("Parameters", (Table(
@@ -460,18 +517,49 @@ class EstimationResult:
             ("objective J", f"{self.objective:.6g}"),
             ("chi2 / dof", f"{self.chi2_per_dof:.4f}  (2J / ({self.n_data} - {self.n_estimated}))"),
             ("RMS residual", ", ".join(f"{k} {v:.4g}" for k, v in self.rms.items())),
+            ("sigma", self._sigma_text()),
             *((("priors", f"{len(self.spec.priors)} Gaussian priors, their share of J {self.prior_objective:.4g} "
                           f"(data {self.data_objective:.6g})"),) if self.spec.priors else ())))
         notes = list(self.notes)
         if not self.success:
             notes.insert(0, f"IPOPT did not converge: {self.message.rstrip('.')}. The estimates are the last iterate, "
                             "not an optimum.")
+        if self.success:
+            notes.extend(f"NOT CREDIBLE: {n}." for n in self.sanity)
         for s, side in self.active_bounds():
             notes.append(f"{s} is at its {side} bound: the estimate is limited by the bound, not by the data.")
+        if self.unmeasured_outputs:
+            notes.append(f"output(s) {', '.join(self.unmeasured_outputs)} are not in the data: predicted "
+                         "(EstimationResult.predict), not fitted.")
+        if self.sigma_estimated:
+            notes.append(f"sigma of {', '.join(self.sigma_estimated)} estimated with the parameters (maximum "
+                         "likelihood): chi2/dof is then near 1 by construction and does not test the fit; a model "
+                         "error shows as a larger sigma instead. Compare the estimated sigma with what the sensor "
+                         "or the data's resolution allows.")
         if self.success and self.chi2_per_dof > 1.5:
             notes.append(f"chi2/dof = {self.chi2_per_dof:.3g} is well above 1: the model does not fit to the noise "
                          "level (a missing effect or wrong sigma); see `rocketid diagnose`.")
         return Summary(f"rocketid estimation: {self.spec.name}", (problem, solver, parameters, fit), notes)
+
+    @cached_property
+    def sanity(self) -> tuple[str, ...]:
+        """What makes this result not credible even if IPOPT converged (every parameter at a
+        bound, chi2/dof above 1e4, a fitted trajectory that descends where the data climb or
+        turns through more than 90 degrees); empty when nothing is wrong."""
+        from .start import result_checks
+        return tuple(result_checks(self))
+
+    def _status_word(self) -> str:
+        if not self.success:
+            return "FAILED"
+        if self.sanity:
+            return "IPOPT stopped at an optimum, but the result is NOT CREDIBLE (see the notes)"
+        return "converged"
+
+    def _sigma_text(self) -> str:
+        std = self.sigma_std
+        return ", ".join(f"{k} {v:.4g} +- {std[k]:.2g} (estimated)" if k in std else f"{k} {v:.4g}"
+                         for k, v in self.sigma.items())
 
     def to_dict(self) -> dict:
         """A JSON-ready dictionary (``success``, ``parameters``, ``objective``, ...);
@@ -486,6 +574,11 @@ class EstimationResult:
             "chi2_per_dof": finite_or_none(self.chi2_per_dof),
             "iterations": int(self.iterations),
             "rms": {k: finite_or_none(v) for k, v in self.rms.items()},
+            "sigma": {k: finite_or_none(v) for k, v in self.sigma.items()},
+            "sigma_estimated": list(self.sigma_estimated),
+            "sigma_std": {k: finite_or_none(v) for k, v in self.sigma_std.items()},
+            "unmeasured_outputs": list(self.unmeasured_outputs),
+            "sanity": list(self.sanity) if self.success else [],
             "n_data": int(self.n_data),
             "mesh": {"n_elements": int(self.prepared.transcription.mesh.n_elements),
                      "K": int(self.prepared.transcription.mesh.K)},
@@ -504,7 +597,9 @@ class EstimationResult:
 
 def estimate(spec: ModelSpec, data: Measurements, *, guess: Mapping | Sequence[float] | None = None,
              mesh: Mesh | None = None, options: Mapping[str, Any] | None = None,
-             warm_start: EstimationResult | None = None, prepared: Prepared | None = None) -> EstimationResult:
+             warm_start: EstimationResult | None = None, prepared: Prepared | None = None,
+             sigma: str | Mapping[str, float | str] | None = None,
+             window: Sequence[float] | None = None) -> EstimationResult:
     """Estimate all parameters of ``spec`` from ``data`` (the NLP (7.5)).
 
     Parameters
@@ -521,6 +616,18 @@ def estimate(spec: ModelSpec, data: Measurements, *, guess: Mapping | Sequence[f
         Start from a previous solution of the same problem (primal and dual).
     prepared : Prepared, optional
         Reuse an already built NLP (same spec, data and mesh).
+    sigma : "estimate" or mapping, optional
+        Noise levels: ``"estimate"`` estimates every channel's sigma with the
+        parameters (:func:`relax_sigma`); a mapping ``{channel: value or
+        "estimate"}`` gives some and estimates others; ``"quantized"`` (or
+        ``"quantized:STEP"``) sets a channel's sigma to its rounding error
+        ``STEP / sqrt(12)``, the step found in its values unless given. Default: the data's sigma,
+        else the model's.
+    window : (float, float), optional
+        A flight window ``(T0, T1)`` (s): the data and the model are cut to it
+        (:func:`rocketid.start.apply_window`); a window that starts after the model's
+        ``t0`` estimates the initial states the data determine (parameters ``<state>_0``,
+        guessed from the data). The result's ``spec`` is the windowed model.
 
     Returns
     -------
@@ -528,11 +635,29 @@ def estimate(spec: ModelSpec, data: Measurements, *, guess: Mapping | Sequence[f
         ``success`` is False (with a note) when IPOPT fails; never raises for
         a non-converged solve.
     """
+    notes = []
+    if window is not None:
+        from .start import apply_window, window_guess
+        if prepared is not None:
+            raise SettingsError("window= cuts the model and the data: it cannot be combined with prepared=")
+        if not isinstance(spec, ModelSpec) or not isinstance(data, Measurements):
+            prepare(spec, data)  # names the wrong type
+        p_full = spec.parameter_vector(guess)
+        spec_w, data, wnotes = apply_window(spec, data, window, p_full)
+        notes += wnotes
+        guess = window_guess(spec, spec_w, p_full)
+        spec = spec_w
     check_determined(spec, data)
+    if isinstance(data, Measurements):
+        sigma = resolve_quantized(sigma, data)
+    given, estimated = sigma_request(sigma, data.names if isinstance(data, Measurements) else ())
+    if given:
+        data = data.with_sigma(given)
     if prepared is None:
         prepared = prepare(spec, data, mesh=mesh)
+    elif given:
+        prepared = prepared.with_sigma(given)
     nlp = prepared.nlp
-    notes = []
     p0 = spec.parameter_vector(guess)
     check_guess(spec, p0)
     warm = None
@@ -542,11 +667,103 @@ def estimate(spec: ModelSpec, data: Measurements, *, guess: Mapping | Sequence[f
         if guess is not None:
             x0 = nlp.layout.with_reduced(x0, p0)  # (7.5): the reduced parameters are p
     else:
-        S, note = prepared.initial_states(p0)
-        if note:
-            notes.append(note)
-        x0 = nlp.initial_x(S, p0)
-    return fit_nlp(prepared, nlp, x0, options=options, warm=warm, setup_s=prepared.setup_s, notes=notes)
+        from .start import start_states
+        start = start_states(spec, prepared.measurements, prepared.transcription.mesh.node_times, p0)
+        notes.extend(start.notes)
+        x0 = nlp.initial_x(start.states, p0)
+    fit = fit_nlp(prepared, nlp, x0, options=options, warm=warm, setup_s=prepared.setup_s, notes=notes)
+    if estimated:
+        fit = relax_sigma(fit, estimated, options=options)
+    return fit
+
+
+def ml_sigma(fit: EstimationResult, channels: Sequence[str]) -> dict[str, float]:
+    """The maximum-likelihood noise level of each channel at ``fit``'s parameters,
+    ``sqrt(mean(residual^2))``.
+
+    Raises
+    ------
+    DataError
+        A channel whose residuals are all zero (sigma cannot be estimated: give it).
+    """
+    out = {}
+    for c in channels:
+        r = fit.residuals[c]
+        with np.errstate(over="ignore", invalid="ignore"):
+            s = float(np.sqrt(np.mean(r ** 2)))
+        if not (s > 0 and math.isfinite(s)):
+            raise DataError(f"the noise level of channel {c!r} cannot be estimated: its residuals are "
+                            f"{'all zero' if s == 0 else 'not finite'} at the fit; give its sigma (--sigma {c}=VALUE)")
+        out[c] = s
+    return out
+
+
+def relax_sigma(fit: EstimationResult, channels: Sequence[str], *, options: Mapping[str, Any] | None = None,
+                rtol: float = 1e-6, max_fits: int = 30) -> EstimationResult:
+    """Maximum likelihood with the noise levels of ``channels`` unknown: the output-error
+    method's relaxation.
+
+    With ``n_k`` samples and residuals ``r_k`` in channel ``k``, the likelihood is largest over
+    ``sigma_k`` at ``sigma_k^2 = r_k . r_k / n_k`` for given parameters. The relaxation
+    alternates: sigma from the residuals of the last fit, then the parameters again with those
+    sigmas (starting from the last solution), until no sigma changes by more than ``rtol``
+    relatively. The fixed point is a stationary point of the concentrated likelihood
+    ``sum_k n_k / 2 log(r_k . r_k / n_k)``.
+
+    Parameters
+    ----------
+    fit : EstimationResult
+        A fit with any starting sigmas (the model's or the data's).
+    channels : sequence of str
+        The channels whose sigma is estimated; the others keep theirs.
+    options : mapping, optional
+        IPOPT options of the refits.
+    rtol : float
+        Convergence: the largest relative change of a sigma between two fits.
+    max_fits : int
+        Give up (with a note) after this many refits.
+
+    Returns
+    -------
+    EstimationResult
+        The last fit, with the estimated sigmas in its data (``fit.sigma``,
+        ``fit.prepared.measurements``) so that the covariance, the statistic criterion
+        and the score test use them; ``sigma_estimated`` names the channels.
+    """
+    channels = tuple(channels)
+    if not channels:
+        return fit
+    unknown = [c for c in channels if c not in fit.nlp.channel_names]
+    if unknown:
+        raise DataError(f"sigma of {', '.join(map(repr, unknown))} cannot be estimated: not a fitted channel "
+                        f"({', '.join(fit.nlp.channel_names)})")
+    notes = list(fit.notes)
+    fits = 1
+    solve_s = fit.timings.get("solve_s", 0.0)
+    current = fit.sigma
+    converged = False
+    while fit.success:
+        new = ml_sigma(fit, channels)
+        change = max(abs(new[c] / current[c] - 1.0) for c in channels)
+        if change <= rtol:
+            converged = True
+            break
+        if fits > max_fits:
+            break
+        prepared = fit.prepared.with_sigma(new)
+        fit = fit_nlp(prepared, prepared.nlp, fit.x, options=options)
+        solve_s += fit.timings["solve_s"]
+        fits += 1
+        current = new
+    if not fit.success:
+        notes.append(f"the fit failed while the noise levels were being estimated (fit {fits}); the sigmas are those "
+                     "of the last fit")
+    elif not converged:
+        notes.append(f"the noise levels did not settle within {max_fits} refits (last relative change "
+                     f"{change:.2g}); the estimates are the last ones")
+    notes.extend(n for n in fit.notes if n not in notes)
+    return replace(fit, notes=tuple(notes), sigma_estimated=channels, sigma_iterations=fits,
+                   timings={"setup_s": fit.prepared.setup_s, "solve_s": solve_s})
 
 
 def fit_nlp(prepared: Prepared, nlp: CollocationNLP, x0: np.ndarray, *, options: Mapping[str, Any] | None = None,

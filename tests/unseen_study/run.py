@@ -44,7 +44,7 @@ for extra in (TESTS, TESTS / "vehicles"):
 
 import kestrel as K  # noqa: E402
 
-from unseen_study.cases import BY_NAME, CASES, family  # noqa: E402
+from unseen_study.cases import ALL, BY_NAME, family  # noqa: E402
 
 MODEL_FILE = TESTS / "vehicles" / "kestrel.py"
 COEFFICIENTS = dict(K.truth(None))
@@ -156,11 +156,11 @@ def table(records: dict, title: str) -> str:
     lines = [title, "",
              "| case | truth (hidden) | final effects | chi2/dof base -> final | sizes vs truth | verdict | outcome | acceptable | s |",
              "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
-    for case in CASES:
+    for case in ALL:
         if case.name in records:
             lines.append(row(case, records[case.name]))
     counts: dict[str, int] = {}
-    for case in CASES:
+    for case in ALL:
         if case.name in records:
             outcome = classify(case, records[case.name])
             counts[outcome] = counts.get(outcome, 0) + 1
@@ -188,7 +188,7 @@ def main(argv=None) -> int:
     args = parser.parse_args(argv)
     path = Path(args.json)
     stored = json.loads(path.read_text()) if path.exists() else {"records": {}}
-    names = args.cases or [c.name for c in CASES]
+    names = args.cases or [c.name for c in ALL]
     unknown = [n for n in names if n not in BY_NAME]
     if unknown:
         parser.error(f"unknown case(s) {', '.join(unknown)}; known: {', '.join(BY_NAME)}")

@@ -25,6 +25,10 @@ Hidden effects (``Hidden``), each in its own shape, none of them a catalogue exp
 - ``rotation``: Earth rotation at latitude ``lat`` launching on azimuth ``az``: the Coriolis
   ``-2 Omega x V`` and centrifugal ``-Omega x (Omega x r)`` accelerations as cross products in the
   launch site's east-north-up frame, projected on the trajectory plane;
+- ``drag_bump``: a drag hump ``dCD (1 - ((M - M_c)/w)^2)^2`` between the table's Mach knots;
+- ``tailoff``: the grain's last sliver burning out early: thrust and mass flow sag by a fraction
+  along a smoothstep in time;
+- ``jet``: a tailwind with a surface value and a ``sech^2`` jet, added to the headwind profile;
 - ``dm0``: a start mass ``dm0`` kg above the declared one (a heavier payload; not a catalogue effect);
 - sensor effects applied to the sampled trajectory (``sensor``): an altitude bias drifting linearly
   ``b0 + b1 t``, and a time-tag offset (the trajectory sampled at ``t - tau``, not a first-order
@@ -62,6 +66,9 @@ class Hidden:
     dm0: float = 0.0                  # kg
     bias_h: tuple[float, float] = (0.0, 0.0)      # (b0 m, b1 m/s)
     tau: float = 0.0                  # s
+    drag_bump: tuple[float, float, float] = (0.0, 1.15, 0.1)   # (dCD, Mach centre, Mach half-width)
+    tailoff: tuple[float, float, float] = (0.0, 30.0, 34.0)    # (fraction lost, ramp start s, ramp end s)
+    jet: tuple[float, float, float, float] = (0.0, 0.0, 9000.0, 2500.0)  # (surface, peak m/s, at m, half-width m)
 
 
 def _interp(var, xs, ys):
@@ -117,6 +124,12 @@ def truth_model(hidden: Hidden = Hidden()):
     p_table = m.input("P_table", k * tab, breakpoints=brk)
     pitch = m.input("pitch", _interp(t, K.PITCH_TIMES, [math.radians(d) for d in K.PITCH_DEG]), breakpoints=brk)
     thrust = p_table
+    lost, t1, t2 = hidden.tailoff
+    if lost:                                                   # a sliver burning out early: the thrust sags late
+        ramp = sp.Piecewise((0.0, t < t1), ((t - t1) / (t2 - t1), t < t2), (1.0, True))
+        ramp = ramp ** 2 * (3 - 2 * ramp)
+        thrust = thrust * (1 - lost * ramp)
+    p_motor = thrust                                           # the motor's own thrust: the mass flow follows it
     if hidden.A_e:
         hs, p, _ = pressure_table()
         lnp = _interp(h, hs, np.log(p))
@@ -130,12 +143,18 @@ def truth_model(hidden: Hidden = Hidden()):
     if any(hidden.wind):
         ws, wg = hidden.wind
         W = -(ws + wg * (1 - sp.exp(-h / 5000.0)))
+    if hidden.jet[0] or hidden.jet[1]:
+        surface, peak, at, half = hidden.jet
+        W = W + surface + peak * sp.sech((h - at) / half) ** 2 * 1.0
     ua = u - W
     va = sp.sqrt(ua ** 2 + w ** 2)
     mach = va / us76_speed_of_sound(h)
     q = rho * va ** 2 / 2
     S = math.pi * K.DIAMETER ** 2 / 4
     cd = _interp(mach, K.CD_KNOTS, K.CD_TRUTH)
+    bump, centre, width = hidden.drag_bump
+    if bump:                                                   # a drag hump between the table's knots
+        cd = cd + bump * sp.Max(0, 1 - ((mach - centre) / width) ** 2) ** 2
     cla = _interp(mach, K.CLA_KNOTS, K.CLA_TRUTH)
     theta_air = sp.atan2(w, ua)
     alpha_air = pitch - theta_air
@@ -161,7 +180,7 @@ def truth_model(hidden: Hidden = Hidden()):
         h: w,
         u: fu / mass - u * w / r + au,
         w: fw / mass - g + u ** 2 / r + aw,
-        mass: -p_table / (K.ISP * K.G0),
+        mass: -p_motor / (K.ISP * K.G0),
     })
     m.output("x", x, sigma=K.SIGMA["x"])
     m.output("h", h, sigma=K.SIGMA["h"])

@@ -186,6 +186,7 @@ class OutputMap:
     times: np.ndarray
     Mu: sps.csr_matrix
     data: np.ndarray  # (n_samples, 1): time
+    index: int = 0    # the output's position in ``spec.outputs`` (and the generated code's)
 
 
 @dataclass(frozen=True)
@@ -281,6 +282,8 @@ def _check_mesh(spec: ModelSpec, mesh: Mesh) -> None:
                             f"[{spec.t0:g}, {spec.tf:g}]")
     for f in spec.families:
         for tb in f.breakpoints:
+            if not spec.t0 < tb < spec.tf:
+                continue  # the ends are checked above; a model cut to a window keeps breakpoints outside it
             if np.min(np.abs(b - tb)) > 1e-9 * max(1.0, abs(spec.tf)):
                 raise SettingsError(
                     f"breakpoint t = {tb:g} of family {f.symbol} is not on an element boundary of the mesh "
@@ -352,13 +355,13 @@ def transcribe(spec: ModelSpec, measurements: Measurements, mesh: Mesh) -> Trans
     u = output_variables(spec)
     nu = len(u)
     maps = []
-    for o in spec.outputs:
-        try:
-            ch = measurements[o.name]
-        except DataError:
-            raise DataError(f"model {spec.name!r} has output {o.name!r} but the measurements have no such "
-                            f"channel (they have {', '.join(measurements.names)}); map the column or "
-                            "drop the output") from None
+    if not any(o.name in measurements.names for o in spec.outputs):
+        raise DataError(f"the measurements have none of model {spec.name!r}'s outputs ({', '.join(spec.output_names)}); "
+                        f"they have {', '.join(measurements.names)}: map the columns (CLI: --column NAME=COLUMN)")
+    for index, o in enumerate(spec.outputs):
+        if o.name not in measurements.names:
+            continue  # an output the data do not measure: predicted, not fitted
+        ch = measurements[o.name]
         ts = ch.times
         if ts[0] < spec.t0 - 1e-12 or ts[-1] > spec.tf + 1e-12:
             before = ts[ts < spec.t0 - 1e-12]
@@ -381,5 +384,5 @@ def transcribe(spec: ModelSpec, measurements: Measurements, mesh: Mesh) -> Trans
             c.append(c_cols.ravel())
             v.append(c_coef.ravel())
         Mu = sps.csr_matrix((np.concatenate(v), (np.concatenate(r), np.concatenate(c))), shape=(n * nu, layout.n))
-        maps.append(OutputMap(o.name, ts, Mu, ts[:, None].copy()))
+        maps.append(OutputMap(o.name, ts, Mu, ts[:, None].copy(), index))
     return Transcription(spec, mesh, layout, Mz, point_data, ic, ic_off, tuple(maps), nz=nz, nu=nu)

@@ -25,7 +25,8 @@ import time
 
 import click
 
-from ..cli import EXIT_NOT_CONVERGED, NameValue, assignments, model_option, read_data, status, verbose_option
+from ..cli import (EXIT_NOT_CONVERGED, NameValue, assignments, flight_window, given_sigmas, model_option, read_data,
+                   sigma_argument, sigma_option_decl, status, unmeasured_option_decl, verbose_option)
 from ..errors import SettingsError
 from ..output import check_folder, folder_lock
 
@@ -51,16 +52,20 @@ __all__ = ["command"]
               help="Parallel refit processes (default: up to 2).")
 @click.option("--refit-timeout", type=float, default=180.0, show_default=True, metavar="SECONDS",
               help="Give up a refit or hold-out prediction after this long (it is reported as given up).")
-@click.option("--window", type=float, default=None, metavar="SECONDS",
+@click.option("--locate-window", "locate_window", type=float, default=None, metavar="SECONDS",
               help="Window length of the located statistics (default: the flight's span / 22).")
+@click.option("--window", "window_text", default=None, metavar="T0:T1",
+              help="Fit only the flight window T0:T1 (s; '20:' to the end); a window that starts in flight "
+                   "estimates the initial states the data determine. (A plain number is the old meaning, "
+                   "--locate-window.)")
 @click.option("--column", "columns", multiple=True, type=NameValue(str, "CSV column name"),
               metavar="NAME=CSVCOL", help="Read output NAME from column CSVCOL (repeatable).")
 @click.option("--time-column", default="t", show_default=True, help="Name of the time column.")
-@click.option("--sigma", "sigmas", multiple=True, type=NameValue(float), metavar="NAME=VALUE",
-              help="Noise standard deviation of an output (repeatable; default: the model's).")
+@sigma_option_decl()
+@unmeasured_option_decl()
 @verbose_option
-def command(data_file, out, model, level, confirm_top, holdout, max_effects, workers, refit_timeout, window,
-            columns, time_column, sigmas):
+def command(data_file, out, model, level, confirm_top, holdout, max_effects, workers, refit_timeout, locate_window,
+            window_text, columns, time_column, sigmas, unmeasured):
     """Fit a model to DATA.csv and diagnose what it misses; write DIR/report.html.
 
     The report compares each channel with the model, locates where the
@@ -72,21 +77,35 @@ def command(data_file, out, model, level, confirm_top, holdout, max_effects, wor
 
     if not 0 < level < 1:
         raise SettingsError(f"--level must be between 0 and 1, got {level:g}")
+    window, window_option = locate_window, "--locate-window"
+    flight = None
+    if window_text is not None:
+        try:
+            legacy = float(window_text)
+        except ValueError:
+            flight = flight_window(window_text)
+        else:
+            window, window_option = legacy, "--window"
     if window is not None and not window > 0:
-        raise SettingsError(f"--window must be a positive number of seconds, got {window:g}")
+        raise SettingsError(f"{window_option} must be a positive number of seconds, got {window:g}")
+    if window_option == "--window":
+        click.echo(f"Warning: --window {window_text} (a length) is now --locate-window; --window takes a flight "
+                   "window T0:T1", err=True)
     if not refit_timeout > 0:
         raise SettingsError(f"--refit-timeout must be a positive number of seconds, got {refit_timeout:g}")
     holdout = _holdout(holdout)
     check_folder(out, "--out")  # before the work: a bad --out fails at once, not after the fits
     spec, label = resolve_model(model)
-    sig = assignments(sigmas, "--sigma", allowed=list(spec.output_names))
-    data = read_data(data_file, spec, time_column=time_column, columns=assignments(columns, "--column"), sigma=sig)
+    sigma = sigma_argument(sigmas, spec)
+    data = read_data(data_file, spec, time_column=time_column, columns=assignments(columns, "--column"),
+                     sigma=given_sigmas(sigma), unmeasured=tuple(unmeasured))
     with folder_lock(out):
         status(f"read {data.n_samples} values of {', '.join(data.names)} from {data_file}; fitting {spec.name} and "
                "diagnosing")
         t0 = time.perf_counter()
         report = diagnose(data, spec, level=level, confirm_top=confirm_top, window=window, holdout=holdout,
-                          max_effects=max_effects, workers=workers, refit_timeout=refit_timeout)
+                          max_effects=max_effects, workers=workers, refit_timeout=refit_timeout, sigma=sigma,
+                          flight_window=flight)
         report = _relabel(report, label, str(data_file))
         path = report.write(out)
     for line in report.verdict():

@@ -21,8 +21,9 @@ from dataclasses import replace
 
 import click
 
-from ..cli import (EXIT_NOT_CONVERGED, NameValue, data_options, fit_inputs, ipopt_options, load_model,
-                   model_option, prepare_verbosely, status, verbose_option, write_json)
+from ..cli import (EXIT_NOT_CONVERGED, NameValue, data_options, fit_inputs, flight_window, ipopt_options, load_model,
+                   given_sigmas, model_option, prepare_verbosely, sigma_argument, status, verbose_option, windowed_inputs,
+                   write_json)
 from ..errors import SettingsError
 from ..output import check_file
 
@@ -53,7 +54,7 @@ __all__ = ["command"]
               help="Plot the eigenvalue spectrum and the directions' composition.")
 @verbose_option
 def command(data_files, model, scaling, threshold, n_estimated, at, guesses, columns, time_column, sigmas,
-            n_elements, K, per_flight, ipopt, out, plot):
+            unmeasured, window_text, n_elements, K, per_flight, ipopt, out, plot):
     """Estimability report: eigenvalues of the reduced Hessian, ratios, np, directions.
 
     Prints the report; writes EST.json (and EST.png with --plot).
@@ -81,25 +82,42 @@ def command(data_files, model, scaling, threshold, n_estimated, at, guesses, col
     if n_estimated is not None and not 1 <= n_estimated <= n_p:
         raise SettingsError(f"--np must be from 1 to {n_p} (the number of parameters of {spec.name}), "
                             f"got {n_estimated}")
+    sigma = sigma_argument(sigmas, spec)
+    if sigma is not None and at == "guess" and any(v == "estimate" for v in
+                                                   (sigma.values() if isinstance(sigma, dict) else [sigma])):
+        raise SettingsError("--sigma estimate needs a fit to estimate the noise from: add --at fit (or give the "
+                            "sigma as a number)")
+    window = flight_window(window_text)
     if len(data_files) > 1:
+        if given_sigmas(sigma) != (sigma or {}):
+            raise SettingsError("--sigma estimate is not available yet for several flights: give the sigmas as "
+                                "numbers")
         _joint(spec, data_files, scaling=scaling, at=at, guesses=guesses, columns=columns, time_column=time_column,
-               sigmas=sigmas, n_elements=n_elements, K=K, per_flight=per_flight, options=options, out=out)
+               sigmas=sigmas, n_elements=n_elements, K=K, per_flight=per_flight, options=options, out=out,
+               unmeasured=unmeasured, window=window)
         return
     if per_flight:
         raise SettingsError("--per-flight needs several data files (one per flight)")
     data_file = data_files[0]
     guess, mesh, data = fit_inputs(spec, data_file, guesses=guesses, columns=columns, time_column=time_column,
-                                   sigmas=sigmas, n_elements=n_elements, K=K)
+                                   sigmas=sigmas, n_elements=n_elements, K=K, unmeasured=unmeasured)
+    spec, data, guess, mesh, window_notes = windowed_inputs(spec, data, guess, window, n_elements, K)
+    n_p = len(spec.parameters)
+    if n_estimated is not None and not 1 <= n_estimated <= n_p:
+        raise SettingsError(f"--np must be from 1 to {n_p} (the number of parameters of {spec.name} in the window), "
+                            f"got {n_estimated}")
     status(f"read {data.n_samples} values of {', '.join(data.names)} from {data_file}; collocating on "
            f"{mesh.describe()}")
     t0 = time.perf_counter()
     prepared = prepare_verbosely(spec, data, mesh)
-    extra_notes = []
+    extra_notes = list(window_notes)
     fit_info = None
     if at == "fit":
-        fit = estimate(spec, data, guess=guess, prepared=prepared, options=options)
+        fit = estimate(spec, data, guess=guess, prepared=prepared, options=options, sigma=sigma)
         fit_info = {"success": bool(fit.success), "iterations": int(fit.iterations),
-                    "objective": float(fit.objective), "chi2_per_dof": float(fit.chi2_per_dof)}
+                    "objective": float(fit.objective), "chi2_per_dof": float(fit.chi2_per_dof),
+                    "sigma": fit.sigma, "sigma_estimated": list(fit.sigma_estimated)}
+        prepared = fit.prepared  # the estimated sigmas weight H_r
         if not fit.success:
             click.echo(f"Error: the full fit did not converge ({fit.message}); the reduced Hessian is not formed "
                        "at a point that is not an estimate (use --at guess, or --ipopt to help the fit)", err=True)
@@ -138,6 +156,7 @@ def command(data_files, model, scaling, threshold, n_estimated, at, guesses, col
 
 
 def _joint(spec, data_files, *, scaling, at, guesses, columns, time_column, sigmas, n_elements, K, per_flight,
+           unmeasured=(), window=None,
            options, out):
     """The joint estimability report of several flights (``rocketid.joint.joint_estimability``)."""
     from ..cli import assignments, read_flights
@@ -145,6 +164,7 @@ def _joint(spec, data_files, *, scaling, at, guesses, columns, time_column, sigm
     from ..sensitivity import sensitivity_at
 
     flights = read_flights(data_files, spec, columns=columns, time_column=time_column, sigmas=sigmas,
+                           unmeasured=unmeasured, window=window,
                            n_elements=n_elements, K=K)
     guess = assignments(guesses, "--guess")
     prep = joint_prepare(flights, per_flight=per_flight)

@@ -384,14 +384,14 @@ def _check_settings(level, confirm_top, max_effects, refit_timeout) -> None:
         raise SettingsError(f"refit_timeout must be a positive number of seconds, got {refit_timeout!r}")
 
 
-def _fit_base(spec, meas, guess, mesh, options, notes: list) -> EstimationResult:
+def _fit_base(spec, meas, guess, mesh, options, notes: list, sigma=None) -> EstimationResult:
     if mesh is None:
         # a short first element: effects that act from lift-off (misalignment, Earth
         # rotation) are otherwise blurred by the singular start (docs/effects.md); the
         # candidates' refits reuse this mesh
         from ..solve import default_mesh
         mesh = default_mesh(spec, refine_first=3)
-    fit = estimate(spec, meas, guess=guess, mesh=mesh, options=options)
+    fit = estimate(spec, meas, guess=guess, mesh=mesh, options=options, sigma=sigma)
     if not fit.success:
         notes.append(f"the base fit did not converge ({fit.message}); the diagnosis describes its last iterate")
     return fit
@@ -594,7 +594,9 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
              confirm_top: int = 2, window: float | None = None, guess: Mapping | Sequence[float] | None = None,
              mesh=None, options: Mapping[str, Any] | None = None, holdout: tuple | str | None = "auto",
              max_effects: int = 3, workers: int | None = None, refit_timeout: float = 180.0,
-             refine: bool = True, variant: bool | str = "auto") -> DiagnosisReport:
+             refine: bool = True, variant: bool | str = "auto",
+             sigma: str | Mapping[str, float | str] | None = None,
+             flight_window: Sequence[float] | None = None) -> DiagnosisReport:
     """Fit ``model`` to ``data`` and find what it misses::
 
         fit -> compare -> locate -> plausibility
@@ -640,6 +642,16 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
         variant (``rocketid.diagnostics.variant``): ``"auto"`` does so unless the model
         itself is explained (the time-knot drag absorbs most force effects, so "nothing
         missing" or a partial answer on it needs the variant's word); True always.
+    sigma : "estimate" or mapping, optional
+        Noise levels of the base fit (:func:`rocketid.estimate`'s ``sigma``). Estimated
+        sigmas are then held fixed: every refit, score test and hold-out check uses them.
+        They are estimated from the base model's residuals, so a missing effect inflates
+        them and "reaches the noise" means "reaches the base fit's residual level": give
+        the sensor's sigma when it is known.
+    flight_window : (float, float), optional
+        Diagnose only the flight window ``(T0, T1)`` (s): the model and the data are cut to
+        it (:func:`rocketid.start.apply_window`; a window that starts in flight estimates the
+        initial states the data determine), and everything after works on the windowed model.
 
     Returns
     -------
@@ -656,6 +668,15 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
     holdout_window(spec, holdout)           # refuse a bad window before any work
     meas, data_label = _read_data(data, spec)
     notes: list[str] = []
+    if flight_window is not None:
+        from ..start import apply_window, window_guess
+        p_full = spec.parameter_vector(guess)
+        spec_w, meas, wnotes = apply_window(spec, meas, flight_window, p_full)
+        notes.extend(wnotes)
+        guess = window_guess(spec, spec_w, p_full)
+        spec = spec_w
+        if mesh is not None:
+            raise SettingsError("flight_window cuts the model: give no mesh (the default mesh of the window is used)")
     timings: dict = {}
 
     def timed(key, fn, *args, **kw):
@@ -664,7 +685,8 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
         timings[key] = time.perf_counter() - t0
         return value
 
-    fit = timed("fit_s", _fit_base, spec, meas, guess, mesh, options, notes)
+    fit = timed("fit_s", _fit_base, spec, meas, guess, mesh, options, notes, sigma)
+    meas = fit.prepared.measurements  # with the estimated sigmas, if any
     comp, loc, plaus = timed("describe_s", _describe, fit, level, window, notes)
     effects = _candidate_effects(candidates)
     disc, ranking = None, None

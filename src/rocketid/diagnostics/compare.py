@@ -315,6 +315,9 @@ class Comparison:
     level : float
         Significance level of the verdicts.
     notes : tuple of str
+    predicted_only : tuple
+        ``(output name, times, values)`` of each model output the data do not measure: the
+        fitted model's prediction at the mesh nodes (plotted, not tested).
     """
 
     model: str
@@ -327,6 +330,7 @@ class Comparison:
     whiteness: LjungBox
     level: float = 0.05
     notes: tuple = ()
+    predicted_only: tuple = ()
 
     def __getitem__(self, name: str) -> ChannelComparison:
         for c in self.channels:
@@ -387,7 +391,8 @@ class Comparison:
                 "n_estimated": self.n_estimated, "fits_to_noise": self.fits_to_noise,
                 "criterion": {k: float(v) for k, v in self.criterion.items()},
                 "criterion_source": self.criterion_source,
-                "channels": [c.to_dict() for c in self.channels], "notes": list(self.notes)}
+                "channels": [c.to_dict() for c in self.channels], "notes": list(self.notes),
+                "predicted_only": [name for name, _, _ in self.predicted_only]}
 
     # ---- plots
     def plot(self, path=None, *, title: str | None = None):
@@ -397,9 +402,15 @@ class Comparison:
         Returns the matplotlib figure (saved to ``path`` when given).
         """
         plt = _pyplot()
-        n = len(self.channels)
+        n = len(self.channels) + len(self.predicted_only)
         fig, axes = plt.subplots(n, 2, figsize=(11, 2.5 * n + 0.6), squeeze=False,
                                  gridspec_kw={"width_ratios": [1, 1.4]})
+        for (a1, a2), (name, t, y) in zip(axes[len(self.channels):], self.predicted_only):
+            a1.plot(t, y, "-", lw=1.2, color="tab:blue", label="model (not measured)")
+            a1.set_ylabel(name)
+            a1.legend(loc="upper left", fontsize=8, frameon=False)
+            a2.axis("off")
+            a2.text(0.02, 0.5, f"{name} is not measured: predicted, not fitted", transform=a2.transAxes, fontsize=9)
         for (a1, a2), c in zip(axes, self.channels):
             k = _stride(c.n)
             a1.plot(c.times[::k], c.measured[::k], ".", ms=1.5, color="0.55", label="measured", rasterized=True)
@@ -569,9 +580,14 @@ def compare(fit: EstimationResult, *, lags: int | None = None, level: float = 0.
                         f"{c.normality.skewness:.2f}, kurtosis {c.normality.kurtosis:.2f})")
         if bits:
             notes.append(f"channel {c.name} residuals are " + "; ".join(bits))
+    predicted = tuple((name, np.asarray(fit.node_times, float), np.asarray(fit.predict(name), float))
+                      for name in fit.unmeasured_outputs)
+    if predicted:
+        notes.append(f"output(s) {', '.join(n for n, _, _ in predicted)} are not in the data: predicted (plotted), "
+                     "not fitted")
     if crit["eta"] < 0.1 and any(c.whiteness.p_value < level / m for c in chans):
         notes.append(f"eta = {crit['eta']:.3g} is small although the residuals are not white: eta (7.10) tests "
                      "skewness and kurtosis, not whiteness")
     return Comparison(model=fit.spec.name, channels=tuple(chans), chi2_per_dof=float(fit.chi2_per_dof),
                       n_data=int(N), n_estimated=int(p), criterion=crit, criterion_source=source, whiteness=pooled,
-                      level=float(level), notes=tuple(notes))
+                      level=float(level), notes=tuple(notes), predicted_only=predicted)
