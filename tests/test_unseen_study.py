@@ -44,6 +44,8 @@ KNOWN_FAILURES: dict[str, str] = {
                     "1.086 against the band 1.082: partly explained",
     "back-pressure+headwind": "5e37825 and e16b567: a spurious misalignment (0.43 deg) added first, then "
                               "back_pressure and wind; chi2/dof 1.043, h not white, partly explained",
+    "tailwind-jet+time-offset": "e16b567: wind_pl_9 + time_offset right, plus a spurious bias_h (-0.28 +- 0.16 m), "
+                                "verdict explained (on 5e37825: wind_surface_8 + time_offset, right)",
     "sliver-tailoff": "main 5e37825: wind + transonic_drag + bias_x, no thrust term, chi2/dof 2.43, partly explained",
 }
 
