@@ -44,7 +44,8 @@ KNOWN_FAILURES: dict[str, str] = {
                     "1.086 against the band 1.082: partly explained",
     "back-pressure+headwind": "5e37825 and e16b567: a spurious misalignment (0.43 deg) added first, then "
                               "back_pressure and wind; chi2/dof 1.043, h not white, partly explained",
-    "sliver-tailoff": "main 5e37825: wind + transonic_drag + bias_x, no thrust term, chi2/dof 2.43, partly explained",
+    "sliver-tailoff": "e16b567: drag_mach_5 + wind_pl_9 (94 m/s at the top knot), CD_5 0.75 for 0.40, no thrust "
+                      "term, chi2/dof 0.983, verdict explained (5e37825: three wrong effects, partly explained)",
 }
 
 
