@@ -389,3 +389,33 @@ def test_a_sensor_bias_refines_to_a_drifting_bias(channel, ra66m_spec):
     for t, want in ((spec.t0, 2.0), (spec.t0 + 10.0, 5.0)):
         diff = (out - base).xreplace({spec.symbol(f"b_{channel}"): 2.0, spec.symbol(f"db_{channel}"): 0.3, spec.t: t})
         assert float(diff) == pytest.approx(want, abs=1e-12)
+
+
+def test_a_heavier_vehicle_is_found_as_a_start_mass_error(ra66m_spec):
+    """The data fly RA-66M's vehicle declared 150 kg heavier (its own Vehicle value: the mass constant, not the
+    effect's expression); the model as stated plus ``start_mass`` recovers the extra mass, and the size is
+    judged against the vehicle's mass (1 % of it)."""
+    from dataclasses import replace as dc_replace
+
+    from rocketid.cases.ra66 import ra66_vehicle_model
+    from rocketid.cases.ra66m import RA66M_MACH_KNOTS, ra66m_alpha, ra66m_truth
+    from rocketid.cases.vehicle import RA66_VEHICLE
+    from rocketid.diagnostics.effects import Vehicle
+
+    def aero(m, fc, alpha):
+        cd = m.table("CD_M", fc.mach, RA66M_MACH_KNOTS, 0.4, bounds=(0.01, 2.0), nominal=0.4)
+        return cd, m.parameter("CL_alpha", 2.0, bounds=(0.0, 10.0), nominal=2.5) * alpha
+
+    heavy = ra66_vehicle_model("heavy", "RA-66M 150 kg heavier", ra66m_alpha, aero,
+                               vehicle=dc_replace(RA66_VEHICLE, mass0=RA66_VEHICLE.mass0 + 150.0)).freeze()
+    data = ri.simulate_measurements(heavy, ra66m_truth(heavy), ri.ra66_times(), seed=11)
+    spec = with_effects(ra66m_spec, ["start_mass"])
+    fit = ri.estimate(spec, data, guess={n: v for n, v in zip(ra66m_spec.parameter_names, ra66m_truth(ra66m_spec))})
+    assert fit.success
+    from rocketid.estimability import uncertainty
+    sd = uncertainty(fit).standard_errors[spec.parameter_names.index("dm_start")]
+    assert abs(fit.value("dm_start") - 150.0) < 4 * sd, (fit.value("dm_start"), sd)
+    assert abs(fit.chi2_per_dof - 1) < 0.05
+    veh = Vehicle(thrust=4e5, mass=20e3, mass_flow=100.0, speed=900.0, start_speed=0.0, duration=66.0,
+                  altitude=(0.0, 3e4), mach=(0.0, 2.7), sigma={"x": 1.0}, sample_interval=0.01)
+    assert CATALOGUE["start_mass"].sizes(veh)["dm_start"] == pytest.approx(200.0)

@@ -362,3 +362,31 @@ def test_implausible_sizes_and_undetermined_parameters(ra66_noisy_fit):
     assert d["passed"] is False and len(d["parameters"]) == 8
     with pytest.raises(SettingsError):
         check_plausibility("fit")
+
+
+# ---------------------------------------------------------------------------
+# the supersonic check: a drag coefficient that climbs with Mach above 1.5
+# ---------------------------------------------------------------------------
+
+
+def test_a_declining_supersonic_drag_passes(clean_fit, ra66_noisy_fit):
+    """RA-66M's drag falls from 0.52 at Mach 1.3 to 0.36 at 2.8, RA-66's is constant: no flag."""
+    for fit in (clean_fit, ra66_noisy_fit):
+        assert not check_plausibility(fit).flagged("supersonic-rise"), fit.spec.name
+
+
+def test_a_supersonic_drag_rise_is_flagged(m_spec):
+    """Data flown with a drag table that climbs from 0.42 at Mach 2 to 0.60 at Mach 2.8 (no real vehicle
+    does; the data are made so on purpose): the fit recovers the climb and the check flags it, naming the
+    table's knots, with a standard error from the covariance."""
+    truth = ra66m_truth(m_spec)
+    truth[m_spec.parameter_names.index("CD_M_6")] = 0.60
+    data = ri.simulate_measurements(m_spec, truth, ri.ra66_times(), seed=3)
+    fit = ri.estimate(m_spec, data)
+    assert fit.success
+    flags = check_plausibility(fit).flagged("supersonic-rise")
+    assert len(flags) == 1 and flags[0].severity == "fail"
+    assert "CD_M_6" in flags[0].parameters
+    assert "rises from 0.4" in flags[0].message and "+-" in flags[0].message
+    # a tolerance larger than the climb lets it pass: the check compares the rise with its tolerance
+    assert not check_plausibility(fit, supersonic_tolerance=0.5).flagged("supersonic-rise")

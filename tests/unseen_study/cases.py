@@ -14,7 +14,11 @@ these, and each of ``needed`` must be there). Sizes, relative to Kestrel-S (thru
 - Earth rotation at Andoya (69.3 N), launched north-east (azimuth 45 deg);
 - altitude sensor bias drifting from 3 m to 9 m over the 40 s (0.15 m/s);
 - time-tag offset 20 ms (half a sample at 25 Hz);
-- a start mass 25 kg above the declared 1500 kg (1.7 %): no catalogue effect has this shape;
+- a start mass 25 kg above the declared 1500 kg (1.7 %): when this case was written no catalogue
+  effect had this shape (the diagnosis called a thrust profile explained); the catalogue's
+  ``start_mass`` was added after that failure was measured, so this case is no longer evidence on
+  unseen physics -- it checks that the effect, once in the catalogue, wins against the thrust
+  profile that mimics it;
 - two pairs; eight clean seeds.
 """
 
@@ -45,7 +49,8 @@ class Case:
 def family(effect: str) -> str:
     """The catalogue family of an effect name (``wind_surface_6`` -> ``wind``, ``bias_h_drift`` -> ``bias_h``)."""
     for fam in ("thrust_profile", "wind", "density", "back_pressure", "drag_mach", "bias_x", "bias_h", "bias_v",
-                "misalignment", "earth_rotation", "time_offset", "transonic_drag", "mass_flow", "scale_v"):
+                "misalignment", "earth_rotation", "time_offset", "transonic_drag", "mass_flow", "start_mass",
+                "scale_v"):
         if effect == fam or effect.startswith(fam + "_"):
             return fam
     return effect
@@ -79,8 +84,8 @@ CASES = (
          "time tags 20 ms late (exact shift)",
          right=frozenset({"time_offset"}), needed=frozenset({"time_offset"}), sizes=(("tau", 0.02),)),
     Case("heavy-start", Hidden(dm0=25.0), 309,
-         "start mass 25 kg (1.7 %) above the declared (no catalogue effect)",
-         out_of_catalogue=True),
+         "start mass 25 kg (1.7 %) above the declared",
+         right=frozenset({"start_mass"}), needed=frozenset({"start_mass"}), sizes=(("dm_start", 25.0),)),
     Case("back-pressure+headwind", Hidden(A_e=0.05, wind=(5.0, 20.0)), 310,
          "back-pressure A_e 0.05 m^2 + headwind 5 -> 25 m/s",
          right=frozenset({"back_pressure", "wind"}), needed=frozenset({"back_pressure", "wind"}),

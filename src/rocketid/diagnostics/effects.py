@@ -383,6 +383,15 @@ def _mass_flow(m: Model) -> tuple:
     return (eps,)
 
 
+def _start_mass(m: Model) -> tuple:
+    sym, mass = _role_definition(m, "mass", "start_mass")
+    dm = m.parameter("dm_start", 0.0, nominal=100.0)
+    # the whole mass history shifted by dm_start: a heavier (or lighter) vehicle at the start, burning the
+    # same propellant (a payload, a ballast, a propellant load off its stated value)
+    m.redefine(sym, mass + dm)
+    return (dm,)
+
+
 TRANSONIC_MACH = 1.1
 TRANSONIC_WIDTH = 0.2
 
@@ -990,6 +999,9 @@ def _build_catalogue() -> dict[str, Effect]:
         Effect("mass_flow", "mass-flow error", "mass", _mass_flow,
                "mass m(t0) - (m(t0) - m(t)) (1 + eps_mdot): the mass flow scaled by 1 + eps_mdot",
                {"eps_mdot": 0.02}),
+        Effect("start_mass", "start-mass error", "mass", _start_mass,
+               "mass m(t) + dm_start, kg: the vehicle heavier (or lighter) than stated by a constant amount",
+               {"dm_start": 200.0}, relative=lambda veh: {"dm_start": 0.01 * veh.mass}),
         Effect("transonic_drag", "transonic drag rise", "aero", _transonic_drag,
                f"cd + dCD_transonic exp(-((M - {TRANSONIC_MACH:g})/{TRANSONIC_WIDTH:g})^2/2)", {"dCD_transonic": 0.2},
                refine=_refine_drag),

@@ -19,7 +19,29 @@ and the fitted trajectory, and flag:
 ``subsonic-flat``   time-knot drag that varies by more than
                     ``subsonic_spread`` (relative) between knots below Mach 0.8,
                     where a slender body's drag is nearly constant
+``supersonic-rise`` the drag coefficient flown (the model's drag role along the
+                    fitted trajectory, whatever its parameterization and the
+                    effects added to it) rising with the Mach number above
+                    Mach 1.5 by more than ``supersonic_tolerance`` plus two
+                    standard errors (below)
 ==================  ==========================================================
+
+The supersonic check. Past the transonic peak (Mach 1.0-1.3 for a launch
+vehicle or a finned rocket) every part of the drag coefficient falls with the
+Mach number: wave drag as ``1 / sqrt(M^2 - 1)``, base drag and skin friction
+too; tabulated rocket drag curves (Stage-30's, RA-66M's, missile DATCOM
+estimates) decline monotonically from Mach 1.5 on. A fitted drag that climbs
+there is standing in for something else -- measured: a late thrust shortfall of
+a solid motor, fitted as a drag correction in Mach plus a wind, drew a CD
+rising from 0.48 at Mach 2.5 to 0.75 at Mach 3 and reached the noise. The
+check evaluates the drag coefficient and the Mach number at the fit's
+collocation nodes where Mach >= :data:`SUPERSONIC_MACH`, takes the largest rise
+``CD(M_b) - min over M_a < M_b of CD(M_a)`` and its standard error (the
+gradient of the drag coefficient in the parameters, with the states held, and
+the parameter covariance), and flags a rise above ``supersonic_tolerance``
+(default 0.05, the Mach-consistency test's tolerance) plus two standard
+errors. It needs the ``drag_coefficient`` and ``mach`` roles and at least
+:data:`SUPERSONIC_SPAN` of Mach flown above 1.5.
 
 The Mach-consistency test. For a drag family piecewise linear in time on
 knots ``t_k`` (``CD0..CD6``), the Mach number ``M_k`` at each knot time comes
@@ -72,7 +94,7 @@ class Flag:
     ----------
     code : str
         ``at-bound``, ``wrong-sign``, ``implausible``, ``undetermined``,
-        ``mach-smooth`` or ``subsonic-flat``.
+        ``mach-smooth``, ``subsonic-flat`` or ``supersonic-rise``.
     severity : str
         ``fail`` (physically impossible or held by a bound), ``warn``, ``info``.
     parameters : tuple of str
@@ -309,7 +331,7 @@ def check_plausibility(fit: EstimationResult, *, uncertainty=None, level: float 
                        drag_range: tuple = (0.05, 1.5), mach_degree: int = 2, mach_tolerance: float = 0.05,
                        transonic: bool = True,
                        subsonic_spread: float = 0.5, effect_factor: float = 5.0,
-                       realistic: dict | None = None) -> Plausibility:
+                       realistic: dict | None = None, supersonic_tolerance: float = 0.05) -> Plausibility:
     """Check the estimated coefficients of ``fit`` (item 3 of the diagnosis).
 
     Parameters
@@ -334,6 +356,9 @@ def check_plausibility(fit: EstimationResult, *, uncertainty=None, level: float 
         An effect parameter larger than this many times its realistic size is implausible.
     realistic : dict, optional
         ``{parameter name: realistic magnitude}`` (default: from the effects catalogue).
+    supersonic_tolerance : float
+        Largest rise of the drag coefficient with the Mach number above :data:`SUPERSONIC_MACH`
+        (drag-coefficient units) beyond two standard errors that is not flagged.
 
     Returns
     -------
@@ -436,6 +461,9 @@ def check_plausibility(fit: EstimationResult, *, uncertainty=None, level: float 
                                       f"{fam.symbol} varies from {vals.min():.3g} to {vals.max():.3g} "
                                       f"({100 * spread / mean:.0f} % of its mean) between knots below Mach 0.8 "
                                       f"({', '.join(ks)}); a slender body's subsonic drag is nearly constant"))
+    rise = _supersonic_rise(fit, cov, supersonic_tolerance)
+    if rise is not None:
+        flags.append(rise)
     order = {s: i for i, s in enumerate(SEVERITIES)}
     flags.sort(key=lambda f: order[f.severity])
     return Plausibility(model=spec.name, names=names, estimates=p, standard_errors=se, lower=lo, upper=hi, kinds=kinds,
@@ -444,6 +472,65 @@ def check_plausibility(fit: EstimationResult, *, uncertainty=None, level: float 
 
 TRANSONIC_CENTRE = 1.1
 TRANSONIC_WIDTH = 0.25
+
+SUPERSONIC_MACH = 1.5
+"""Above this Mach number a launch vehicle's drag coefficient falls with the Mach number (module notes)."""
+
+SUPERSONIC_SPAN = 0.3
+"""The supersonic check needs at least this span of Mach numbers flown above :data:`SUPERSONIC_MACH`."""
+
+
+def _supersonic_rise(fit: EstimationResult, cov, tolerance: float) -> Flag | None:
+    """The ``supersonic-rise`` flag of ``fit`` (module notes), or None (no rise, or no roles, or too little
+    supersonic flight to tell)."""
+    spec = fit.spec
+    cd_sym, mach_sym = spec.role("drag_coefficient"), spec.role("mach")
+    if cd_sym is None or mach_sym is None or tolerance < 0:
+        return None
+    times = np.asarray(fit.node_times, float)
+    states = np.asarray(fit.state_trajectories, float)
+    p = np.asarray(fit.p, float)
+    cd_expr = spec.expand(cd_sym)
+    with np.errstate(all="ignore"):
+        mach = evaluate_along(spec, mach_sym, times, states, p)
+        cd = evaluate_along(spec, cd_expr, times, states, p)
+    keep = np.isfinite(mach) & np.isfinite(cd) & (mach >= SUPERSONIC_MACH)
+    if keep.sum() < 3 or np.ptp(mach[keep]) < SUPERSONIC_SPAN:
+        return None
+    order = np.argsort(mach[keep], kind="stable")
+    idx = np.flatnonzero(keep)[order]
+    m, c = mach[idx], cd[idx]
+    low = np.minimum.accumulate(c)
+    rises = c - low
+    b = int(np.argmax(rises))
+    if rises[b] <= tolerance:
+        return None
+    a = int(np.argmin(c[:b + 1]))
+    names = spec.parameter_names
+    used = {str(x) for x in cd_expr.free_symbols}
+    cols = [i for i, n in enumerate(names) if n in used]
+    sd = 0.0
+    if cov is not None and cols:
+        # gradient of CD(M_b) - CD(M_a) in the parameters, the states held at the fit
+        pts = idx[[a, b]]
+        g = np.zeros(len(names))
+        for i in cols:
+            step = 1e-6 * max(1.0, abs(p[i]))
+            q = p.copy()
+            q[i] += step
+            with np.errstate(all="ignore"):
+                moved = evaluate_along(spec, cd_expr, times[pts], states[pts], q)
+            g[i] = ((moved[1] - moved[0]) - (cd[pts[1]] - cd[pts[0]])) / step
+        var = float(g @ np.asarray(cov, float) @ g)
+        sd = float(np.sqrt(var)) if np.isfinite(var) and var > 0 else 0.0
+    if rises[b] <= tolerance + 2 * sd:
+        return None
+    drag = tuple(n for n in names if n in used and _kind(n) == "drag") or tuple(names[i] for i in cols)
+    return Flag("supersonic-rise", "fail", drag,
+                f"the drag coefficient rises from {c[a]:.3g} at Mach {m[a]:.2f} to {c[b]:.3g} at Mach {m[b]:.2f} "
+                f"(+{rises[b]:.3g} +- {sd:.2g}; tolerance {tolerance:g}): above Mach {SUPERSONIC_MACH:g} a launch "
+                "vehicle's drag falls with the Mach number, so the drag is standing in for another effect "
+                "(a thrust or mass error late in the flight, a wind aloft)")
 
 
 def _basis(mach: np.ndarray, degree: int, transonic: bool) -> np.ndarray:

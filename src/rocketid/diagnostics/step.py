@@ -278,9 +278,10 @@ def final_verdict(added: bool, fits: bool, base_fits: bool, last: Acceptance | N
     return "explained", notes
 
 
-REFINE_FAMILIES = 3
-"""At most this many families are refined at a step: the chosen effect's and the next significant ones,
-by the objective their refit reached."""
+REFINE_FAMILIES = 8
+"""At most this many families are refined at a step: the chosen effect's and every other significant one,
+by the objective their refit reached. (It was 3: on a late thrust shortfall of a solid motor the thrust
+family came fourth, behind density, drag and wind, and its shapes in time were never tried.)"""
 
 
 def _families_to_refine(accs: Sequence[Acceptance], scr: Screen, vehicle: Vehicle, chosen: int | None) -> list[int]:
