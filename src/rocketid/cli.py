@@ -240,16 +240,19 @@ def ipopt_options(pairs: Iterable[tuple[str, str]]) -> dict[str, Any]:
 
 def read_data(path: str | os.PathLike, spec: ModelSpec, *, time_column: str = "t",
               columns: Mapping[str, str] | None = None, sigma: Mapping[str, float] | None = None,
-              unmeasured: Sequence[str] = (), window: tuple[float, float] | None = None) -> Measurements:
+              unmeasured: Sequence[str] = (), window: tuple[float, float] | None = None,
+              sigma_columns: Mapping[str, str] | None = None) -> Measurements:
     """Read a CSV with one column per model output (see :func:`rocketid.data.read_csv`);
-    ``columns`` and ``sigma`` are keyed by output name, checked against the model.
+    ``columns``, ``sigma`` and ``sigma_columns`` (per-sample sigma columns, ``--sigma-column``)
+    are keyed by output name, checked against the model.
 
     An output without a column is left out (predicted, not fitted) when it is named in
     ``unmeasured`` or when the file has no column that goes unread; an empty cell means
     "not measured then". ``window`` keeps the samples in ``[t0, t1]``.
     """
     outputs = spec.output_names
-    for option, names in (("--column", columns), ("--sigma", sigma), ("--unmeasured", unmeasured)):
+    for option, names in (("--column", columns), ("--sigma", sigma), ("--sigma-column", sigma_columns),
+                          ("--unmeasured", unmeasured)):
         for name in names or {}:
             if name not in outputs:
                 raise SettingsError(f"{option} {name}: model {spec.name!r} has no output {name!r}; "
@@ -257,8 +260,13 @@ def read_data(path: str | os.PathLike, spec: ModelSpec, *, time_column: str = "t
     wanted = [o for o in outputs if o not in set(unmeasured)]
     if not wanted:
         raise SettingsError(f"--unmeasured names every output of model {spec.name!r}: nothing is left to fit")
+    skipped = [k for k in (sigma_columns or {}) if k not in wanted]
+    if skipped:
+        raise SettingsError(f"--sigma-column {skipped[0]}={sigma_columns[skipped[0]]}: {skipped[0]!r} is named by "
+                            "--unmeasured (not fitted); drop one of the two")
     data = read_csv(path, wanted, time_column=time_column, column_map=columns,
-                    sigma={k: v for k, v in (sigma or {}).items() if k in wanted}, missing="auto")
+                    sigma={k: v for k, v in (sigma or {}).items() if k in wanted}, missing="auto",
+                    sigma_columns=sigma_columns)
     if window is not None:
         data = data.window(*window)
     return data
@@ -336,6 +344,14 @@ def sigma_option_decl():
                              "NAME=quantized (or quantized:STEP) sets it to the rounding error STEP/sqrt(12).")
 
 
+def sigma_column_option_decl():
+    """The ``--sigma-column NAME=COLUMN`` option: a column of per-sample sigmas of output NAME."""
+    return click.option("--sigma-column", "sigma_columns", multiple=True, type=NameValue(str, "CSV column name"),
+                        metavar="NAME=CSVCOL",
+                        help="Read the noise standard deviation of output NAME at each sample from column CSVCOL "
+                             "(per-sample sigma, repeatable); each sample's residual is weighted by 1/sigma^2.")
+
+
 def window_option_decl(name: str = "--window"):
     """The flight-window option ``--window T0:T1``."""
     return click.option(name, "window_text", default=None, metavar="T0:T1",
@@ -373,7 +389,7 @@ def windowed_inputs(spec: ModelSpec, data: Measurements, guess, window, n_elemen
 
 
 def data_options(f):
-    """``--column``, ``--time-column``, ``--sigma``, ``--unmeasured``, ``--window`` (reading
+    """``--column``, ``--time-column``, ``--sigma``, ``--sigma-column``, ``--unmeasured``, ``--window`` (reading
     DATA.csv) and ``--elements``, ``--K`` (the mesh): the options of every command that fits a
     model to a data file."""
     for opt in reversed([
@@ -381,6 +397,7 @@ def data_options(f):
                      metavar="NAME=CSVCOL", help="Read output NAME from column CSVCOL (repeatable)."),
         click.option("--time-column", default="t", show_default=True, help="Name of the time column."),
         sigma_option_decl(),
+        sigma_column_option_decl(),
         unmeasured_option_decl(),
         window_option_decl(),
         click.option("--elements", "n_elements", type=click.IntRange(min=1), default=None, metavar="N",
@@ -436,7 +453,7 @@ def prepare_verbosely(spec: ModelSpec, data: Measurements, mesh):
 
 
 def fit_inputs(spec: ModelSpec, data_file, *, guesses, columns, time_column, sigmas, n_elements, K,
-               unmeasured=()):
+               unmeasured=(), sigma_columns=()):
     """``(guess, mesh, data)`` from the options of a command that fits ``spec`` to DATA.csv
     (``--guess`` checked against the bounds, :func:`data_options`; the window is applied by
     :func:`windowed_inputs`)."""
@@ -445,7 +462,8 @@ def fit_inputs(spec: ModelSpec, data_file, *, guesses, columns, time_column, sig
     mesh = make_mesh(spec, n_elements, K)
     sigma = sigma_argument(sigmas, spec)
     data = read_data(data_file, spec, time_column=time_column, columns=assignments(columns, "--column"),
-                     sigma=given_sigmas(sigma), unmeasured=tuple(unmeasured))
+                     sigma=given_sigmas(sigma), unmeasured=tuple(unmeasured),
+                     sigma_columns=assignments(sigma_columns, "--sigma-column"))
     if isinstance(sigma, Mapping):
         from .data import resolve_quantized
         quantized = {k: v for k, v in sigma.items() if isinstance(v, str) and v.startswith("quantized")}
@@ -622,7 +640,7 @@ def flight_labels(paths: Sequence[str]) -> list[str]:
 
 
 def read_flights(paths: Sequence[str], spec: ModelSpec, *, columns, time_column, sigmas, n_elements, K,
-                 unmeasured=(), window=None):
+                 unmeasured=(), window=None, sigma_columns=()):
     """:class:`rocketid.joint.Flight` values for several data files fitted with one model
     (each cut to ``window`` with its own initial states, :func:`windowed_inputs`)."""
     from .joint import Flight
@@ -631,7 +649,8 @@ def read_flights(paths: Sequence[str], spec: ModelSpec, *, columns, time_column,
     flights = []
     for label, path in zip(flight_labels(paths), paths):
         data = read_data(path, spec, time_column=time_column, columns=assignments(columns, "--column"),
-                         sigma=given_sigmas(sigma_argument(sigmas, spec)), unmeasured=tuple(unmeasured))
+                         sigma=given_sigmas(sigma_argument(sigmas, spec)), unmeasured=tuple(unmeasured),
+                         sigma_columns=assignments(sigma_columns, "--sigma-column"))
         spec_f, data, _, mesh, _ = windowed_inputs(spec, data, spec.guess, window, n_elements, K)
         check_determined(spec_f, data)
         flights.append(Flight(label, spec_f, data, mesh))
@@ -652,8 +671,8 @@ def read_flights(paths: Sequence[str], spec: ModelSpec, *, columns, time_column,
 @click.option("--out", "out", type=click.Path(dir_okay=False), default=None, metavar="FIT.json",
               help="Write the result as JSON.")
 @verbose_option
-def estimate_command(data_files, model, columns, time_column, sigmas, unmeasured, window_text, n_elements, K, guesses,
-                     per_flight, ipopt, out):
+def estimate_command(data_files, model, columns, time_column, sigmas, sigma_columns, unmeasured, window_text,
+                     n_elements, K, guesses, per_flight, ipopt, out):
     """Estimate the model's parameters from measurements in DATA.csv.
 
     Prints the summary; with --out writes FIT.json (success, parameters,
@@ -696,7 +715,8 @@ def estimate_command(data_files, model, columns, time_column, sigmas, unmeasured
         raise SettingsError("--per-flight needs several data files (one per flight)")
     data_file = data_files[0]
     guess, mesh, data = fit_inputs(spec, data_file, guesses=guesses, columns=columns, time_column=time_column,
-                                   sigmas=sigmas, n_elements=n_elements, K=K, unmeasured=unmeasured)
+                                   sigmas=sigmas, n_elements=n_elements, K=K, unmeasured=unmeasured,
+                                   sigma_columns=sigma_columns)
     status(f"read {data.n_samples} values of {', '.join(data.names)} from {data_file}")
     spec, data, guess, mesh, wnotes = windowed_inputs(spec, data, guess, window, n_elements, K)
     check_determined(spec, data)

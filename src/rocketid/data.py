@@ -22,7 +22,7 @@ import numpy as np
 from .errors import DataError
 from .output import write_csv
 
-__all__ = ["Channel", "Measurements", "read_csv", "read_channels", "sigma_request", "quantization_step",
+__all__ = ["Channel", "Measurements", "equivalent_sigma", "read_csv", "read_channels", "sigma_request", "quantization_step",
            "resolve_quantized", "QUANTIZED", "ESTIMATE", "MAX_VALUE", "SIGMA_RANGE"]
 
 #: The word that asks for a channel's noise level to be estimated (``sigma="estimate"``,
@@ -49,14 +49,15 @@ class Channel:
     times : ndarray, shape (n,)
         Sample times, strictly increasing.
     values : ndarray, shape (n,)
-    sigma : float or None
-        Noise standard deviation; None means "use the model's".
+    sigma : float, ndarray of shape (n,), or None
+        Noise standard deviation: one for the channel, one per sample (read-only array), or
+        None ("use the model's"). Per-sample sigmas weight each residual by ``1/sigma_i^2``.
     """
 
     name: str
     times: np.ndarray
     values: np.ndarray
-    sigma: float | None = None
+    sigma: float | np.ndarray | None = None
 
     def __post_init__(self):
         t = np.asarray(self.times, dtype=float).ravel()
@@ -87,7 +88,9 @@ class Channel:
             i = int(np.flatnonzero(dt < 0)[0])
             raise DataError(f"channel {self.name!r}: times are not sorted (t = {t[i]:g} is followed by "
                             f"{t[i + 1]:g} at sample {i + 1}); sort the data by time")
-        if self.sigma is not None:
+        if self.sigma is not None and np.ndim(self.sigma) > 0:
+            object.__setattr__(self, "sigma", _per_sample_sigma(self.name, self.sigma, t))
+        elif self.sigma is not None:
             try:
                 sigma = float(self.sigma)
             except (TypeError, ValueError):
@@ -103,6 +106,64 @@ class Channel:
         y.flags.writeable = False
         object.__setattr__(self, "times", t)
         object.__setattr__(self, "values", y)
+
+
+    @property
+    def per_sample(self) -> bool:
+        """True when the channel has one sigma per sample (an array), not one for all."""
+        return isinstance(self.sigma, np.ndarray)
+
+    def sigma_array(self, default: float | None = None) -> np.ndarray:
+        """The noise standard deviation at every sample, shape (n,): the per-sample values, or
+        the channel's one sigma (``default`` when it has none) repeated.
+
+        Raises
+        ------
+        DataError
+            The channel has no sigma and no ``default`` is given.
+        """
+        if self.per_sample:
+            return self.sigma
+        s = self.sigma if self.sigma is not None else default
+        if s is None:
+            raise DataError(f"channel {self.name!r} has no sigma; give one (sigma=, --sigma {self.name}=VALUE)")
+        return np.full(self.times.size, float(s))
+
+    def select(self, keep: np.ndarray) -> "Channel":
+        """The samples where ``keep`` (a boolean mask or indices) holds, with their sigmas."""
+        sigma = self.sigma[keep] if self.per_sample else self.sigma
+        return Channel(self.name, self.times[keep], self.values[keep], sigma)
+
+
+def equivalent_sigma(sigma: np.ndarray) -> float:
+    """The one sigma with the same total weight as per-sample sigmas, ``1 / sqrt(mean(1 / sigma^2))``:
+    what a channel with per-sample sigmas reports where one number per channel is expected."""
+    sigma = np.asarray(sigma, float)
+    return float(1.0 / np.sqrt(np.mean(1.0 / sigma ** 2)))
+
+
+def _per_sample_sigma(name: str, sigma, times: np.ndarray) -> np.ndarray:
+    """Check and freeze the per-sample sigmas of channel ``name`` (one per sample time)."""
+    try:
+        s = np.array(sigma, dtype=float).ravel()
+    except (TypeError, ValueError):
+        raise DataError(f"channel {name!r}: per-sample sigma must be numbers, got {type(sigma).__name__}") from None
+    if s.size != times.size:
+        raise DataError(f"channel {name!r}: {s.size} per-sample sigmas for {times.size} samples; give one sigma per "
+                        "sample (or one number for the channel)")
+    bad = np.flatnonzero(~(np.isfinite(s) & (s > 0)))
+    if bad.size:
+        i = int(bad[0])
+        raise DataError(f"channel {name!r}: per-sample sigma {s[i]:g} at t = {times[i]:g} (sample {i}; {bad.size} "
+                        "bad in all) is not positive and finite; every sample's sigma must be a positive number")
+    bad = np.flatnonzero((s < SIGMA_RANGE[0]) | (s > SIGMA_RANGE[1]))
+    if bad.size:
+        i = int(bad[0])
+        raise DataError(f"channel {name!r}: per-sample sigma {s[i]:g} at t = {times[i]:g} is out of scale (the weight "
+                        f"1/sigma^2 must be a finite positive number: {SIGMA_RANGE[0]:g} <= sigma <= "
+                        f"{SIGMA_RANGE[1]:g}); check its units")
+    s.flags.writeable = False
+    return s
 
 
 @dataclass(frozen=True)
@@ -154,7 +215,8 @@ class Measurements:
         return sum(c.times.size for c in self.channels)
 
     def with_sigma(self, sigma: Mapping[str, float]) -> "Measurements":
-        """A copy whose named channels have the noise standard deviations ``sigma``.
+        """A copy whose named channels have the noise standard deviations ``sigma`` (a number,
+        or one per sample).
 
         Raises
         ------
@@ -180,7 +242,7 @@ class Measurements:
             keep = (c.times >= t_start) & (c.times <= t_end)
             if not keep.any():
                 raise DataError(f"channel {c.name!r} has no samples in [{t_start:g}, {t_end:g}]")
-            out.append(Channel(c.name, c.times[keep], c.values[keep], c.sigma))
+            out.append(c.select(keep))
         return Measurements(tuple(out))
 
     def to_csv(self, path: str | os.PathLike) -> Path:
@@ -304,7 +366,8 @@ def resolve_quantized(sigma, data: "Measurements"):
 
 def read_csv(path: str | os.PathLike, channels: Sequence[str] = ("x", "h", "v"), *,
              time_column: str = "t", column_map: Mapping[str, str] | None = None,
-             sigma: Mapping[str, float] | None = None, missing: str = "error") -> Measurements:
+             sigma: Mapping[str, float] | None = None, missing: str = "error",
+             sigma_columns: Mapping[str, str] | None = None) -> Measurements:
     """Read measurements from a CSV file with a header row.
 
     Parameters
@@ -322,6 +385,10 @@ def read_csv(path: str | os.PathLike, channels: Sequence[str] = ("x", "h", "v"),
         A channel without a column: an error; left out (an output the data do not measure,
         predicted but not fitted); or left out only when the file has no column that goes
         unread (otherwise the missing one is probably misnamed: an error).
+    sigma_columns : mapping, optional
+        ``{output name: CSV column}``: the column holding each sample's noise standard deviation
+        of that output (per-sample sigma; a cell may be empty only where the output's is). Not
+        together with ``sigma`` for the same output.
 
     Returns
     -------
@@ -332,7 +399,9 @@ def read_csv(path: str | os.PathLike, channels: Sequence[str] = ("x", "h", "v"),
     Raises
     ------
     DataError
-        Missing file or columns, non-numeric cells, NaN, unsorted or duplicate times.
+        Missing file or columns, non-numeric cells, NaN, unsorted or duplicate times; a sigma
+        column that is missing, or has an empty, negative, zero or non-finite cell where the
+        output is measured.
     """
     path = Path(path)
     if path.is_dir():
@@ -361,7 +430,7 @@ def read_csv(path: str | os.PathLike, channels: Sequence[str] = ("x", "h", "v"),
         raise DataError(f"missing must be 'error', 'skip' or 'auto', got {missing!r}")
     wanted = {time_column: time_column, **{c: column_map.get(c, c) for c in channels}}
     absent = [col for col in wanted.values() if col not in header]
-    unread = [h for h in header if h and h not in wanted.values()]
+    unread = [h for h in header if h and h not in wanted.values() and h not in dict(sigma_columns or {}).values()]
     skip = time_column not in absent and len(absent) < len(channels) and (
         missing == "skip" or (missing == "auto" and not unread))
     if absent and skip:
@@ -378,10 +447,28 @@ def read_csv(path: str | os.PathLike, channels: Sequence[str] = ("x", "h", "v"),
                           f"(CLI: --unmeasured {names[0]})")
         raise DataError(f"{path}: missing column(s) {', '.join(absent)}; the file has {', '.join(header)}{hint}. "
                         f"Rename the columns or map them (CLI: --column NAME=COLUMN, API: column_map=){unmeasured}")
-    twice = sorted({col for col in wanted.values() if header.count(col) > 1})
+    sigma_columns = dict(sigma_columns or {})
+    both = [k for k in sigma_columns if k in (sigma or {})]
+    if both:
+        raise DataError(f"sigma of {', '.join(both)} is given both as a number and as a column "
+                        f"({', '.join(sigma_columns[k] for k in both)}); give one (drop --sigma or --sigma-column)")
+    for name, col in sigma_columns.items():
+        if name not in channels:
+            raise DataError(f"sigma column {col!r} is given for {name!r}, which is not a channel read from {path}; "
+                            f"the channels are {', '.join(channels)}")
+        if col not in header:
+            raise DataError(f"{path}: no column {col!r} for the per-sample sigma of {name} (sigma column {name}={col}); "
+                            f"the file has {', '.join(header)}. Name an existing column (CLI: --sigma-column "
+                            f"{name}=COLUMN, API: sigma_columns=)")
+        if col in wanted.values():
+            raise DataError(f"{path}: column {col!r} is read as data; the per-sample sigma of {name} must be a column "
+                            "of its own")
+    wanted_sigma = {f"sigma:{k}": v for k, v in sigma_columns.items()}
+    twice = sorted({col for col in [*wanted.values(), *wanted_sigma.values()] if header.count(col) > 1})
     if twice:
         raise DataError(f"{path}: column(s) {', '.join(twice)} appear more than once in the header; rename or "
                         "remove the extra column so that it is clear which one to read")
+    wanted = {**wanted, **wanted_sigma}
     idx = {key: header.index(col) for key, col in wanted.items()}
     data = {key: np.empty(len(rows)) for key in idx}
     empty = {key: np.zeros(len(rows), bool) for key in idx}
@@ -416,6 +503,16 @@ def read_csv(path: str | os.PathLike, channels: Sequence[str] = ("x", "h", "v"),
         raise DataError(f"sigma is given for {', '.join(map(repr, unknown))}, which is not a channel; "
                         f"the channels are {', '.join(channels)}")
     t = data[time_column]
+    for c, col in sigma_columns.items():
+        key = f"sigma:{c}"
+        s = data[key]
+        bad = np.flatnonzero(~empty[c] & (empty[key] | ~np.isfinite(s) | ~(s > 0)))
+        if bad.size:
+            i = int(bad[0])
+            what = "is empty" if empty[key][i] else f"is {s[i]:g}, not a positive finite number"
+            raise DataError(f"{path}, line {lines[i]}, column {col!r} (per-sample sigma of {c}): the cell {what} where "
+                            f"{c} is measured ({bad.size} such row(s)); every measured sample needs a positive sigma")
+        sigma[c] = s[~empty[c]]
     try:
         # an empty cell: that channel was not measured at that time (multi-rate telemetry, drop-outs)
         return Measurements(tuple(Channel(c, t[~empty[c]], data[c][~empty[c]], sigma.get(c)) for c in channels))
@@ -425,7 +522,8 @@ def read_csv(path: str | os.PathLike, channels: Sequence[str] = ("x", "h", "v"),
 
 def read_channels(files: Mapping[str, str | os.PathLike], *, time_column: str = "t",
                   column_map: Mapping[str, str] | None = None,
-                  sigma: Mapping[str, float] | None = None) -> Measurements:
+                  sigma: Mapping[str, float] | None = None,
+                  sigma_columns: Mapping[str, str] | None = None) -> Measurements:
     """Read measurements from one CSV file per channel, each with its own sample times.
 
     Parameters
@@ -433,7 +531,7 @@ def read_channels(files: Mapping[str, str | os.PathLike], *, time_column: str = 
     files : mapping
         ``{output name: CSV path}``; each file has the time column and the channel's column
         (named like the output, or mapped by ``column_map``).
-    time_column, column_map, sigma
+    time_column, column_map, sigma, sigma_columns
         As for :func:`read_csv`.
 
     Returns
@@ -446,10 +544,16 @@ def read_channels(files: Mapping[str, str | os.PathLike], *, time_column: str = 
         raise DataError("files must be a non-empty mapping {output name: CSV path}")
     column_map = dict(column_map or {})
     sigma = dict(sigma or {})
+    sigma_columns = dict(sigma_columns or {})
+    unknown = [k for k in sigma_columns if k not in files]
+    if unknown:
+        raise DataError(f"sigma column given for {', '.join(map(repr, unknown))}, which has no file; the channels are "
+                        f"{', '.join(files)}")
     channels = []
     for name, path in files.items():
         one = read_csv(path, [name], time_column=time_column, column_map={name: column_map.get(name, name)},
-                       sigma={name: sigma[name]} if name in sigma else None)
+                       sigma={name: sigma[name]} if name in sigma else None,
+                       sigma_columns={name: sigma_columns[name]} if name in sigma_columns else None)
         channels.append(one[name])
     return Measurements(tuple(channels))
 

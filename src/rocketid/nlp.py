@@ -2,11 +2,12 @@
 
 The collocated problem is
 
-    min_x  J(x) = 1/2 sum_k sum_s ((g_k(u_ks) - y_ks) / sigma_k)^2  [+ 1/2 sum_i ((p_i - mu_i) / s_i)^2]
+    min_x  J(x) = 1/2 sum_k sum_s ((g_k(u_ks) - y_ks) / sigma_ks)^2  [+ 1/2 sum_i ((p_i - mu_i) / s_i)^2]
     s.t.   c(x) = [ IC w - s0 ;  F(z_c) for every collocation point c ;  A_lin x ]
            cl <= c(x) <= cu,  xl <= x <= xu
 
-(the bracket: Gaussian priors on parameters, when the model declares them), with the full
+(the bracket: Gaussian priors on parameters, when the model declares them; ``sigma_ks`` is
+channel k's sigma, the same at every sample or one per sample), with the full
 decision vector ``w = T x + w0`` (``T`` is the identity for the
 plain estimation (7.5); for (7.9), ``p = V1 q1 + V2 q2`` with ``q2`` fixed,
 so ``x = [S, q1]`` and the bounds on ``p`` become the linear rows ``A_lin``).
@@ -39,7 +40,7 @@ import scipy.sparse as sps
 
 from .codegen import GeneratedModel, OutputFunction
 from .collocation.transcription import Transcription, VariableLayout
-from .data import Measurements
+from .data import Measurements, equivalent_sigma
 from .errors import SettingsError
 
 __all__ = ["CollocationNLP", "NLPStructure", "HessianStructure", "ParameterTransform", "ReducedLayout", "build_nlp"]
@@ -311,7 +312,7 @@ class _ChannelMaps:
     name: str
     index: int
     values: np.ndarray        # measured
-    sigma: float
+    sigma: np.ndarray         # noise standard deviation per sample, shape (n,)
     fn: OutputFunction
     Mu: sps.csr_matrix        # u = Mu x + u0
     Mu_full: sps.csr_matrix   # u = Mu_full w (before the transform)
@@ -325,6 +326,16 @@ class _ChannelMaps:
     def linear(self) -> bool:
         return self.fn.linear
 
+    @cached_property
+    def weights(self) -> np.ndarray:
+        """``1 / sigma^2`` per sample, shape (n,)."""
+        return 1.0 / self.sigma ** 2
+
+    @cached_property
+    def per_sample(self) -> bool:
+        """True when the samples' sigmas differ (a per-sample sigma)."""
+        return bool(np.any(self.sigma != self.sigma[0]))
+
 
 @dataclass(frozen=True)
 class _Channel:
@@ -337,6 +348,7 @@ class _Channel:
     name = property(lambda self: self.maps.name)
     n = property(lambda self: self.maps.n)
     sigma = property(lambda self: self.maps.sigma)
+    weights = property(lambda self: self.maps.weights)
     linear = property(lambda self: self.maps.fn.linear)
     values = property(lambda self: self.maps.values)
 
@@ -472,7 +484,8 @@ def _build_structure(tr: Transcription, g: GeneratedModel, measurements: Measure
     chans = []
     for k, omap in enumerate(tr.outputs):
         ch = measurements[omap.name]
-        sigma = ch.sigma if ch.sigma is not None else spec.outputs[omap.index].sigma
+        sigma = ch.sigma_array(spec.outputs[omap.index].sigma)
+        sigma.flags.writeable = False
         fn = g.outputs[omap.index]
         Mu = (omap.Mu @ T).tocsr()
         Mu.sort_indices()
@@ -489,7 +502,7 @@ def _build_structure(tr: Transcription, g: GeneratedModel, measurements: Measure
                                   (np.repeat(np.arange(nsamp), gi.size), (np.arange(nsamp)[:, None] * tr.nu + gi).ravel())),
                                  shape=(nsamp, nsamp * tr.nu))
             G = (sel @ Mu).tocsr()
-        chans.append(_ChannelMaps(omap.name, k, ch.values, float(sigma), fn, Mu, omap.Mu, omap.data, nsamp, sel, c0, G))
+        chans.append(_ChannelMaps(omap.name, k, ch.values, sigma, fn, Mu, omap.Mu, omap.data, nsamp, sel, c0, G))
 
     # the linear channels stacked: the objective and gradient are two sparse mat-vecs
     lin_ch = [ch for ch in chans if ch.linear]
@@ -498,7 +511,7 @@ def _build_structure(tr: Transcription, g: GeneratedModel, measurements: Measure
         G_lin = sps.vstack([ch.G for ch in lin_ch], format="csr")
         GT_lin = G_lin.T.tocsr()
         z_lin = np.concatenate([ch.values for ch in lin_ch])
-        w_lin = np.concatenate([np.full(ch.n, 1.0 / ch.sigma ** 2) for ch in lin_ch])
+        w_lin = np.concatenate([ch.weights for ch in lin_ch])
 
     return NLPStructure(
         transcription=tr, generated=g, measurements=measurements, P=P, T=T, Mz=Mz, ic=ic, A_lin=A_lin,
@@ -518,7 +531,7 @@ def _build_hessian(st: NLPStructure) -> HessianStructure:
     H_lin = sps.csr_matrix((n, n))
     for ch in st.channels:
         if ch.linear:
-            H_lin = H_lin + (ch.G.T @ ch.G) / ch.sigma ** 2
+            H_lin = H_lin + ch.G.T @ sps.diags(ch.weights) @ ch.G
     has, _, weight = tr.spec.prior_arrays()
     if has.any():
         # the priors' penalty is quadratic in p = P r + c: a constant P^T W P in the parameter block
@@ -669,7 +682,20 @@ class CollocationNLP:
 
     @property
     def channel_sigmas(self) -> np.ndarray:
-        return np.array([ch.sigma for ch in self._channels])
+        """One sigma per channel, shape (n_channels,): the channel's sigma, or for a channel with
+        per-sample sigmas the one with the same total weight, ``1 / sqrt(mean(1 / sigma_i^2))``
+        (:func:`rocketid.data.equivalent_sigma`; the samples' own are :meth:`channel_sigma_arrays`)."""
+        return np.array([equivalent_sigma(ch.sigma) if ch.maps.per_sample else float(ch.sigma[0])
+                         for ch in self._channels])
+
+    def channel_sigma_arrays(self) -> dict[str, np.ndarray]:
+        """Each channel's noise standard deviation at its samples, ``{name: shape (n,)}``."""
+        return {ch.name: ch.sigma for ch in self._channels}
+
+    @property
+    def per_sample_channels(self) -> tuple[str, ...]:
+        """The channels whose samples have different sigmas (per-sample sigma)."""
+        return tuple(ch.name for ch in self._channels if ch.maps.per_sample)
 
     def channel_slices(self) -> dict[str, slice]:
         """Each channel's rows in the stacked residuals (:meth:`output_jacobian`, :meth:`sigma_vector`)."""
@@ -728,7 +754,7 @@ class CollocationNLP:
             # (then spinning) its threads cost 15 ms a call on a busy 2-core machine
             J += 0.5 * float(np.sum(r * (st.w_lin * r)))
         for r, ch in zip(self.residuals(x, linear=False), (c for c in self._channels if not c.linear)):
-            J += 0.5 * float(np.sum(r * r)) / ch.sigma ** 2
+            J += 0.5 * float(np.sum(r * r * ch.weights))
         return J + self.prior_objective(x)
 
     def prior_objective(self, x: np.ndarray) -> float:
@@ -749,7 +775,7 @@ class CollocationNLP:
             if ch.linear:
                 continue
             U, y, gv = ch.evaluate(x, 1)
-            r = (y - ch.values) / ch.sigma ** 2
+            r = (y - ch.values) * ch.weights
             dU = np.zeros_like(U)
             dU[:, ch.maps.fn.grad_idx] = gv * r[:, None]
             grad += ch.maps.Mu.T @ dU.ravel()
@@ -785,8 +811,9 @@ class CollocationNLP:
         for (index, gi, ga, gb), E in zip(hs.obj_templates, hs.E_obj):
             ch = self._channels[index]
             U, y, gv, hv = ch.evaluate(x, 2)
-            r = (y - ch.values) / ch.sigma ** 2
-            q = np.concatenate([gv[:, ga] * gv[:, gb] / ch.sigma ** 2, hv * r[:, None]], axis=1)
+            w = ch.weights
+            r = (y - ch.values) * w
+            q = np.concatenate([gv[:, ga] * gv[:, gb] * w[:, None], hv * r[:, None]], axis=1)
             H = H + obj_factor * (E @ q.ravel())
         return H
 
@@ -813,7 +840,7 @@ class CollocationNLP:
 
     def sigma_vector(self) -> np.ndarray:
         """Noise standard deviation of every stacked residual."""
-        return np.concatenate([np.full(ch.n, ch.sigma) for ch in self._channels])
+        return np.concatenate([ch.sigma for ch in self._channels])
 
     # ------------------------------------------------------- new values
     def with_offset(self, c: np.ndarray) -> "CollocationNLP":

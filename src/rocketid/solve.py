@@ -468,8 +468,26 @@ class EstimationResult:
 
     @property
     def sigma(self) -> dict[str, float]:
-        """The noise standard deviation of each channel used in the fit (estimated ones included)."""
+        """The noise standard deviation of each channel used in the fit (estimated ones included);
+        for a channel with per-sample sigmas, the one with the same total weight
+        (:func:`rocketid.data.equivalent_sigma`; see :attr:`sigma_per_sample`)."""
         return {k: float(v) for k, v in zip(self.nlp.channel_names, self.nlp.channel_sigmas)}
+
+    @property
+    def sigma_per_sample(self) -> dict[str, dict[str, float]]:
+        """Channels with per-sample sigmas: ``{channel: {"n", "min", "median", "max", "equivalent"}}``
+        (empty when every channel has one sigma)."""
+        arrays = self.nlp.channel_sigma_arrays()
+        return {k: {"n": int(arrays[k].size), "min": float(np.min(arrays[k])), "median": float(np.median(arrays[k])),
+                    "max": float(np.max(arrays[k])), "equivalent": self.sigma[k]}
+                for k in self.nlp.per_sample_channels}
+
+    @cached_property
+    def normalized_residuals(self) -> dict[str, np.ndarray]:
+        """Residuals divided by each sample's sigma (``(model - measured) / sigma_i``); N(0, 1) for a
+        correct model and correct sigmas, per-sample sigmas included."""
+        arrays = self.nlp.channel_sigma_arrays()
+        return {k: r / arrays[k] for k, r in self.residuals.items()}
 
     @property
     def sigma_std(self) -> dict[str, float]:
@@ -558,7 +576,10 @@ class EstimationResult:
 
     def _sigma_text(self) -> str:
         std = self.sigma_std
-        return ", ".join(f"{k} {v:.4g} +- {std[k]:.2g} (estimated)" if k in std else f"{k} {v:.4g}"
+        per = self.sigma_per_sample
+        return ", ".join(f"{k} {v:.4g} +- {std[k]:.2g} (estimated)" if k in std else
+                         f"{k} per sample {per[k]['min']:.3g} .. {per[k]['median']:.3g} .. {per[k]['max']:.3g} "
+                         "(min .. median .. max)" if k in per else f"{k} {v:.4g}"
                          for k, v in self.sigma.items())
 
     def to_dict(self) -> dict:
@@ -577,6 +598,8 @@ class EstimationResult:
             "sigma": {k: finite_or_none(v) for k, v in self.sigma.items()},
             "sigma_estimated": list(self.sigma_estimated),
             "sigma_std": {k: finite_or_none(v) for k, v in self.sigma_std.items()},
+            **({"sigma_per_sample": {k: {kk: vv if kk == "n" else finite_or_none(vv) for kk, vv in d.items()}
+                                     for k, d in self.sigma_per_sample.items()}} if self.sigma_per_sample else {}),
             "unmeasured_outputs": list(self.unmeasured_outputs),
             "sanity": list(self.sanity) if self.success else [],
             "n_data": int(self.n_data),
@@ -651,6 +674,8 @@ def estimate(spec: ModelSpec, data: Measurements, *, guess: Mapping | Sequence[f
     if isinstance(data, Measurements):
         sigma = resolve_quantized(sigma, data)
     given, estimated = sigma_request(sigma, data.names if isinstance(data, Measurements) else ())
+    if isinstance(data, Measurements):
+        check_not_per_sample(data, estimated, "sigma")
     if given:
         data = data.with_sigma(given)
     if prepared is None:
@@ -675,6 +700,22 @@ def estimate(spec: ModelSpec, data: Measurements, *, guess: Mapping | Sequence[f
     if estimated:
         fit = relax_sigma(fit, estimated, options=options)
     return fit
+
+
+def check_not_per_sample(data: Measurements, estimated: Sequence[str], where: str = "sigma") -> None:
+    """Refuse to estimate the sigma of a channel that has per-sample sigmas (it would replace them).
+
+    Raises
+    ------
+    DataError
+        Names the channels and the fix.
+    """
+    clash = [c for c in estimated if c in data.names and data[c].per_sample]
+    if clash:
+        others = [c for c in data.names if c not in clash and c in estimated]
+        hint = (f"; estimate only the others ({', '.join(f'{where} {c}=estimate' for c in others)})" if others else "")
+        raise DataError(f"{where}: channel(s) {', '.join(clash)} have per-sample sigmas (a sigma column), which "
+                        f"estimating would replace; drop the sigma column or do not estimate their sigma{hint}")
 
 
 def ml_sigma(fit: EstimationResult, channels: Sequence[str]) -> dict[str, float]:
@@ -737,6 +778,7 @@ def relax_sigma(fit: EstimationResult, channels: Sequence[str], *, options: Mapp
     if unknown:
         raise DataError(f"sigma of {', '.join(map(repr, unknown))} cannot be estimated: not a fitted channel "
                         f"({', '.join(fit.nlp.channel_names)})")
+    check_not_per_sample(fit.prepared.measurements, channels)
     notes = list(fit.notes)
     fits = 1
     solve_s = fit.timings.get("solve_s", 0.0)

@@ -248,7 +248,7 @@ def apply_window(spec: ModelSpec, data: Measurements, window: Sequence[float], p
     for c in data.channels:
         keep = (c.times >= t0) & (c.times <= t1)
         if keep.any():
-            kept.append(Channel(c.name, c.times[keep], c.values[keep], c.sigma))
+            kept.append(c.select(keep))
     if not any(c.name in spec.output_names for c in kept):
         raise DataError(f"the data have no samples of {', '.join(spec.output_names)} in the window "
                         f"[{t0:g}, {t1:g}]")

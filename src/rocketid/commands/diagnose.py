@@ -26,7 +26,8 @@ import time
 import click
 
 from ..cli import (EXIT_NOT_CONVERGED, NameValue, assignments, flight_window, given_sigmas, model_option, read_data,
-                   sigma_argument, sigma_option_decl, status, unmeasured_option_decl, verbose_option)
+                   sigma_argument, sigma_column_option_decl, sigma_option_decl, status, unmeasured_option_decl,
+                   verbose_option)
 from ..errors import SettingsError
 from ..output import check_folder, folder_lock
 
@@ -62,10 +63,11 @@ __all__ = ["command"]
               metavar="NAME=CSVCOL", help="Read output NAME from column CSVCOL (repeatable).")
 @click.option("--time-column", default="t", show_default=True, help="Name of the time column.")
 @sigma_option_decl()
+@sigma_column_option_decl()
 @unmeasured_option_decl()
 @verbose_option
 def command(data_file, out, model, level, confirm_top, holdout, max_effects, workers, refit_timeout, locate_window,
-            window_text, columns, time_column, sigmas, unmeasured):
+            window_text, columns, time_column, sigmas, sigma_columns, unmeasured):
     """Fit a model to DATA.csv and diagnose what it misses; write DIR/report.html.
 
     The report compares each channel with the model, locates where the
@@ -98,7 +100,8 @@ def command(data_file, out, model, level, confirm_top, holdout, max_effects, wor
     spec, label = resolve_model(model)
     sigma = sigma_argument(sigmas, spec)
     data = read_data(data_file, spec, time_column=time_column, columns=assignments(columns, "--column"),
-                     sigma=given_sigmas(sigma), unmeasured=tuple(unmeasured))
+                     sigma=given_sigmas(sigma), unmeasured=tuple(unmeasured),
+                     sigma_columns=assignments(sigma_columns, "--sigma-column"))
     with folder_lock(out):
         status(f"read {data.n_samples} values of {', '.join(data.names)} from {data_file}; fitting {spec.name} and "
                "diagnosing")

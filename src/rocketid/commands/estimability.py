@@ -54,7 +54,7 @@ __all__ = ["command"]
               help="Plot the eigenvalue spectrum and the directions' composition.")
 @verbose_option
 def command(data_files, model, scaling, threshold, n_estimated, at, guesses, columns, time_column, sigmas,
-            unmeasured, window_text, n_elements, K, per_flight, ipopt, out, plot):
+            sigma_columns, unmeasured, window_text, n_elements, K, per_flight, ipopt, out, plot):
     """Estimability report: eigenvalues of the reduced Hessian, ratios, np, directions.
 
     Prints the report; writes EST.json (and EST.png with --plot).
@@ -94,13 +94,14 @@ def command(data_files, model, scaling, threshold, n_estimated, at, guesses, col
                                 "numbers")
         _joint(spec, data_files, scaling=scaling, at=at, guesses=guesses, columns=columns, time_column=time_column,
                sigmas=sigmas, n_elements=n_elements, K=K, per_flight=per_flight, options=options, out=out,
-               unmeasured=unmeasured, window=window)
+               unmeasured=unmeasured, window=window, sigma_columns=sigma_columns)
         return
     if per_flight:
         raise SettingsError("--per-flight needs several data files (one per flight)")
     data_file = data_files[0]
     guess, mesh, data = fit_inputs(spec, data_file, guesses=guesses, columns=columns, time_column=time_column,
-                                   sigmas=sigmas, n_elements=n_elements, K=K, unmeasured=unmeasured)
+                                   sigmas=sigmas, n_elements=n_elements, K=K, unmeasured=unmeasured,
+                                   sigma_columns=sigma_columns)
     spec, data, guess, mesh, window_notes = windowed_inputs(spec, data, guess, window, n_elements, K)
     n_p = len(spec.parameters)
     if n_estimated is not None and not 1 <= n_estimated <= n_p:
@@ -156,7 +157,7 @@ def command(data_files, model, scaling, threshold, n_estimated, at, guesses, col
 
 
 def _joint(spec, data_files, *, scaling, at, guesses, columns, time_column, sigmas, n_elements, K, per_flight,
-           unmeasured=(), window=None,
+           unmeasured=(), window=None, sigma_columns=(),
            options, out):
     """The joint estimability report of several flights (``rocketid.joint.joint_estimability``)."""
     from ..cli import assignments, read_flights
@@ -164,7 +165,7 @@ def _joint(spec, data_files, *, scaling, at, guesses, columns, time_column, sigm
     from ..sensitivity import sensitivity_at
 
     flights = read_flights(data_files, spec, columns=columns, time_column=time_column, sigmas=sigmas,
-                           unmeasured=unmeasured, window=window,
+                           unmeasured=unmeasured, window=window, sigma_columns=sigma_columns,
                            n_elements=n_elements, K=K)
     guess = assignments(guesses, "--guess")
     prep = joint_prepare(flights, per_flight=per_flight)

@@ -96,9 +96,9 @@ def statistic_criterion(residuals: Mapping[str, Sequence[float]] | Sequence[floa
     residuals : mapping of str to array, or array
         ``{channel: model minus measurement}`` (e.g. ``EstimationResult.residuals``),
         or one array of residuals.
-    sigma : mapping of str to float, or float, optional
-        Noise standard deviation per channel (or one for all). Default 1
-        (the residuals are already normalized).
+    sigma : mapping of str to float or array, or float, optional
+        Noise standard deviation per channel (or one for all); a channel's may be an array,
+        one per sample (per-sample sigma). Default 1 (the residuals are already normalized).
 
     Returns
     -------
@@ -119,12 +119,15 @@ def statistic_criterion(residuals: Mapping[str, Sequence[float]] | Sequence[floa
             elif isinstance(sigma, Mapping):
                 if name not in sigma:
                     raise DataError(f"no sigma for channel {name!r}; pass sigma={{{name!r}: ...}} for every channel")
-                s = float(sigma[name])
+                s = np.asarray(sigma[name], dtype=float)
             else:
-                s = float(sigma)
-            if not s > 0:
-                raise DataError(f"sigma of channel {name!r} must be positive, got {s}")
-            parts.append(np.asarray(r, dtype=float).ravel() / s)
+                s = np.asarray(float(sigma))
+            r = np.asarray(r, dtype=float).ravel()
+            if s.ndim and s.shape != r.shape:
+                raise DataError(f"channel {name!r}: {s.size} per-sample sigmas for {r.size} residuals")
+            if not np.all(s > 0):
+                raise DataError(f"sigma of channel {name!r} must be positive, got {np.min(s):g}")
+            parts.append(r / s)
         e = np.concatenate(parts) if parts else np.empty(0)
     else:
         if isinstance(sigma, Mapping):
@@ -151,6 +154,5 @@ def statistic_criterion(residuals: Mapping[str, Sequence[float]] | Sequence[floa
 
 def criterion_of(fit) -> StatisticCriterion:
     """eta (7.10) of an :class:`~rocketid.solve.EstimationResult`'s residuals, each
-    channel divided by the sigma the NLP uses for it."""
-    sig = dict(zip(fit.nlp.channel_names, fit.nlp.channel_sigmas))
-    return statistic_criterion(fit.residuals, sig)
+    channel divided by the sigma the NLP uses for it (at each sample: per-sample sigmas too)."""
+    return statistic_criterion(fit.residuals, fit.nlp.channel_sigma_arrays())

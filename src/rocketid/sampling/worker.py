@@ -203,7 +203,7 @@ class Recipe:
             h.update(ch.name.encode())
             h.update(np.ascontiguousarray(ch.times).tobytes())
             h.update(np.ascontiguousarray(ch.values).tobytes())
-            h.update(repr(ch.sigma).encode())
+            h.update(np.ascontiguousarray(ch.sigma).tobytes() if ch.per_sample else repr(ch.sigma).encode())
         mesh = prepared.transcription.mesh
         h.update(np.ascontiguousarray(mesh.boundaries).tobytes())
         h.update(str(mesh.K).encode())
