@@ -170,3 +170,86 @@ def test_eliminating_a_flights_own_parameters_is_the_marginal_information():
     B = np.zeros((5, 5))
     B[:3, :3] = H[:3, :3]                                   # parameters 3 and 4 have no information
     assert np.allclose(_schur(B, keep, np.array([3, 4])), H[:3, :3])
+
+
+SIGMA_A = {"x": 2.0, "h": 0.5, "v": 1.5}
+SIGMA_B = {"x": 0.8, "h": 1.2, "v": 0.4}
+
+
+def _no_sigma(data):
+    """The channels without the sigma they were simulated with (the fit starts from the model's)."""
+    return ri.Measurements(tuple(ri.Channel(c.name, c.times, c.values) for c in data.channels))
+
+
+@pytest.fixture(scope="module")
+def two_noisy_flights(two_flights):
+    """The two pitch programs with different, unstated noise levels in each flight."""
+    spec_a, spec_b, _, _, truth = two_flights
+    data_a = _no_sigma(ri.simulate_measurements(spec_a, truth, ra66_times(), seed=21, sigma=SIGMA_A))
+    data_b = _no_sigma(ri.simulate_measurements(spec_b, truth, ra66_times(), seed=22, sigma=SIGMA_B))
+    return spec_a, spec_b, data_a, data_b, truth
+
+
+def test_joint_fit_estimates_each_flights_sigma(two_noisy_flights):
+    spec_a, spec_b, data_a, data_b, truth = two_noisy_flights
+    joint = joint_estimate([Flight("A", spec_a, data_a), Flight("B", spec_b, data_b)], sigma="estimate")
+    assert joint.success, joint.message
+    assert joint.sigma_estimated == {"A": ("x", "h", "v"), "B": ("x", "h", "v")}
+    assert joint.sigma_iterations >= 2
+    for label, true in (("A", SIGMA_A), ("B", SIGMA_B)):
+        for ch, s in true.items():
+            est = joint.sigma[label][ch]
+            assert abs(est / s - 1) < 0.03, (label, ch, est)            # within a few percent
+            assert abs(est - s) < 4 * joint.sigma_std[label][ch]          # and within its stated error
+            # the relaxation's fixed point: each flight's sigma is the RMS of its own residuals
+            assert est == pytest.approx(joint.flight(label).rms[ch], rel=1e-5)
+    assert np.all(np.abs(joint.theta - truth) < 4 * joint.standard_errors)
+    d = joint.to_dict()
+    assert d["sigma_estimated"] == {"A": ["x", "h", "v"], "B": ["x", "h", "v"]}
+    assert set(d["sigma"]) == {"A", "B"} and d["sigma"]["B"]["v"] == pytest.approx(joint.sigma["B"]["v"])
+    text = joint.summary().text()
+    assert "each flight's separately" in text and "(estimated)" in text
+    # the covariance uses the estimated sigmas: the same as a joint fit with those sigmas given
+    given = joint_estimate([Flight("A", spec_a, data_a.with_sigma(joint.sigma["A"])),
+                            Flight("B", spec_b, data_b.with_sigma(joint.sigma["B"]))])
+    np.testing.assert_allclose(given.theta, joint.theta, rtol=1e-5)
+    np.testing.assert_allclose(given.standard_errors, joint.standard_errors, rtol=1e-3)
+
+
+def test_joint_fit_estimates_one_channel_and_keeps_the_given(two_noisy_flights):
+    spec_a, spec_b, data_a, data_b, truth = two_noisy_flights
+    joint = joint_estimate([Flight("A", spec_a, data_a), Flight("B", spec_b, data_b)],
+                           sigma={"h": "estimate", "x": 1.0, "v": 1.0})
+    assert joint.success, joint.message
+    assert joint.sigma_estimated == {"A": ("h",), "B": ("h",)}
+    assert joint.sigma["A"]["x"] == 1.0 and joint.sigma["B"]["v"] == 1.0
+    assert abs(joint.sigma["A"]["h"] / 0.5 - 1) < 0.05 and abs(joint.sigma["B"]["h"] / 1.2 - 1) < 0.05
+    with pytest.raises(ri.DataError, match="no flight has a channel 'q'"):
+        joint_estimate([Flight("A", spec_a, data_a), Flight("B", spec_b, data_b)], sigma={"q": "estimate"})
+    with pytest.raises(ri.DataError, match="give 'estimate'"):
+        joint_estimate([Flight("A", spec_a, data_a), Flight("B", spec_b, data_b)], sigma="guess")
+
+
+def test_cli_several_files_with_sigma_estimate(two_noisy_flights, tmp_path):
+    spec_a, spec_b, data_a, data_b, truth = two_noisy_flights
+    f1 = data_a.to_csv(tmp_path / "f1.csv")
+    f2 = _no_sigma(ri.simulate_measurements(spec_a, truth, ra66_times(), seed=23, sigma=SIGMA_B)).to_csv(
+        tmp_path / "f2.csv")
+    out = tmp_path / "fit.json"
+    res = CliRunner().invoke(main, ["estimate", str(f1), str(f2), "--model", "ra66m", "--sigma", "estimate",
+                                    "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    fit = json.loads(out.read_text())
+    assert fit["sigma_estimated"] == {"f1": ["x", "h", "v"], "f2": ["x", "h", "v"]}
+    for label, true in (("f1", SIGMA_A), ("f2", SIGMA_B)):
+        assert all(abs(fit["sigma"][label][c] / s - 1) < 0.03 for c, s in true.items()), fit["sigma"]
+    est_out = tmp_path / "est.json"
+    res = CliRunner().invoke(main, ["estimability", str(f1), str(f2), "--model", "ra66m", "--at", "fit",
+                                    "--sigma", "h=estimate", "--out", str(est_out)])
+    assert res.exit_code == 0, res.output
+    est = json.loads(est_out.read_text())
+    assert est["fit"]["sigma_estimated"] == {"f1": ["h"], "f2": ["h"]}
+    assert abs(est["fit"]["sigma"]["f1"]["h"] / 0.5 - 1) < 0.05 and abs(est["fit"]["sigma"]["f2"]["h"] / 1.2 - 1) < 0.05
+    res = CliRunner().invoke(main, ["estimability", str(f1), str(f2), "--model", "ra66m", "--sigma", "estimate",
+                                    "--out", str(est_out)])
+    assert res.exit_code == 2 and "--at fit" in res.output

@@ -682,6 +682,7 @@ def estimate_command(data_files, model, columns, time_column, sigmas, sigma_colu
     Several files are several flights of one vehicle fitted jointly: the
     parameters are shared except those named by --per-flight (and free initial
     states), which FIT.json names NAME[flight], the flight being the file's name.
+    With --sigma estimate each flight's noise levels are estimated separately.
     """
     from dataclasses import replace
 
@@ -697,14 +698,12 @@ def estimate_command(data_files, model, columns, time_column, sigmas, sigma_colu
     if len(data_files) > 1:
         from .joint import joint_estimate
 
-        if given_sigmas(sigma) != (sigma or {}):
-            raise SettingsError("--sigma estimate is not available yet for several flights fitted jointly: give the "
-                                "sigmas as numbers (an estimate from a fit of each flight alone, for example)")
         guess = assignments(guesses, "--guess")
         flights = read_flights(data_files, spec, columns=columns, time_column=time_column, sigmas=sigmas,
-                               n_elements=n_elements, K=K, unmeasured=unmeasured, window=window)
+                               n_elements=n_elements, K=K, unmeasured=unmeasured, window=window,
+                               sigma_columns=sigma_columns)
         status(f"fitting {len(flights)} flights jointly")
-        result = joint_estimate(flights, per_flight=per_flight, guess=guess, options=options)
+        result = joint_estimate(flights, per_flight=per_flight, guess=guess, options=options, sigma=sigma)
         click.echo(result.summary().text())
         if out is not None:
             write_json(out, result.to_dict())

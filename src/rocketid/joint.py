@@ -46,7 +46,7 @@ import scipy.sparse as sps
 
 from .collocation.transcription import Mesh
 from .data import Measurements
-from .errors import SensitivityError, SettingsError
+from .errors import DataError, SensitivityError, SettingsError
 from .model import ModelSpec, check_guess
 from .output import finite_or_none
 from .sensitivity import sensitivity_of
@@ -520,6 +520,8 @@ class JointResult:
     timings : dict
         ``setup_s``, ``solve_s``.
     notes : tuple of str
+    sigma_iterations : int
+        Joint fits of the noise-level relaxation (0 when no sigma was estimated).
     """
 
     success: bool
@@ -532,10 +534,28 @@ class JointResult:
     solution: NLPSolution
     timings: dict
     notes: tuple = ()
+    sigma_iterations: int = 0
 
     @property
     def layout(self) -> JointLayout:
         return self.prepared.layout
+
+    @property
+    def sigma(self) -> dict[str, dict[str, float]]:
+        """Each flight's noise standard deviation per channel, ``{label: {channel: sigma}}``
+        (estimated ones included)."""
+        return {l: r.sigma for l, r in zip(self.labels, self.flights)}
+
+    @property
+    def sigma_estimated(self) -> dict[str, tuple]:
+        """The channels whose sigma was estimated, per flight: ``{label: (channel, ...)}`` (flights
+        with none left out)."""
+        return {l: r.sigma_estimated for l, r in zip(self.labels, self.flights) if r.sigma_estimated}
+
+    @property
+    def sigma_std(self) -> dict[str, dict[str, float]]:
+        """Standard error of each estimated sigma, per flight (``sigma / sqrt(2 n)``)."""
+        return {l: r.sigma_std for l, r in zip(self.labels, self.flights) if r.sigma_estimated}
 
     @property
     def names(self) -> tuple:
@@ -627,12 +647,18 @@ class JointResult:
              zip(lay.names, self.theta, se, lay.guess, lay.lower, lay.upper)],
             (None, ".6g", ".3g", ".4g", ".3g", ".3g")),))
         fit_rows = [("chi2 / dof", f"{self.chi2_per_dof:.4f} (all flights)")]
-        for st in self.flight_statistics():
+        for st, r in zip(self.flight_statistics(), self.flights):
             fit_rows.append((st["flight"], f"chi2/dof {st['chi2_per_dof']:.4g}; RMS "
-                                           + ", ".join(f"{k} {v:.4g}" for k, v in st["rms"].items())))
+                                           + ", ".join(f"{k} {v:.4g}" for k, v in st["rms"].items())
+                                           + f"; sigma {r._sigma_text()}"))
         notes = list(self.notes)
         if not self.success:
             notes.insert(0, f"IPOPT did not converge: {self.message.rstrip('.')}.")
+        if self.sigma_estimated:
+            notes.append(f"sigma estimated with the parameters, each flight's separately ("
+                         + "; ".join(f"{l}: {', '.join(c)}" for l, c in self.sigma_estimated.items())
+                         + f"; {self.sigma_iterations} joint fits): chi2/dof is then near 1 by construction and does "
+                         "not test the fit; a model error shows as a larger sigma instead.")
         notes += self.flight_notes()
         return Summary(f"rocketid joint estimation: {len(self.flights)} flights",
                        (problem, solver, params, Section("Fit per flight", fit_rows)), notes)
@@ -645,7 +671,8 @@ class JointResult:
         out = []
         for f, fl in enumerate(self.prepared.flights):
             p0 = np.clip(self.layout.flight_parameters(self.theta, f), fl.spec.lower, fl.spec.upper)
-            out.append(estimate(fl.spec, fl.data, guess=p0, mesh=self.prepared.prepared[f].transcription.mesh))
+            pr = self.prepared.prepared[f]  # its data carry the joint fit's sigmas (estimated ones too)
+            out.append(estimate(fl.spec, pr.measurements, guess=p0, mesh=pr.transcription.mesh))
         return tuple(out)
 
     def consistency(self) -> Summary:
@@ -713,6 +740,11 @@ class JointResult:
                                           "n_data": int(st["n_data"]),
                                           "rms": {k: finite_or_none(v) for k, v in st["rms"].items()}}
                            for st in self.flight_statistics()},
+            "sigma": {l: {k: finite_or_none(v) for k, v in d.items()} for l, d in self.sigma.items()},
+            "sigma_estimated": {l: list(c) for l, c in self.sigma_estimated.items()},
+            "sigma_std": {l: {k: finite_or_none(v) for k, v in d.items()} for l, d in self.sigma_std.items()},
+            **({"sigma_per_sample": per} if (per := {l: r.sigma_per_sample for l, r in zip(self.labels, self.flights)
+                                                    if r.sigma_per_sample}) else {}),
             "timings": {k: float(v) for k, v in self.timings.items()},
             "notes": list(self.notes) + self.flight_notes(),
         }
@@ -724,7 +756,9 @@ class JointResult:
 
 def joint_estimate(flights: Sequence[Flight], *, per_flight: Sequence[str] = (),
                    guess: Mapping[str, float] | None = None, options: Mapping[str, Any] | None = None,
-                   prepared: JointPrepared | None = None) -> JointResult:
+                   prepared: JointPrepared | None = None,
+                   sigma: str | Mapping[str, float | str] | None = None,
+                   sigma_rtol: float = 1e-6, max_sigma_fits: int = 30) -> JointResult:
     """Fit several flights of one vehicle at once: shared parameters, per-flight ones, one NLP.
 
     Parameters
@@ -741,13 +775,39 @@ def joint_estimate(flights: Sequence[Flight], *, per_flight: Sequence[str] = (),
         IPOPT options.
     prepared : JointPrepared, optional
         Reuse an assembled problem.
+    sigma : "estimate" or mapping, optional
+        Noise levels, the same request for every flight: ``"estimate"`` estimates every
+        channel's sigma of every flight, each flight's separately (a flight's sensors and
+        conditions are its own); ``{channel: value or "estimate"}`` gives some and estimates
+        others. Estimation is the output-error relaxation of :func:`rocketid.solve.relax_sigma`
+        on the joint problem: each flight's sigmas from its residuals, then the joint fit again
+        from the last solution, until no sigma changes by more than ``sigma_rtol`` relatively.
+        Default: each flight's data's sigma, else the model's.
+    sigma_rtol : float
+        Convergence of the relaxation (the largest relative change of a sigma).
+    max_sigma_fits : int
+        Give up (with a note) after this many refits.
 
     Returns
     -------
     JointResult
+        With the estimated sigmas in :attr:`JointResult.sigma` and the flights' data
+        (``prepared.prepared[f].measurements``), so that the covariance uses them.
     """
     if prepared is None:
+        flights = tuple(flights)
+        _check_sigma_names(sigma, [fl.data for fl in flights if isinstance(fl, Flight)])
+        requests = [_flight_sigma_request(fl.data, sigma, fl.label) if isinstance(fl, Flight) else ({}, ())
+                    for fl in flights]
+        flights = tuple(replace(fl, data=fl.data.with_sigma(g)) if g else fl for fl, (g, _) in zip(flights, requests))
         prepared = joint_prepare(flights, per_flight=per_flight)
+    else:
+        _check_sigma_names(sigma, [pr.measurements for pr in prepared.prepared])
+        requests = [_flight_sigma_request(pr.measurements, sigma, fl.label)
+                    for fl, pr in zip(prepared.flights, prepared.prepared)]
+        if any(g for g, _ in requests):
+            prepared = _with_sigmas(prepared, [g for g, _ in requests])
+    estimated = {fl.label: e for fl, (_, e) in zip(prepared.flights, requests) if e}
     nlp = prepared.nlp
     lay = prepared.layout
     theta0 = lay.guess.copy()
@@ -765,6 +825,52 @@ def joint_estimate(flights: Sequence[Flight], *, per_flight: Sequence[str] = (),
             notes.append(f"flight {fl.label}: {note}")
         xs.append(pr.nlp.initial_x(S, p0))
     X0 = nlp.pack(xs, theta0)
+    result = _solve_joint(prepared, X0, options, notes)
+    if estimated:
+        result = _relax_joint_sigma(result, estimated, options=options, rtol=sigma_rtol, max_fits=max_sigma_fits)
+    return result
+
+
+def _check_sigma_names(sigma, datas: Sequence[Measurements]) -> None:
+    """Refuse a ``sigma=`` mapping that names a channel no flight measures."""
+    if not isinstance(sigma, Mapping):
+        return
+    names = {n for d in datas for n in d.names}
+    unknown = [k for k in sigma if k not in names]
+    if unknown:
+        raise DataError(f"sigma {unknown[0]}: no flight has a channel {unknown[0]!r}; the channels are "
+                        f"{', '.join(sorted(names))}")
+
+
+def _flight_sigma_request(data: Measurements, sigma, label: str) -> tuple[dict, tuple]:
+    """``(given, estimated)`` of a ``sigma=`` request for one flight's data (channels the flight
+    does not measure are left out of a mapping)."""
+    from .data import resolve_quantized, sigma_request
+    from .solve import check_not_per_sample
+
+    if isinstance(sigma, Mapping):
+        sigma = {k: v for k, v in sigma.items() if k in data.names}
+        sigma = resolve_quantized(sigma, data)
+    try:
+        given, estimated = sigma_request(sigma, data.names)
+        check_not_per_sample(data, estimated)
+    except DataError as exc:
+        raise DataError(f"flight {label}: {exc}") from None
+    return given, estimated
+
+
+def _with_sigmas(prepared: JointPrepared, sigmas: Sequence[Mapping[str, float]]) -> JointPrepared:
+    """The joint problem with each flight's channels at the noise levels ``sigmas[f]`` (the
+    flights' transcriptions are kept; their NLPs and the joint NLP are rebuilt)."""
+    t0 = time.perf_counter()
+    prep = tuple(pr.with_sigma(s) if s else pr for pr, s in zip(prepared.prepared, sigmas))
+    nlp = JointNLP(prepared.layout, tuple(p.nlp for p in prep))
+    return replace(prepared, prepared=prep, nlp=nlp, setup_s=prepared.setup_s + time.perf_counter() - t0)
+
+
+def _solve_joint(prepared: JointPrepared, X0: np.ndarray, options, notes: Sequence[str]) -> JointResult:
+    """Solve the joint NLP from ``X0`` and split the solution into the flights' results."""
+    nlp = prepared.nlp
     sol = solve_nlp(nlp, X0, options=options)
     flights_out = []
     for f, pr in enumerate(prepared.prepared):
@@ -778,3 +884,31 @@ def joint_estimate(flights: Sequence[Flight], *, per_flight: Sequence[str] = (),
     return JointResult(sol.success and finite, sol.message, nlp.theta(sol.x).copy(), float(sol.objective),
                        sol.iterations, tuple(flights_out), prepared, sol,
                        {"setup_s": prepared.setup_s, "solve_s": sol.solve_s}, tuple(notes))
+
+
+def _relax_joint_sigma(result: JointResult, estimated: Mapping[str, tuple], *, options, rtol: float,
+                       max_fits: int) -> JointResult:
+    """The output-error relaxation on the joint problem (:func:`rocketid.solve.relax_sigma`):
+    each flight's estimated sigmas from its residuals at the joint fit, the joint fit again with
+    them (from the last solution), until no sigma changes by more than ``rtol`` relatively."""
+    from .solve import ml_sigma, relaxation
+
+    labels = result.labels
+    notes = list(result.notes)
+
+    def sigmas_of(last):
+        return {(l, c): s for l, chans in estimated.items() for c, s in ml_sigma(last.flight(l), chans).items()}
+
+    def refit(last, new):
+        per_flight = [{c: s for (fl, c), s in new.items() if fl == l} for l in labels]
+        return _solve_joint(_with_sigmas(last.prepared, per_flight), last.solution.x, options, last.notes)
+
+    current = {(l, c): result.flight(l).sigma[c] for l, chans in estimated.items() for c in chans}
+    result, fits, solve_s, note = relaxation(result, sigmas_of, refit, current, rtol=rtol, max_fits=max_fits,
+                                            what="joint fit")
+    if note:
+        notes.append(note)
+    flights_out = tuple(replace(r, sigma_estimated=estimated.get(l, ()), sigma_iterations=fits if l in estimated else 0)
+                        for l, r in zip(labels, result.flights))
+    return replace(result, flights=flights_out, notes=tuple(notes), sigma_iterations=fits,
+                   timings={"setup_s": result.prepared.setup_s, "solve_s": solve_s})

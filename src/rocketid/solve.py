@@ -33,7 +33,7 @@ from .output import finite_or_none
 from .summary import Section, Summary, Table
 
 __all__ = ["IPOPT_OPTIONS", "check_ipopt_options", "NLPSolution", "solve_nlp", "EstimationResult",
-           "estimate", "prepare", "default_mesh", "Prepared", "relax_sigma", "ml_sigma"]
+           "estimate", "prepare", "default_mesh", "Prepared", "relax_sigma", "ml_sigma", "relaxation"]
 
 _S, _I, _F = "str", "int", "float"
 IPOPT_OPTIONS: dict[str, str] = {
@@ -780,32 +780,68 @@ def relax_sigma(fit: EstimationResult, channels: Sequence[str], *, options: Mapp
                         f"({', '.join(fit.nlp.channel_names)})")
     check_not_per_sample(fit.prepared.measurements, channels)
     notes = list(fit.notes)
-    fits = 1
-    solve_s = fit.timings.get("solve_s", 0.0)
-    current = fit.sigma
-    converged = False
+
+    def refit(last, new):
+        prepared = last.prepared.with_sigma(new)
+        return fit_nlp(prepared, prepared.nlp, last.x, options=options)
+
+    fit, fits, solve_s, note = relaxation(fit, lambda last: ml_sigma(last, channels), refit,
+                                         {c: fit.sigma[c] for c in channels}, rtol=rtol, max_fits=max_fits)
+    if note:
+        notes.append(note)
+    notes.extend(n for n in fit.notes if n not in notes)
+    return replace(fit, notes=tuple(notes), sigma_estimated=channels, sigma_iterations=fits,
+                   timings={"setup_s": fit.prepared.setup_s, "solve_s": solve_s})
+
+
+def relaxation(fit, sigmas_of: Callable, refit: Callable, current: Mapping, *, rtol: float, max_fits: int,
+               what: str = "fit"):
+    """The output-error relaxation's loop, shared by one flight (:func:`relax_sigma`) and several
+    (:func:`rocketid.joint.joint_estimate`): sigmas from the last fit's residuals, a refit with
+    them, until no sigma changes by more than ``rtol`` relatively.
+
+    Parameters
+    ----------
+    fit : EstimationResult or JointResult
+        The first fit (``success``, ``timings["solve_s"]``).
+    sigmas_of : callable
+        ``sigmas_of(fit) -> {key: sigma}``, the maximum-likelihood sigmas at a fit.
+    refit : callable
+        ``refit(fit, sigmas) -> fit``: the fit again with those sigmas, from ``fit``'s solution.
+    current : mapping
+        ``{key: sigma}`` the first fit was made with.
+    rtol, max_fits : float, int
+        Convergence, and the refits after which to give up.
+    what : str
+        The fit's name in the note ("fit", "joint fit").
+
+    Returns
+    -------
+    (fit, fits, solve_s, note)
+        The last fit, the number of fits, their IPOPT time and a note when the relaxation failed
+        or did not settle (else None).
+    """
+    fits, solve_s, converged, change = 1, fit.timings.get("solve_s", 0.0), False, math.inf
     while fit.success:
-        new = ml_sigma(fit, channels)
-        change = max(abs(new[c] / current[c] - 1.0) for c in channels)
+        new = sigmas_of(fit)
+        change = max(abs(new[k] / current[k] - 1.0) for k in new)
         if change <= rtol:
             converged = True
             break
         if fits > max_fits:
             break
-        prepared = fit.prepared.with_sigma(new)
-        fit = fit_nlp(prepared, prepared.nlp, fit.x, options=options)
+        fit = refit(fit, new)
         solve_s += fit.timings["solve_s"]
         fits += 1
         current = new
+    note = None
     if not fit.success:
-        notes.append(f"the fit failed while the noise levels were being estimated (fit {fits}); the sigmas are those "
-                     "of the last fit")
+        note = (f"the {what} failed while the noise levels were being estimated ({what} {fits}); the sigmas are "
+                f"those of the last {what}")
     elif not converged:
-        notes.append(f"the noise levels did not settle within {max_fits} refits (last relative change "
-                     f"{change:.2g}); the estimates are the last ones")
-    notes.extend(n for n in fit.notes if n not in notes)
-    return replace(fit, notes=tuple(notes), sigma_estimated=channels, sigma_iterations=fits,
-                   timings={"setup_s": fit.prepared.setup_s, "solve_s": solve_s})
+        note = (f"the noise levels did not settle within {max_fits} refits (last relative change {change:.2g}); "
+                "the estimates are the last ones")
+    return fit, fits, solve_s, note
 
 
 def fit_nlp(prepared: Prepared, nlp: CollocationNLP, x0: np.ndarray, *, options: Mapping[str, Any] | None = None,

@@ -22,7 +22,7 @@ from dataclasses import replace
 import click
 
 from ..cli import (EXIT_NOT_CONVERGED, NameValue, data_options, fit_inputs, flight_window, ipopt_options, load_model,
-                   given_sigmas, model_option, prepare_verbosely, sigma_argument, status, verbose_option, windowed_inputs,
+                   model_option, prepare_verbosely, sigma_argument, status, verbose_option, windowed_inputs,
                    write_json)
 from ..errors import SettingsError
 from ..output import check_file
@@ -89,12 +89,9 @@ def command(data_files, model, scaling, threshold, n_estimated, at, guesses, col
                             "sigma as a number)")
     window = flight_window(window_text)
     if len(data_files) > 1:
-        if given_sigmas(sigma) != (sigma or {}):
-            raise SettingsError("--sigma estimate is not available yet for several flights: give the sigmas as "
-                                "numbers")
         _joint(spec, data_files, scaling=scaling, at=at, guesses=guesses, columns=columns, time_column=time_column,
                sigmas=sigmas, n_elements=n_elements, K=K, per_flight=per_flight, options=options, out=out,
-               unmeasured=unmeasured, window=window, sigma_columns=sigma_columns)
+               unmeasured=unmeasured, window=window, sigma_columns=sigma_columns, sigma=sigma)
         return
     if per_flight:
         raise SettingsError("--per-flight needs several data files (one per flight)")
@@ -157,7 +154,7 @@ def command(data_files, model, scaling, threshold, n_estimated, at, guesses, col
 
 
 def _joint(spec, data_files, *, scaling, at, guesses, columns, time_column, sigmas, n_elements, K, per_flight,
-           unmeasured=(), window=None, sigma_columns=(),
+           unmeasured=(), window=None, sigma_columns=(), sigma=None,
            options, out):
     """The joint estimability report of several flights (``rocketid.joint.joint_estimability``)."""
     from ..cli import assignments, read_flights
@@ -172,9 +169,11 @@ def _joint(spec, data_files, *, scaling, at, guesses, columns, time_column, sigm
     lay = prep.layout
     payload = {"model": spec.name, "data": [str(p) for p in data_files], "at": at}
     if at == "fit":
-        joint = joint_estimate(flights, per_flight=per_flight, guess=guess, options=options, prepared=prep)
+        joint = joint_estimate(flights, per_flight=per_flight, guess=guess, options=options, prepared=prep,
+                               sigma=sigma)
         payload["fit"] = {"success": bool(joint.success), "iterations": int(joint.iterations),
-                          "chi2_per_dof": float(joint.chi2_per_dof)}
+                          "chi2_per_dof": float(joint.chi2_per_dof), "sigma": joint.sigma,
+                          "sigma_estimated": {l: list(c) for l, c in joint.sigma_estimated.items()}}
         if not joint.success:
             click.echo(f"Error: the joint fit did not converge ({joint.message}); use --at guess or --ipopt",
                        err=True)
