@@ -127,3 +127,36 @@ def test_units_check_names_the_likely_mistake(tmp_path, ra66_spec, ra66_noisy, c
 def test_right_units_pass_the_check(ra66_spec, ra66_noisy, ra66_noisy_fit):
     assert ra66_noisy_fit.success and not ra66_noisy_fit.sanity
     assert not any("start from the data" in n for n in ra66_noisy_fit.notes)
+
+
+def _decay(k_bounds, free_start: bool = False) -> ri.ModelSpec:
+    """y' = -k y from y(0) = 1 (free when asked), with the rate's bounds as given."""
+    m = ri.Model("bounded-decay", t0=0.0, tf=2.0)
+    y = m.state("y", initial=1.0, free=free_start, bounds=(0.0, 10.0))
+    k = m.parameter("k", guess=0.3, bounds=k_bounds)
+    m.ode({y: -k * y})
+    m.output("y", y, sigma=0.01)
+    return m.freeze()
+
+
+def test_every_parameter_at_a_bound_is_not_credible():
+    """The data decay at k = 1.3 but the bounds allow 0.1 <= k <= 0.5: IPOPT stops at k = 0.5, an
+    optimum of the bounded problem that is no estimate; the result says so."""
+    times = np.linspace(0.02, 2.0, 100)
+    spec = _decay((0.1, 0.5))
+    data = ri.simulate_measurements(spec.with_guess({"k": 0.3}), np.array([1.3]), times, seed=0)
+    fit = ri.estimate(spec, data)
+    assert fit.success, fit.message
+    assert fit.active_bounds() == [(spec.parameter_symbols[0], "upper")]
+    notes = result_checks(fit)
+    assert any(n.startswith("every parameter is at a bound: this is not an estimate") for n in notes), notes
+    assert any("every parameter is at a bound" in n for n in fit.sanity)
+    text = fit.summary().text()
+    assert "NOT CREDIBLE: every parameter is at a bound" in text and "status        : converged" not in text
+    assert fit.to_dict()["sanity"] == list(fit.sanity)
+    # one parameter at its bound and another free is a bound note, not this one
+    spec2 = _decay((0.1, 0.5), free_start=True)
+    fit2 = ri.estimate(spec2, ri.simulate_measurements(spec2, spec2.parameter_vector({"k": 1.3, "y_0": 1.0}),
+                                                       times, seed=0))
+    assert len(fit2.active_bounds()) == 1
+    assert not any("every parameter is at a bound" in n for n in result_checks(fit2))
