@@ -190,3 +190,14 @@ def test_cli_sigma_column(tmp_path, ra66_spec, growing_noise):
     # every command that reads data has the option
     for cmd in ("estimate", "estimability", "diagnose"):
         assert "--sigma-column" in CliRunner().invoke(main, [cmd, "--help"]).output, cmd
+
+
+def test_read_channels_sigma_columns(tmp_path):
+    from rocketid.data import read_channels
+    h = _write(tmp_path / "h.csv", ["0.1,2,0.5", "0.2,3,0.6"], "t,h,sig_h")
+    x = _write(tmp_path / "x.csv", ["0.1,1", "0.3,2", "0.5,4"], "t,x")
+    m = read_channels({"x": x, "h": h}, sigma_columns={"h": "sig_h"})
+    np.testing.assert_allclose(m["h"].sigma, [0.5, 0.6])
+    assert m["x"].sigma is None
+    with pytest.raises(DataError, match="'v', which has no file"):
+        read_channels({"x": x, "h": h}, sigma_columns={"v": "sig_v"})
