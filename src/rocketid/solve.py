@@ -713,7 +713,8 @@ def check_not_per_sample(data: Measurements, estimated: Sequence[str], where: st
     clash = [c for c in estimated if c in data.names and data[c].per_sample]
     if clash:
         others = [c for c in data.names if c not in clash and c in estimated]
-        hint = (f"; estimate only the others ({', '.join(f'{where} {c}=estimate' for c in others)})" if others else "")
+        hint = (f"; estimate only the others (CLI: {' '.join(f'--sigma {c}=estimate' for c in others)}; API: "
+                f"sigma={ {c: 'estimate' for c in others} })" if others else "")
         raise DataError(f"{where}: channel(s) {', '.join(clash)} have per-sample sigmas (a sigma column), which "
                         f"estimating would replace; drop the sigma column or do not estimate their sigma{hint}")
 
