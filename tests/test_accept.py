@@ -212,3 +212,43 @@ def test_identifiability_reports_a_coefficient_the_effect_inflates():
     # a weak correlation (r = 0.5: 1.15x) is no trade-off
     cov[0, 2] = cov[2, 0] = 0.5 * a * b
     assert identifiability(names, cov, ["W_1"], {"W_1": 30.0}) == ""
+
+
+def test_the_exchange_swaps_an_effect_chosen_while_another_was_missing(monkeypatch):
+    """Kestrel-S with a misalignment and a drifting altitude bias: at step 1 a wind (no single effect
+    reached the noise) had a lower BIC than the misalignment; the drift then brought wind + drift to the
+    noise. The exchange refits the set with the wind swapped for the other families admissible at step 1
+    and takes one that passes every check with a lower BIC; a swap that does not pass is not taken."""
+    from rocketid.diagnostics import step as S
+    from rocketid.diagnostics.effects import CATALOGUE
+    from rocketid.diagnostics.screen import Contender, Screen
+
+    wind, mis, bias, tof = (CATALOGUE[n] for n in ("wind", "misalignment", "bias_h", "time_offset"))
+    s1 = Screen(None, (Contender(wind, ""), Contender(mis, ""), Contender(tof, "")), ())
+    a_wind, a_mis = accept(refit("wind", 1.42), BAND), accept(refit("misalignment", 1.45), BAND)
+    a_tof = accept(refit("time_offset", 4.1), BAND)
+    steps = [S.Step(1, s1, (a_wind, a_mis, a_tof), a_wind, "", (), ("wind",), fit=object()),
+             S.Step(2, Screen(None, (Contender(bias, ""),), ()), (), None, "", (), ("wind", "bias_h"), fit=object())]
+    last = accept(refit("bias_h", 0.990), BAND)
+    tried = []
+
+    def fake_task(base_spec, fit, effects, added, *a, **k):
+        tried.append(tuple(e.name for e in effects))
+        return tuple(e.name for e in effects)
+
+    def fake_refits(tasks, workers=None):
+        return tuple(refit(t[0], 0.985 if t[0] == "misalignment" else 0.95, white=WHITE if t[0] == "misalignment"
+                           else {"x": 0.0, "h": 0.0, "v": 0.0}) for t in tasks)
+
+    monkeypatch.setattr(S, "_task", fake_task)
+    monkeypatch.setattr(S, "refit_all", fake_refits)
+    effects, acc, why = S._exchange(steps, [wind, bias], last, None, None, None, BAND, level=0.05, options=None,
+                                    timeout=60.0, workers=1)
+    assert [e.name for e in effects] == ["misalignment", "bias_h"]
+    assert tried == [("misalignment", "bias_h"), ("time_offset", "bias_h")]     # the same family is not tried
+    assert "misalignment in place of wind" in why and acc.accepted
+    # when no swap passes every check (here: residuals not white), the found set stays
+    monkeypatch.setattr(S, "refit_all", lambda tasks, workers=None: tuple(
+        refit(t[0], 0.95, white={"x": 0.0, "h": 0.0, "v": 0.0}) for t in tasks))
+    assert S._exchange(steps, [wind, bias], last, None, None, None, BAND, level=0.05, options=None, timeout=60.0,
+                       workers=1) is None
