@@ -252,3 +252,24 @@ def test_the_exchange_swaps_an_effect_chosen_while_another_was_missing(monkeypat
         refit(t[0], 0.95, white={"x": 0.0, "h": 0.0, "v": 0.0}) for t in tasks))
     assert S._exchange(steps, [wind, bias], last, None, None, None, BAND, level=0.05, options=None, timeout=60.0,
                        workers=1) is None
+
+
+def test_when_the_ranking_cannot_be_made_every_candidate_is_refitted(monkeypatch):
+    """A base fit that did not converge gives no sensitivities for the score test (Stage-30 with a misalignment
+    from the start: locally infeasible at chi2/dof 1.4e6); the refits decide: every candidate is a contender."""
+    import importlib
+
+    from rocketid.diagnostics.effects import CATALOGUE
+    from rocketid.errors import SensitivityError
+
+    SC = importlib.import_module("rocketid.diagnostics.screen")
+
+    def fail(*a, **k):
+        raise SensitivityError("Newton's method on the collocation equations did not converge")
+
+    monkeypatch.setattr(SC, "rank_candidates", fail)
+    cands = [CATALOGUE[n] for n in ("misalignment", "thrust_level", "bias_h")]
+    scr = SC.screen(object(), cands, vehicle=None)
+    assert scr.ranking is None and scr.names == ("misalignment", "thrust_level", "bias_h")
+    assert all(c.start == {} for c in scr.contenders)
+    assert "ranking failed" in scr.notes[0] and "every candidate is refitted" in scr.notes[0]

@@ -61,6 +61,11 @@ SIZE_FACTOR = 5.0
 BAND_LEVEL = 0.001
 """Upper tail of chi2(dof)/dof that bounds the noise band."""
 
+DISCRETIZATION_LIMIT = 0.1
+"""Largest discretization error, in chi2/dof, that the noise band allows for: more is a mesh too coarse
+for the flight (or a fit that is not a trajectory), not the discretization of a usable mesh (the default
+meshes leave 1e-5 to 1e-2)."""
+
 SHIFT_LIMIT = 0.2
 """When the fit before the refit is already inside the noise band, an effect that moves a base
 coefficient by more than this share while chi2/dof falls by less than :data:`SHIFT_GAIN` of its
@@ -111,6 +116,12 @@ def noise_band(fit: EstimationResult, *, timeout: float = 60.0) -> NoiseBand:
     times = np.unique(np.concatenate([c.times for c in meas.channels]))
     note = ""
     D = math.nan
+    if not fit.success:
+        # the last iterate of a fit that did not converge is not a trajectory of its parameters: its distance
+        # from the simulation measures that, not the discretization (measured: Stage-30 with a misalignment
+        # from the start, base fit locally infeasible: a 'band' up to chi2/dof 4.4e6)
+        return NoiseBand(base, dof, D, "the fit did not converge: the discretization error is not measured; "
+                                       "the band holds none")
     try:
         traj = simulate(fit.spec, fit.p, times, rtol=1e-10, atol=1e-10, max_wall_time=timeout)
         if traj.success:
@@ -123,6 +134,10 @@ def noise_band(fit: EstimationResult, *, timeout: float = 60.0) -> NoiseBand:
     except Exception as exc:  # noqa: BLE001 - the band stays usable without it
         note = f"the discretization error could not be measured ({exc}); the band holds none"
     extra = D / dof if np.isfinite(D) else 0.0
+    if extra > DISCRETIZATION_LIMIT:
+        note = (f"the collocation differs from the simulation of the fitted model by {extra:.3g} in chi2/dof, more "
+                f"than a discretization error (<= {DISCRETIZATION_LIMIT:g}): a finer mesh is needed; the band holds none")
+        extra = 0.0
     return NoiseBand(base + extra, dof, D, note)
 
 

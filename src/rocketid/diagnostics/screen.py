@@ -195,7 +195,13 @@ def screen(fit: EstimationResult, candidates: Sequence[Effect], *, level: float 
         try:
             ranking = rank_candidates(fit, list(candidates), level=level)
         except (ModelError, RocketidError) as exc:
-            return Screen(None, (), (f"the candidate ranking failed: {exc}",))
+            # the score test needs the sensitivities at the fit, which a fit far from any trajectory of its
+            # parameters (a base fit that did not converge) cannot give; the refits decide instead: every
+            # candidate is a contender, started from zero (measured: Stage-30 with a 0.25 deg misalignment
+            # from the start, base fit locally infeasible at chi2/dof 1.4e6, found nothing without this)
+            return Screen(None, tuple(Contender(e, "the ranking could not be made: every candidate is refitted")
+                                      for e in candidates),
+                          (f"the candidate ranking failed ({exc}); every candidate is refitted",))
     vehicle = vehicle if vehicle is not None else vehicle_of(fit)
     sig = [c for c in ranking.candidates if c.significant]
     if not sig:
