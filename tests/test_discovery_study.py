@@ -170,19 +170,17 @@ def test_quick_case():
     check_case(record("s30-bias_h"))
 
 
-#: Cases the diagnosis did not pass when the study was last run (``benchmarks/discovery_study.py`` on the
-#: discovery branch, 2026-11-23 22:46-23:40 UTC, re-run rows of the table in docs/effects.md), each with its
-#: measured failure. They stay real assertions: xfail, not strict, so that a fix shows as XPASS.
-#: (Fixed by the piecewise-linear refined shapes and measured passing: s30-wind -- wind_pl_9, chi2/dof
-#: 0.983, CL_alpha 2.53; m-transonic_drag -- drag_mach_6, 0.999. At the data's limit, named in the verdict
-#: (harness.DATA_LIMITS): m-mass_flow, s30-density.)
+#: Cases the diagnosis did not pass when the study was last run (``benchmarks/discovery_study.py``,
+#: 2026-11-24, the table in docs/effects.md: the diagnostics of 1266e7a, re-run rows on a570929), each with
+#: its measured failure. They stay real assertions: xfail, not strict, so that a fix shows as XPASS.
+#: (s30-back_pressure+wind passes since every significant family is refined and the exchange step;
+#: at the data's limit, named in the verdict (harness.DATA_LIMITS): m-mass_flow, s30-density.)
 KNOWN_FAILURES: dict[str, str] = {
-    "m-thrust_level+density": "thrust_level found (chi2/dof 118 -> 1.0108, eps 0.020), the density profile not "
-                              "added: the search stops once the model reaches the noise band (d0b7014; ba99626, "
-                              "which went on past the band, tied density with rivals there: 'partly explained')",
-    "s30-back_pressure+wind": "partly explained on d0b7014: misalignment + back_pressure + wind, chi2/dof 1.0669 "
-                              "(the wind traded against CL_alpha); not re-measured since the piecewise-linear "
-                              "wind (its run did not finish in the session)",
+    "m-thrust_level+density": "a570929: thrust_level and start_mass both reach the noise (chi2/dof 1.01, BIC within "
+                              "10) while the density profile is missing, and neither predicts the hold-out within "
+                              "5 sigma^2 (start_mass 16.9, thrust_level 35.1): 'not explained by the catalogue', the "
+                              "two named as rivals (1266e7a, with the hold-out limit at 25, called start_mass "
+                              "explained)",
 }
 
 
