@@ -113,3 +113,18 @@ def test_numpy_numbers_render_like_python_ones():
     t = Table(("a", "b"), ((np.float64(1.23456), np.int64(7)),), (".3g", ".3g"))
     assert t.cells() == [["1.23", "7"]]
     assert Text("x\n\ny", indent=4) in Section("", (Text("x\n\ny", indent=4),)).items
+
+
+def test_summary_text_is_the_text_and_keeps_the_value():
+    """The diagnostics' results return a SummaryText: a str (joined, searched and printed as
+    before) that renders as its Summary does and nests as that value."""
+    from rocketid.summary import SummaryText
+
+    s = _example()
+    t = SummaryText(s)
+    assert isinstance(t, str) and t == s.text() and t.text() == s.text() and type(t.text()) is str
+    assert t.value is s and t.notes == s.notes and t.html() == s.html() and t.to_dict() == s.to_dict()
+    assert "\n".join(["before", t]).endswith(s.text()) and "CD0 is at its upper bound" in t
+    assert Section("", (t,)).items == (s,)
+    with pytest.raises(TypeError, match="wraps a Summary"):
+        SummaryText("text")

@@ -262,8 +262,8 @@ def _axes(ax, figsize):
     """``ax``, or the axes of a new figure (not registered with pyplot: no backend is touched)."""
     if ax is not None:
         return ax
-    from matplotlib.figure import Figure
-    return Figure(figsize=figsize).subplots()
+    from .output import new_axes
+    return new_axes(figsize)
 
 
 def select_np(eigenvalues: np.ndarray, threshold: float) -> int:

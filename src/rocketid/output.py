@@ -31,7 +31,8 @@ from typing import Any, Iterable, Iterator, Sequence
 
 from .errors import SettingsError
 
-__all__ = ["atomic_open", "write_text", "write_bytes", "write_json", "write_csv", "save_figure", "check_file",
+__all__ = ["atomic_open", "write_text", "write_bytes", "write_json", "write_csv", "save_figure", "new_axes", "figure_of",
+           "plot_target", "check_file",
            "check_folder", "folder_lock", "remove_stale_tree", "finite_or_none", "nulls_for_non_finite", "LOCK_NAME"]
 
 #: The lock file :func:`folder_lock` keeps in a folder while a run writes there.
@@ -224,6 +225,33 @@ def save_figure(fig: Any, path: str | os.PathLike, **kwargs) -> Path:
     buf = io.BytesIO()
     fig.savefig(buf, **kwargs)
     return write_bytes(path, buf.getvalue())
+
+
+def new_axes(figsize: tuple, *args, **kwargs):
+    """The axes of a new figure that pyplot does not manage (no backend is chosen or switched):
+    ``Figure(figsize=figsize).subplots(*args, **kwargs)``."""
+    from matplotlib.figure import Figure
+    return Figure(figsize=figsize).subplots(*args, **kwargs)
+
+
+def figure_of(drawn: Any):
+    """The figure of what a plot returned: a figure, an Axes, or an array of Axes (None for None)."""
+    if drawn is None or hasattr(drawn, "savefig"):
+        return drawn
+    if hasattr(drawn, "figure"):
+        return drawn.figure
+    import numpy as np
+    return np.asarray(drawn, dtype=object).flat[0].figure
+
+
+def plot_target(ax: Any, path: Any) -> tuple:
+    """``(ax, path)`` of a plot method called as ``plot(ax=None, *, path=None)``: a path given in the
+    axes' place (the older ``plot("figure.png")``) is taken as the path."""
+    if isinstance(ax, (str, os.PathLike)):
+        if path is not None:
+            raise SettingsError(f"a plot got two paths, {ax!r} and {path!r}; pass the axes first, or path= alone")
+        return None, ax
+    return ax, path
 
 
 # ---------------------------------------------------------------------------

@@ -44,7 +44,7 @@ from dataclasses import dataclass, field
 from numbers import Integral, Real
 from typing import Iterable, Union
 
-__all__ = ["Row", "Table", "Text", "Section", "Summary", "KEY_WIDTH"]
+__all__ = ["Row", "Table", "Text", "Section", "Summary", "SummaryText", "KEY_WIDTH"]
 
 #: Keys of rows are padded to at least this many characters (``"scaling       : nominal"``).
 KEY_WIDTH = 14
@@ -154,6 +154,8 @@ Item = Union[Row, Table, Text, "Summary"]
 
 
 def _item(x) -> Item:
+    if isinstance(x, SummaryText):
+        return x.value
     if isinstance(x, (Row, Table, Text, Summary)):
         return x
     if isinstance(x, str):
@@ -323,3 +325,56 @@ class Summary:
                 "sections": [{"title": s.title, "items": [item(it) for it in s.items]} for s in self.sections],
                 "notes": list(self.notes)}
 
+
+
+class SummaryText(str):
+    """The text of a :class:`Summary` that keeps the value: what the diagnostics' results
+    (``Comparison``, ``Location``, ``Plausibility``, ``CandidateRanking``, ``Confirmation``)
+    return from ``summary()``.
+
+    It is a ``str`` (the text, so ``print``, ``in``, ``splitlines`` and ``"\\n".join`` of the
+    reports that still assemble their text from these are unchanged) and it answers as the
+    value does: :meth:`text`, :meth:`html` (Jupyter shows it), :meth:`to_dict`, ``sections``,
+    ``notes``; :attr:`value` is the :class:`Summary` itself. Nested in a :class:`Section` it is
+    taken as that value.
+
+    Parameters
+    ----------
+    summary : Summary
+    """
+
+    value: Summary
+
+    def __new__(cls, summary: Summary) -> "SummaryText":
+        if not isinstance(summary, Summary):
+            raise TypeError(f"SummaryText wraps a Summary, got {type(summary).__name__}")
+        out = super().__new__(cls, summary.text())
+        out.value = summary
+        return out
+
+    @property
+    def title(self) -> str:
+        return self.value.title
+
+    @property
+    def sections(self) -> tuple:
+        return self.value.sections
+
+    @property
+    def notes(self) -> tuple:
+        return self.value.notes
+
+    def text(self) -> str:
+        """The plain-text rendering (this string, as a plain ``str``)."""
+        return str.__str__(self)
+
+    def html(self, level: int = 3) -> str:
+        """The HTML rendering of the value (:meth:`Summary.html`)."""
+        return self.value.html(level)
+
+    def _repr_html_(self) -> str:
+        return self.value.html()
+
+    def to_dict(self) -> dict:
+        """:meth:`Summary.to_dict` of the value."""
+        return self.value.to_dict()
