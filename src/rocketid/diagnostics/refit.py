@@ -27,7 +27,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field, replace
-from typing import Any, Mapping, Sequence
+from typing import Any, Mapping, NamedTuple, Sequence
 
 import numpy as np
 from scipy import stats
@@ -39,6 +39,7 @@ from ..nlp import ParameterTransform
 from ..sensitivity import sensitivity_at
 from ..simulate import simulate
 from ..solve import EstimationResult, estimate, prepare
+from ..summary import Section, Summary, SummaryText, Table
 from .compare import DEFAULT_LAGS, ljung_box as _ljung_box
 from .effects import Effect, resolve_effects, with_effects
 
@@ -180,37 +181,35 @@ class Confirmation:
             "timings": {k: float(v) for k, v in self.timings.items()},
         }
 
-    def summary(self) -> str:
-        """Fixed sections: test, fit per channel, hold-out, effect estimates; then numbered notes."""
+    def summary(self) -> SummaryText:
+        """Fixed sections (test against the base model, channels, hold-out, effect parameters) and
+        numbered notes: a :class:`~rocketid.summary.Summary`, as its text (:class:`~rocketid.summary.SummaryText`)."""
         verdict = "CONFIRMED" if self.confirmed else "not confirmed"
-        lines = [f"rocketid confirmation: {self.base_fit.spec.name} + {' + '.join(self.effects)} ({verdict})",
-                 "=" * 72,
-                 "Test against the base model",
-                 f"  LR statistic  : {self.lr_statistic:.6g} on {self.dof} dof, p = {_p(self.lr_p_value)}",
-                 f"  AIC           : {self.aic[0]:.6g} -> {self.aic[1]:.6g}",
-                 f"  BIC           : {self.bic[0]:.6g} -> {self.bic[1]:.6g}  (delta {self.bic[1] - self.bic[0]:+.4g})",
-                 f"  chi2 / dof    : {self.chi2_per_dof[0]:.4g} -> {self.chi2_per_dof[1]:.4g}",
-                 "Channels (before -> after)",
-                 f"  {'channel':<9}{'RMS':>24}{f'Ljung-Box p ({self.lags} lags)':>30}"]
-        for ch in self.rms:
-            a, b = self.rms[ch]
-            wa, wb = self.whiteness[ch]
-            lines.append(f"  {ch:<9}{a:>11.4g} -> {b:<10.4g}{_p(wa):>17} -> {_p(wb):<10}")
+        test = Section("Test against the base model", (
+            ("LR statistic", f"{self.lr_statistic:.6g} on {self.dof} dof, p = {_p(self.lr_p_value)}"),
+            ("AIC", f"{self.aic[0]:.6g} -> {self.aic[1]:.6g}"),
+            ("BIC", f"{self.bic[0]:.6g} -> {self.bic[1]:.6g}  (delta {self.bic[1] - self.bic[0]:+.4g})"),
+            ("chi2 / dof", f"{self.chi2_per_dof[0]:.4g} -> {self.chi2_per_dof[1]:.4g}")))
+        channels = Section(f"Channels (before -> after; Ljung-Box with {self.lags} lags)", (Table(
+            ("channel", "RMS before", "RMS after", "Ljung-Box p before", "Ljung-Box p after"),
+            [(ch, a, b, _p(self.whiteness[ch][0]), _p(self.whiteness[ch][1])) for ch, (a, b) in self.rms.items()],
+            (None, ".4g", ".4g")),))
+        sections = [test, channels]
         if self.holdout_rms:
-            lines.append(f"Hold-out (fit {self.holdout[0]:g}-{self.holdout[1]:g} s, predict the rest): prediction RMS, "
-                         "base -> new")
-            for ch, (a, b) in self.holdout_rms.items():
-                lines.append(f"  {ch:<9}{a:>11.4g} -> {b:<10.4g}")
-        lines.append("Effect parameters (95 % interval)")
-        for name, (v, s, (lo, hi)) in self.effect_estimates.items():
-            lines.append(f"  {name:<14}{v:>13.6g} +- {s:<10.3g} [{lo:.6g}, {hi:.6g}]")
+            sections.append(Section(
+                f"Hold-out (fit {self.holdout[0]:g}-{self.holdout[1]:g} s, predict the rest): prediction RMS",
+                (Table(("channel", "base", "new"), [(ch, a, b) for ch, (a, b) in self.holdout_rms.items()],
+                       (None, ".4g", ".4g")),)))
+        sections.append(Section("Effect parameters (95 % interval)", (Table(
+            ("parameter", "estimate", "std err", "low", "high"),
+            [(n, v, se, lo, hi) for n, (v, se, (lo, hi)) in self.effect_estimates.items()],
+            (None, ".6g", ".3g", ".6g", ".6g")),)))
         notes = list(self.notes)
         if self.acceptance is not None and not self.acceptance.accepted:
             notes.insert(0, "not accepted: " + self.acceptance.reason())
-        if notes:
-            lines.append("Notes")
-            lines += [f"  [{i}] {n}" for i, n in enumerate(notes, 1)]
-        return "\n".join(lines)
+        return SummaryText(Summary(
+            f"rocketid confirmation: {self.base_fit.spec.name} + {' + '.join(self.effects)} ({verdict})",
+            tuple(sections), tuple(notes)))
 
 
 def _p(p: float) -> str:
@@ -331,20 +330,52 @@ def confirm(fit: EstimationResult, effect: Effect | str | Sequence[Effect | str]
         raise SettingsError(f"level must be in (0, 1), got {level!r}")
     t0 = time.perf_counter()
     timeout = REFIT_TIMEOUT if timeout is None else float(timeout)
-    holdout = holdout_window(fit.spec, holdout)
+    window = holdout_window(fit.spec, holdout)
     options = dict(options or {})
     options.setdefault("max_wall_time", timeout)
     effects = resolve_effects(effect)
-    base_spec = fit.spec
-    spec = with_effects(base_spec, effects)
-    data = fit.prepared.measurements
-    mesh = fit.prepared.transcription.mesh
+    spec = with_effects(fit.spec, effects)
+    data, mesh = fit.prepared.measurements, fit.prepared.transcription.mesh
     if fitted is not None and _same_problem(fitted, spec, data, mesh):
         new = fitted
     else:
         new = estimate(spec, data, guess=guess, mesh=mesh, options=options)
     t1 = time.perf_counter()
-    notes: list[str] = []
+    test = _lr_and_ic(fit, new, lags, timeout)
+    est = _effect_estimates(fit.spec, new, effects)
+    disc = _discretization_check(new, data, timeout)
+    t2 = time.perf_counter()
+    hold = _holdout(fit, new, window, options, timeout)
+    t3 = time.perf_counter()
+    return Confirmation(
+        effects=tuple(e.name for e in effects), fit=new, base_fit=fit, lr_statistic=test.lr, lr_p_value=test.lr_p,
+        dof=test.dof, aic=test.aic, bic=test.bic, whiteness=test.whiteness, rms=test.rms,
+        holdout_rms=hold.rms, effect_estimates=est.estimates, chi2_per_dof=(fit.chi2_per_dof, new.chi2_per_dof),
+        discretization=disc.max_sigma, holdout=window, level=float(level), lags=test.lags,
+        notes=test.notes + est.notes + disc.notes + hold.notes,
+        timings={"refit_s": t1 - t0, "checks_s": t2 - t1, "holdout_s": t3 - t2, "total_s": t3 - t0},
+        holdout_fits=hold.fits, effect_covariance=est.covariance,
+        acceptance=_acceptance(fit, new, effects, fit.spec, disc.total, level))
+
+
+class _Test(NamedTuple):
+    """The refit against the base model: likelihood ratio, information criteria, channels."""
+
+    lr: float
+    lr_p: float
+    dof: int
+    aic: tuple
+    bic: tuple
+    whiteness: dict
+    rms: dict
+    lags: int
+    notes: tuple
+
+
+def _lr_and_ic(fit: EstimationResult, new: EstimationResult, lags: int | None, timeout: float) -> _Test:
+    """The likelihood-ratio test, AIC/BIC (base, new), and per channel the Ljung-Box p and RMS
+    (before, after); ``lags``: the Ljung-Box lags used (the largest, when channels differ)."""
+    notes = []
     if not new.success:
         gave = _timed_out(new)
         notes.append(f"the refit {'gave up after ' + format(timeout, 'g') + ' s' if gave else 'did not converge'} "
@@ -357,17 +388,31 @@ def confirm(fit: EstimationResult, effect: Effect | str | Sequence[Effect | str]
         lr_p = 1.0
     else:
         lr_p = float(stats.chi2.sf(lr, dof)) if dof > 0 else float("nan")
-    aic0, bic0 = information_criteria(fit)
-    aic1, bic1 = information_criteria(new)
-    white, rms = {}, {}
+    white, rms, used = {}, {}, set()
     for ch in fit.nlp.channel_names:
-        white[ch] = (ljung_box(fit.residuals[ch], lags)[1], ljung_box(new.residuals[ch], lags)[1])
+        before, after = _ljung_box(fit.residuals[ch], lags), _ljung_box(new.residuals[ch], lags)
+        white[ch] = (before.p_value, after.p_value)
         rms[ch] = (fit.rms[ch], new.rms[ch])
+        used |= {before.dof, after.dof}
+    (aic0, bic0), (aic1, bic1) = information_criteria(fit), information_criteria(new)
+    return _Test(float(lr), float(lr_p), int(dof), (aic0, aic1), (bic0, bic1), white, rms,
+                 int(max(used)) if used else int(lags or DEFAULT_LAGS), tuple(notes))
 
-    # the effect's parameters with their uncertainty
+
+class _Estimates(NamedTuple):
+    """The effect's parameters: ``{name: (estimate, standard error, (low, high))}`` and their covariance."""
+
+    estimates: dict
+    covariance: np.ndarray | None
+    notes: tuple
+
+
+def _effect_estimates(base_spec, new: EstimationResult, effects: Sequence[Effect]) -> _Estimates:
+    """The effect's parameters with their uncertainty (95 % intervals), with notes on weak
+    identifiability and on estimates far beyond their realistic size."""
+    spec = new.spec
     declared = [n for n in spec.parameter_names if n not in set(base_spec.parameter_names)]
-    estimates = {}
-    cov = None
+    estimates, cov, notes = {}, None, []
     try:
         unc = uncertainty(new)
         iv = unc.interval(0.95)
@@ -376,8 +421,7 @@ def confirm(fit: EstimationResult, effect: Effect | str | Sequence[Effect | str]
             estimates[n] = (float(new.p[i]), float(unc.standard_errors[i]), (float(iv[i, 0]), float(iv[i, 1])))
         idx = [spec.parameter_names.index(n) for n in declared]
         cov = unc.parameter_covariance[np.ix_(idx, idx)]
-        for note in unc.notes:
-            notes.append(f"uncertainty: {note}")
+        notes += [f"uncertainty: {note}" for note in unc.notes]
         realistic = {k: v for e in effects for k, v in e.realistic.items()}
         for n in declared:
             v, se, _ = estimates[n]
@@ -400,10 +444,21 @@ def confirm(fit: EstimationResult, effect: Effect | str | Sequence[Effect | str]
             if n in estimates and mag and abs(estimates[n][0]) > 10 * abs(mag):
                 notes.append(f"{n} = {estimates[n][0]:.4g} is more than 10 times its realistic magnitude "
                              f"{mag:g}: implausible; the effect may be standing in for another one")
+    return _Estimates(estimates, cov, tuple(notes))
 
-    # discretization: the collocation against the high-accuracy simulator at the refit's estimate
-    disc = {}
-    D = float("nan")
+
+class _Discretization(NamedTuple):
+    """Collocation against the high-accuracy simulation at the refit's estimate."""
+
+    max_sigma: dict
+    total: float
+    notes: tuple
+
+
+def _discretization_check(new: EstimationResult, data: Measurements, timeout: float) -> _Discretization:
+    """``{channel: max |collocation - simulation| / sigma}`` and the sum of squares over all
+    samples (NaN when the simulation failed), with a note when the mesh is too coarse."""
+    disc, D, notes = {}, float("nan"), []
     try:
         pred = _predict(new, data, timeout)
         sig = dict(zip(new.nlp.channel_names, new.nlp.channel_sigmas))
@@ -420,45 +475,49 @@ def confirm(fit: EstimationResult, effect: Effect | str | Sequence[Effect | str]
                          "first element, which effects acting at lift-off need)")
     except RocketidError as exc:
         notes.append(f"the discretization check failed: {exc}")
-    t2 = time.perf_counter()
+    return _Discretization(disc, D, tuple(notes))
 
-    # hold-out: fit both models on the window, predict the rest
-    hold_rms, hold_fits = None, None
-    if holdout is not None:
-        a, b = holdout
-        rest = _after(data, b)
-        if rest is None:
-            notes.append(f"no samples after t = {b:g} s: the hold-out check was skipped")
-        else:
-            try:
-                window = data.window(a, b)
-                fb, blind_b = _fit_window(base_spec, window, mesh, None, options, fit.p)
-                # from the model's own guesses, as the base model: a parameter the window's data do not
-                # reach is held at its guess, and a guess taken from the full-data estimate would carry
-                # the predicted samples into the prediction
-                fn, blind_n = _fit_window(spec, window, mesh, None, options, new.p)
-                hold_fits = (fb, fn)
-                pb, pn = _predict(fb, rest, timeout), _predict(fn, rest, timeout)
-                hold_rms = {c.name: (float(np.sqrt(np.mean((pb[c.name] - c.values) ** 2))),
-                                     float(np.sqrt(np.mean((pn[c.name] - c.values) ** 2)))) for c in rest.channels}
-                for label, f, blind in (("base", fb, blind_b), ("new", fn, blind_n)):
-                    if not f.success:
-                        notes.append(f"the {label} model's hold-out fit did not converge ({f.message})")
-                    if blind:
-                        notes.append(f"the data of the hold-out window do not reach {', '.join(blind)} of the {label} "
-                                     "model: held at their guesses in its hold-out fit and prediction")
-            except RocketidError as exc:
-                notes.append(f"the hold-out check failed: {exc}")
-    t3 = time.perf_counter()
-    acceptance = _acceptance(fit, new, effects, base_spec, D, level)
-    return Confirmation(
-        effects=tuple(e.name for e in effects), fit=new, base_fit=fit, lr_statistic=float(lr),
-        lr_p_value=float(lr_p), dof=int(dof), aic=(aic0, aic1), bic=(bic0, bic1), whiteness=white, rms=rms,
-        holdout_rms=hold_rms, effect_estimates=estimates, chi2_per_dof=(fit.chi2_per_dof, new.chi2_per_dof),
-        discretization=disc, holdout=None if holdout is None else (float(holdout[0]), float(holdout[1])),
-        level=float(level), lags=int(lags or DEFAULT_LAGS), notes=tuple(notes),
-        timings={"refit_s": t1 - t0, "checks_s": t2 - t1, "holdout_s": t3 - t2, "total_s": t3 - t0},
-        holdout_fits=hold_fits, effect_covariance=cov, acceptance=acceptance)
+
+class _Holdout(NamedTuple):
+    """Both models fitted on the window, predicting the rest: ``{channel: (base RMS, new RMS)}``."""
+
+    rms: dict | None
+    fits: tuple | None
+    notes: tuple
+
+
+def _holdout(fit: EstimationResult, new: EstimationResult, window: tuple[float, float] | None,
+             options: Mapping[str, Any], timeout: float) -> _Holdout:
+    """Fit the base model and the model with the effect on ``window`` (None: no check) from their
+    own guesses, and predict the samples after it."""
+    if window is None:
+        return _Holdout(None, None, ())
+    data, mesh = fit.prepared.measurements, fit.prepared.transcription.mesh
+    a, b = window
+    rest = _after(data, b)
+    if rest is None:
+        return _Holdout(None, None, (f"no samples after t = {b:g} s: the hold-out check was skipped",))
+    notes, fits = [], None
+    try:
+        win = data.window(a, b)
+        fb, blind_b = _fit_window(fit.spec, win, mesh, None, options, fit.p)
+        # from the model's own guesses, as the base model: a parameter the window's data do not
+        # reach is held at its guess, and a guess taken from the full-data estimate would carry
+        # the predicted samples into the prediction
+        fn, blind_n = _fit_window(new.spec, win, mesh, None, options, new.p)
+        fits = (fb, fn)
+        pb, pn = _predict(fb, rest, timeout), _predict(fn, rest, timeout)
+        rms = {c.name: (float(np.sqrt(np.mean((pb[c.name] - c.values) ** 2))),
+                        float(np.sqrt(np.mean((pn[c.name] - c.values) ** 2)))) for c in rest.channels}
+        for label, f, blind in (("base", fb, blind_b), ("new", fn, blind_n)):
+            if not f.success:
+                notes.append(f"the {label} model's hold-out fit did not converge ({f.message})")
+            if blind:
+                notes.append(f"the data of the hold-out window do not reach {', '.join(blind)} of the {label} "
+                             "model: held at their guesses in its hold-out fit and prediction")
+        return _Holdout(rms, fits, tuple(notes))
+    except RocketidError as exc:
+        return _Holdout(None, fits, tuple(notes) + (f"the hold-out check failed: {exc}",))
 
 
 def _same_problem(fitted: EstimationResult, spec, data: Measurements, mesh) -> bool:
@@ -911,15 +970,27 @@ _TASKS: list = []   # read by forked workers (the tasks are not pickled: effects
 
 
 def _child(index: int, conn, parent_pid: int) -> None:   # pragma: no cover - runs in a worker process
+    """Run refit ``index`` in a forked worker and send its :class:`Refit`; the worker ends with
+    ``os._exit`` (nothing of the parent's runs twice, nothing is printed)."""
+    import os
+
     from ..sampling.executors import die_with_parent
-    die_with_parent(parent_pid)  # a killed diagnose leaves no refit process behind
+    code = 1
     try:
-        refit, _ = run_refit(_TASKS[index])
+        die_with_parent(parent_pid)  # a killed diagnose leaves no refit process behind
+        try:
+            refit, _ = run_refit(_TASKS[index])
+        except BaseException as exc:   # noqa: BLE001 - report anything to the parent
+            refit = _failed(_TASKS[index], f"the refit failed in its worker: {type(exc).__name__}: {exc}", 0.0)
         conn.send(refit)
-    except BaseException as exc:   # noqa: BLE001 - report anything to the parent
-        conn.send(_failed(_TASKS[index], f"the refit failed in its worker: {type(exc).__name__}: {exc}", 0.0))
+        code = 0
+    except BaseException:  # noqa: BLE001 - the parent reports a worker that ended without a result
+        pass
     finally:
-        conn.close()
+        try:
+            conn.close()
+        finally:
+            os._exit(code)
 
 
 def refit_all(tasks: Sequence[RefitTask], *, workers: int | None = None) -> tuple[Refit, ...]:
