@@ -108,6 +108,8 @@ def test_the_score_statistic_predicts_the_refit(base, mesh):
     r = rank_candidates(fit, ["bias_h", "bias_v", "scale_v"])
     c = confirm(fit, "bias_h", holdout=None)
     assert r["bias_h"].statistic == pytest.approx(c.lr_statistic, rel=0.02)
+    assert c.lags == max(min(20, r.size // 5) for r in fit.residuals.values())   # the lags the test used
+    assert c.summary().value.section("Effect parameters (95 % interval)").items[0].rows[0][0] == "b_h"
     est, se, _ = c.effect_estimates["b_h"]
     assert abs(r["bias_h"].one_step["b_h"] - est) < 0.05 * se
 

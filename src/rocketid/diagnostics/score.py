@@ -50,7 +50,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import Iterable, Sequence
+from typing import Iterable, NamedTuple, Sequence
 
 import numpy as np
 from scipy import stats
@@ -59,6 +59,7 @@ from ..errors import ModelError, SettingsError
 from ..model import ModelSpec
 from ..sensitivity import sensitivity_at
 from ..solve import EstimationResult, Prepared, prepare
+from ..summary import Section, Summary, SummaryText, Table
 from .effects import CATALOGUE, Effect, apply_effect, effect_parameter_problems, is_present, resolve_effects
 
 __all__ = ["CandidateScore", "CandidateRanking", "AugmentedModel", "augment", "rank_candidates", "holm",
@@ -236,20 +237,19 @@ class CandidateRanking:
                 "base": dict(self.base), "notes": list(self.notes),
                 "timings": {k: (float(v) if not isinstance(v, bool) else v) for k, v in self.timings.items()}}
 
-    def summary(self) -> str:
-        """A table of the candidates, best first, then numbered notes."""
+    def summary(self) -> SummaryText:
+        """The base fit and the test, a table of the candidates, best first, then numbered notes: a
+        :class:`~rocketid.summary.Summary`, as its text (:class:`~rocketid.summary.SummaryText`)."""
         b = self.base
-        lines = [f"rocketid candidate effects: score test at the fit of {b['model']}",
-                 "=" * 78,
-                 f"  base fit      : J = {b['objective']:.6g}, chi2/dof = {b['chi2_per_dof']:.4g} "
-                 f"({b['n_data']} data, {b['n_estimated']} estimated)",
-                 f"  test          : score (LM) statistic ~ chi2(dof); p corrected by {self.correction.title()} "
-                 f"over {len(self.candidates)} candidates; level {self.level:g}",
-                 f"  time          : {self.timings.get('total_s', float('nan')):.2f} s "
-                 f"(sensitivities {self.timings.get('sensitivity_s', float('nan')):.2f} s)",
-                 "",
-                 f"  {'#':>2} {'effect':<16}{'LM':>12}{'dof':>4}{'p (corr.)':>11}{'drop of J':>12}{'group':>6}  flags"]
+        head = Section("", (
+            ("base fit", f"J = {b['objective']:.6g}, chi2/dof = {b['chi2_per_dof']:.4g} ({b['n_data']} data, "
+                         f"{b['n_estimated']} estimated)"),
+            ("test", f"score (LM) statistic ~ chi2(dof); p corrected by {self.correction.title()} over "
+                     f"{len(self.candidates)} candidates; level {self.level:g}"),
+            ("time", f"{self.timings.get('total_s', float('nan')):.2f} s (sensitivities "
+                     f"{self.timings.get('sensitivity_s', float('nan')):.2f} s)")))
         notes: list[str] = []
+        rows = []
         for c in self.candidates:
             flags = []
             if c.significant:
@@ -262,16 +262,16 @@ class CandidateRanking:
             if c.note:
                 notes.append(f"{c.name}: {c.note}")
                 flags.append(f"[{len(notes)}]")
-            lines.append(f"  {c.rank:>2} {c.name:<16}{c.statistic:>12.4g}{c.dof:>4}{_fmt_p(c.p_value_corrected):>11}"
-                         f"{c.predicted_drop:>12.4g}{c.group:>6}  {' '.join(flags)}")
-        lines.append("  (* significant at the level; LM / 2 is the predicted fall of J when the effect is added)")
-        for name, why in self.skipped.items():
-            notes.append(f"{name} was not scored: {why}")
+            rows.append((c.rank, c.name, c.statistic, c.dof, _fmt_p(c.p_value_corrected), c.predicted_drop, c.group,
+                         " ".join(flags)))
+        table = Section("Candidates (best first)", (
+            Table(("#", "effect", "LM", "dof", "p (corr.)", "drop of J", "group", "flags"), rows,
+                  (None, None, ".4g", None, None, ".4g")),
+            "(* significant at the level; LM / 2 is the predicted fall of J when the effect is added)"))
+        notes += [f"{name} was not scored: {why}" for name, why in self.skipped.items()]
         notes.extend(self.notes)
-        if notes:
-            lines.append("Notes")
-            lines += [f"  [{i}] {n}" for i, n in enumerate(notes, 1)]
-        return "\n".join(lines)
+        return SummaryText(Summary(f"rocketid candidate effects: score test at the fit of {b['model']}",
+                                   (head, table), tuple(notes)))
 
 
 def _fmt_p(p: float) -> str:
@@ -496,30 +496,79 @@ def rank_candidates(fit: EstimationResult, candidates: Iterable[Effect | str] | 
         notes.append("the augmented model given does not match this fit (model, candidates, mesh or sample times); "
                      "it was built again")
     aug = augmented if reused else augment(fit, effects)
-    spec_a = aug.spec
-    base = fit.spec
+    t1 = time.perf_counter()
+    sens = _augmented_sensitivities(fit, aug)
+    t2 = time.perf_counter()
+    proj = _base_projection(fit, sens)
+    n_p = len(fit.spec.parameters)
+    # all candidate columns projected at once: s~ = s - U U^T s
+    C = proj.Sw[:, n_p:]
+    Ct = C - proj.U @ (proj.U.T @ C)
+    index = {n: i - n_p for i, n in enumerate(aug.spec.parameter_names) if i >= n_p}
+    meanings: dict = {}
+    raw = []
+    for e in aug.effects:
+        cols = [index[n] for n in aug.parameters[e.name]]
+        raw.append(_score_one(e, C[:, cols], Ct[:, cols], proj.rw, proj.families, fit.spec, proj.estimated, meanings))
+    logp = np.array([r["logp"] for r in raw])
+    lm = np.array([r["statistic"] for r in raw])
+    order = sorted(range(len(raw)), key=lambda i: (logp[i], -lm[i]))
+    groups = _group_confounded(raw, order)
+    scores = _candidate_scores(raw, order, groups, aug, level)
+    t4 = time.perf_counter()
+    timings = {"build_s": 0.0 if reused else aug.build_s, "prepare_s": 0.0 if reused else aug.prepare_s,
+               "sensitivity_s": t2 - t1, "score_s": t4 - t2, "total_s": t4 - t_start,
+               "codegen_cached": bool(aug.prepared.codegen_cached), "reused_augmented_model": bool(reused)}
+    base_info = {"model": fit.spec.name, "objective": float(fit.objective), "chi2_per_dof": float(fit.chi2_per_dof),
+                 "n_data": int(fit.n_data), "n_estimated": int(fit.n_estimated)}
+    sigma, slices = sens.sigma, sens.channel_slices
+    explained = {aug.effects[i].name: {ch: raw[i]["direction"][sl] * sigma[sl] for ch, sl in slices.items()}
+                 for i in order}
+    return CandidateRanking(scores, [[aug.effects[j].name for j in g] for g in groups.groups],
+                            dict(aug.skipped), float(level), "holm", base_info,
+                            tuple(notes + list(proj.notes) + list(sens.notes)), timings, aug, explained)
+
+
+def _augmented_sensitivities(fit: EstimationResult, aug: AugmentedModel):
+    """The output sensitivities of the augmented model at the base fit (effects at zero): the base
+    fit's collocation states, extended by the effects' own states at their initial values."""
+    spec_a, base = aug.spec, fit.spec
     n_p = len(base.parameters)
     if tuple(spec_a.parameter_names[:n_p]) != base.parameter_names:
         raise ModelError("the augmented model does not start with the base model's parameters")
     if aug.prepared.nlp.channel_names != fit.nlp.channel_names:
         raise ModelError("the augmented model's channels differ from the fit's")
-
-    # collocation states of the base fit, extended by the effects' own states (at their initial values)
-    t1 = time.perf_counter()
     lay_b = fit.prepared.transcription.layout
     lay_a = aug.prepared.transcription.layout
     S_b, _ = lay_b.unpack(fit.nlp.full_vector(fit.x))
     S_a = np.tile(spec_a.initial_state(spec_a.guess), (lay_a.n_nodes, 1))
     S_a[:, :S_b.shape[1]] = S_b
     p_a = np.concatenate([fit.p, np.zeros(len(spec_a.parameters) - n_p)])
-    sens = sensitivity_at(aug.prepared, p_a, gamma=S_a.ravel(), solve=True)
-    t2 = time.perf_counter()
+    return sensitivity_at(aug.prepared, p_a, gamma=S_a.ravel(), solve=True)
 
+
+class _Projection(NamedTuple):
+    """What the base fit's estimated parameters can absorb (module notation)."""
+
+    Sw: np.ndarray          # (N, n_p + n_candidates): weighted sensitivities, base parameters first
+    rw: np.ndarray          # (N,): weighted residuals
+    U: np.ndarray           # orthonormal basis of the estimated parameters' columns
+    estimated: list         # names of the estimated base parameters
+    families: list          # (label, indices into ``estimated``, orthonormal basis) of each family
+    notes: tuple
+
+
+def _base_projection(fit: EstimationResult, sens) -> _Projection:
+    """The weighted sensitivities and residuals, and the basis the score test projects out: the
+    estimated parameters (those at a bound held fixed) or, after (7.9), the estimated directions."""
+    base = fit.spec
+    n_p = len(base.parameters)
     sigma = sens.sigma
     Sw = sens.S / sigma[:, None]
     rw = np.concatenate([fit.residuals[c] for c in fit.nlp.channel_names]) / sigma
     P = fit.nlp.transform.P
     free = np.ones(n_p, bool)
+    notes = []
     if fit.nlp.transform.is_identity:
         for s, side in fit.active_bounds():
             free[base.parameter_symbols.index(s)] = False
@@ -531,27 +580,26 @@ def rank_candidates(fit: EstimationResult, candidates: Iterable[Effect | str] | 
         est_names = list(base.parameter_names)
         notes.append(f"the base fit estimated {P.shape[1]} transformed directions (7.9): the test projects out "
                      "those directions only")
-    U = _orthonormal(X)
     Xp = Sw[:, :n_p][:, [base.parameter_names.index(n) for n in est_names]]
-    families = _families(base, est_names)
-    fam_bases = [(label, idx, _orthonormal(Xp[:, idx])) for label, idx in families]
+    fam_bases = [(label, idx, _orthonormal(Xp[:, idx])) for label, idx in _families(base, est_names)]
+    return _Projection(Sw, rw, _orthonormal(X), est_names, fam_bases, tuple(notes))
 
-    # all candidate columns projected at once: s~ = s - U U^T s
-    C = Sw[:, n_p:]
-    Ct = C - U @ (U.T @ C)
-    index = {n: i - n_p for i, n in enumerate(spec_a.parameter_names) if i >= n_p}
-    meanings: dict = {}
-    raw = []
-    for e in aug.effects:
-        cols = [index[n] for n in aug.parameters[e.name]]
-        raw.append(_score_one(e, C[:, cols], Ct[:, cols], rw, fam_bases, base, est_names, meanings))
 
-    # order, correct, group
-    logp = np.array([r["logp"] for r in raw])
+class _Groups(NamedTuple):
+    """Confounded groups in rank order (candidate indices, the leader first): ``group_of[i]`` the
+    group of candidate ``i``, ``link[i]``
+    ``(leader it joined, |cos|, score ratio)`` for a candidate that joined another's group."""
+
+    groups: list
+    group_of: dict
+    link: dict
+
+
+def _group_confounded(raw: Sequence[dict], order: Sequence[int]) -> _Groups:
+    """Single linkage in rank order: a candidate joins the first group holding a better-ranked one
+    whose output change is collinear with its own (:data:`COLLINEAR_COS`) and whose score statistic
+    is close (:data:`SCORE_RATIO`)."""
     lm = np.array([r["statistic"] for r in raw])
-    order = sorted(range(len(raw)), key=lambda i: (logp[i], -lm[i]))
-    p_raw = np.array([r["p_value"] for r in raw])
-    p_corr = holm(p_raw)
     # |cos| between the output changes the candidates would make: one Gram matrix (no vector BLAS calls,
     # which are slow under a multi-threaded BLAS on a busy machine)
     Dm = np.column_stack([r["direction"] for r in raw])
@@ -560,35 +608,41 @@ def rank_candidates(fit: EstimationResult, candidates: Iterable[Effect | str] | 
     groups: list[list[int]] = []
     group_of: dict[int, int] = {}
     link: dict[int, tuple[int, float, float]] = {}
+
+    def confounded(i, j):
+        if dnorm[i] == 0 or dnorm[j] == 0:
+            return None
+        cos = abs(float(gram[i, j]) / (dnorm[i] * dnorm[j]))
+        ratio = min(lm[i], lm[j]) / max(lm[i], lm[j]) if max(lm[i], lm[j]) > 0 else 1.0
+        return (j, cos, ratio) if cos >= COLLINEAR_COS and ratio >= SCORE_RATIO else None
+
     for i in order:
-        # single linkage: join the first group holding a better-ranked candidate it is confounded with
-        joined = False
-        for g, members in enumerate(groups):
-            for j in members:
-                if dnorm[i] == 0 or dnorm[j] == 0:
-                    continue
-                cos = abs(float(gram[i, j]) / (dnorm[i] * dnorm[j]))
-                ratio = min(lm[i], lm[j]) / max(lm[i], lm[j]) if max(lm[i], lm[j]) > 0 else 1.0
-                if cos >= COLLINEAR_COS and ratio >= SCORE_RATIO:
-                    members.append(i)
-                    group_of[i] = g
-                    link[i] = (j, cos, ratio)
-                    joined = True
-                    break
-            if joined:
-                break
-        if not joined:
+        hit = next(((g, why) for g, members in enumerate(groups) for j in members
+                    for why in (confounded(i, j),) if why is not None), None)
+        if hit is None:
             group_of[i] = len(groups)
             groups.append([i])
+        else:
+            groups[hit[0]].append(i)
+            group_of[i], link[i] = hit
+    return _Groups(groups, group_of, link)
 
+
+def _candidate_scores(raw: Sequence[dict], order: Sequence[int], groups: _Groups, aug: AugmentedModel,
+                      level: float) -> list[CandidateScore]:
+    """The :class:`CandidateScore` of each candidate in rank order: Holm-corrected p-values, its
+    group, and the notes (confounded, asks for a value outside its bounds)."""
+    spec_a = aug.spec
+    p_raw = np.array([r["p_value"] for r in raw])
+    p_corr = holm(p_raw)
     scores = []
     for rank, i in enumerate(order, 1):
         r = raw[i]
         e = aug.effects[i]
         note = list(r["notes"])
-        g = groups[group_of[i]]
-        if i in link:
-            lead, cos, ratio = link[i]
+        g = groups.groups[groups.group_of[i]]
+        if i in groups.link:
+            lead, cos, ratio = groups.link[i]
             note.append(f"confounded with {aug.effects[lead].name} (score statistics {100 * (1 - ratio):.0f} % apart, "
                         f"|cos| {cos:.3f} of the output changes): the data cannot tell them apart at this fit; "
                         "refit both (confirm) to decide")
@@ -603,21 +657,10 @@ def rank_candidates(fit: EstimationResult, candidates: Iterable[Effect | str] | 
         scores.append(CandidateScore(
             name=e.name, title=e.title, statistic=float(r["statistic"]), dof=int(r["dof"]),
             p_value=float(p_raw[i]), p_value_corrected=float(p_corr[i]), predicted_drop=float(r["statistic"]) / 2,
-            group=group_of[i] + 1, absorbed_by=r["absorbed_by"], significant=bool(p_corr[i] < level),
+            group=groups.group_of[i] + 1, absorbed_by=r["absorbed_by"], significant=bool(p_corr[i] < level),
             note="; ".join(note), kind=e.kind, parameters=aug.parameters[e.name], retained=float(r["retained"]),
             one_step=r["one_step"], rank=rank, realistic_statistic=r["realistic_statistic"]))
-    t4 = time.perf_counter()
-    timings = {"build_s": 0.0 if reused else aug.build_s, "prepare_s": 0.0 if reused else aug.prepare_s,
-               "sensitivity_s": t2 - t1, "score_s": t4 - t2, "total_s": t4 - t_start,
-               "codegen_cached": bool(aug.prepared.codegen_cached), "reused_augmented_model": bool(reused)}
-    base_info = {"model": base.name, "objective": float(fit.objective), "chi2_per_dof": float(fit.chi2_per_dof),
-                 "n_data": int(fit.n_data), "n_estimated": int(fit.n_estimated)}
-    slices = sens.channel_slices
-    explained = {aug.effects[i].name: {ch: raw[i]["direction"][sl] * sigma[sl] for ch, sl in slices.items()}
-                 for i in order}
-    return CandidateRanking(scores, [[aug.effects[j].name for j in g] for g in groups], dict(aug.skipped),
-                            float(level), "holm", base_info, tuple(notes + list(sens.notes)), timings, aug,
-                            explained)
+    return scores
 
 
 def _score_one(effect: Effect, Sb: np.ndarray, Sbt: np.ndarray, rw: np.ndarray, fam_bases, base: ModelSpec,
@@ -657,37 +700,10 @@ def _score_one(effect: Effect, Sb: np.ndarray, Sbt: np.ndarray, rw: np.ndarray, 
     absorbed_share = 1.0 - mu.max()
     out["absorbed_share"] = float(absorbed_share)
     if absorbed_share > PARTLY_ABSORBED and fam_bases:
-        expl = []
         best = Li.T @ W[:, np.argmax(mu)]           # least-absorbed combination (in unit-column coordinates)
-        a = A @ best
-        a = a / np.sqrt(np.einsum("i,i->", a, a))
-        for label, idx, Q in fam_bases:
-            expl.append((float(np.sum(_tdot(Q, a) ** 2)), label, idx))
-        expl.sort(key=lambda z: -z[0])
-        total = absorbed_share
-        chosen = [z for z in expl if z[0] >= 0.5 * total] or [z for z in expl if z[0] >= 0.1 * total] or expl[:1]
-        members = [est_names[i] for _, _, idx in chosen for i in idx]
-        labels = ", ".join(label for _, label, _ in chosen)
-        key = tuple(members)
-        if key not in meanings:
-            meanings[key] = _meaning(base, members)
-        meaning = meanings[key]
-        lam = out["realistic_statistic"]
-        size = ", ".join(f"{k} = {v:.3g}" for k, v in effect.realistic.items())
-        if absorbed_share > ABSORBED:
-            out["absorbed_by"] = members
-            note = (f"confounded with {labels}: it would be absorbed into {meaning} (they take up "
-                    f"{100 * absorbed_share:.1f} % of its signature)")
-            if lam is not None and lam < DETECTABLE:
-                note += (f"; at a realistic size ({size}) what they cannot take up would raise the score statistic "
-                         f"by only about {lam:.2g}: the effect would go unseen")
-            elif lam is not None:
-                note += (f"; at a realistic size ({size}) what they cannot take up is still detectable (score "
-                         f"statistic about {lam:.3g}), and the base fit has distorted {meaning}")
-            notes.append(note)
-        else:
-            notes.append(f"partly confounded with {labels} ({100 * absorbed_share:.0f} % of its signature): "
-                         f"the base fit has distorted {meaning}")
+        out["absorbed_by"], note = _absorption(effect, A @ best, absorbed_share, out["realistic_statistic"],
+                                               fam_bases, base, est_names, meanings)
+        notes.append(note)
     if not keep.any():
         return out
     # LM = g^T I^-1 g in the kept directions of the projected columns
@@ -709,3 +725,34 @@ def _score_one(effect: Effect, Sb: np.ndarray, Sbt: np.ndarray, rw: np.ndarray, 
     full[live] = step / norms[live]
     out["one_step"] = {n: float(v) for n, v in zip(names, full)}
     return out
+
+
+def _absorption(effect: Effect, a: np.ndarray, absorbed_share: float, lam: float | None, fam_bases,
+                base: ModelSpec, est_names: Sequence[str], meanings: dict) -> tuple[list | None, str]:
+    """Which families of estimated parameters take up an effect's least-absorbed output change
+    ``a`` (weighted): ``(absorbed_by or None, note)``; absorbed beyond :data:`ABSORBED`, the note
+    says whether a realistic size (score statistic ``lam``) would still be seen."""
+    a = a / np.sqrt(np.einsum("i,i->", a, a))
+    expl = sorted(((float(np.sum(_tdot(Q, a) ** 2)), label, idx) for label, idx, Q in fam_bases),
+                  key=lambda z: -z[0])
+    total = absorbed_share
+    chosen = [z for z in expl if z[0] >= 0.5 * total] or [z for z in expl if z[0] >= 0.1 * total] or expl[:1]
+    members = [est_names[i] for _, _, idx in chosen for i in idx]
+    labels = ", ".join(label for _, label, _ in chosen)
+    key = tuple(members)
+    if key not in meanings:
+        meanings[key] = _meaning(base, members)
+    meaning = meanings[key]
+    if absorbed_share <= ABSORBED:
+        return None, (f"partly confounded with {labels} ({100 * absorbed_share:.0f} % of its signature): "
+                      f"the base fit has distorted {meaning}")
+    size = ", ".join(f"{k} = {v:.3g}" for k, v in effect.realistic.items())
+    note = (f"confounded with {labels}: it would be absorbed into {meaning} (they take up "
+            f"{100 * absorbed_share:.1f} % of its signature)")
+    if lam is not None and lam < DETECTABLE:
+        note += (f"; at a realistic size ({size}) what they cannot take up would raise the score statistic "
+                 f"by only about {lam:.2g}: the effect would go unseen")
+    elif lam is not None:
+        note += (f"; at a realistic size ({size}) what they cannot take up is still detectable (score "
+                 f"statistic about {lam:.3g}), and the base fit has distorted {meaning}")
+    return members, note
