@@ -218,10 +218,8 @@ def test_location_summary_and_dict(bp_fit, tmp_path):
         assert section in text
     d = loc.to_dict()
     assert d["findings"][0]["channel"] == "h" and len(d["phases"]) == 5
-    fig = loc.plot(tmp_path / "loc.png")
-    assert len(fig.axes) == 4 and (tmp_path / "loc.png").stat().st_size > 10_000
-    import matplotlib.pyplot as plt
-    plt.close("all")
+    axes = loc.plot(path=tmp_path / "loc.png")
+    assert len(axes) == 4 and (tmp_path / "loc.png").stat().st_size > 10_000
 
 
 # ---------------------------------------------------------------------------

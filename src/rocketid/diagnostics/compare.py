@@ -43,8 +43,9 @@ from typing import Mapping
 import numpy as np
 
 from ..errors import DataError, SettingsError
-from ..output import save_figure
+from ..output import new_axes, plot_target, save_figure
 from ..solve import EstimationResult
+from ..summary import Section, Summary, SummaryText, Table
 
 __all__ = ["LjungBox", "Normality", "Theil", "ChannelComparison", "Comparison", "compare", "ljung_box",
            "normality", "theil", "criterion_terms", "DEFAULT_LAGS"]
@@ -357,34 +358,34 @@ class Comparison:
         white = all(c.whiteness.p_value >= self.level / len(self.channels) for c in self.channels)
         return bool(self.chi2_per_dof <= hi and white)
 
-    def table(self) -> str:
-        """One line per channel."""
-        head = (f"  {'channel':<8}{'n':>7}{'sigma':>8}{'RMS':>10}{'bias':>10}{'bias z':>9}{'chi2/dof':>10}"
-                f"{'Theil U':>10}{'U_M':>6}{'|e|>2':>7}{'LB p':>9}{'rho1':>7}{'JB p':>9}")
-        lines = [head]
-        for c in self.channels:
-            lines.append(f"  {c.name:<8}{c.n:>7}{c.sigma:>8.3g}{c.rms:>10.4g}{c.bias:>10.3g}{c.bias_z:>9.3g}"
-                         f"{c.chi2_per_dof:>10.4g}{c.theil.U:>10.2e}{c.theil.bias:>6.2f}{100 * c.outside_2sigma:>6.1f}%"
-                         f"{c.whiteness.p_value:>9.2g}{c.whiteness.lag1:>7.3f}{c.normality.p_value:>9.2g}")
-        return "\n".join(lines)
+    def channel_table(self) -> Table:
+        """One row per channel: its statistics (the summary's table)."""
+        return Table(("channel", "n", "sigma", "RMS", "bias", "bias z", "chi2/dof", "Theil U", "U_M", "|e|>2 (%)",
+                      "LB p", "rho1", "JB p"),
+                     [(c.name, c.n, c.sigma, c.rms, c.bias, c.bias_z, c.chi2_per_dof, c.theil.U, c.theil.bias,
+                       100 * c.outside_2sigma, c.whiteness.p_value, c.whiteness.lag1, c.normality.p_value)
+                      for c in self.channels],
+                     (None, None, ".3g", ".4g", ".3g", ".3g", ".4g", ".2e", ".2f", ".1f", ".2g", ".3f", ".2g"))
 
-    def summary(self) -> str:
-        """Fixed sections (overall, channels, eta) and numbered notes."""
+    def table(self) -> str:
+        """One line per channel (:meth:`channel_table` as text)."""
+        return "\n".join("  " + line for line in self.channel_table().text_lines())
+
+    def summary(self) -> SummaryText:
+        """Fixed sections (overall, channels, eta) and numbered notes: a
+        :class:`~rocketid.summary.Summary`, as its text (:class:`~rocketid.summary.SummaryText`)."""
         crit = self.criterion
-        lines = [f"rocketid comparison: {self.model}", "=" * 60, "Overall",
-                 f"  chi2 / dof    : {self.chi2_per_dof:.4f}  ({self.n_data} values, {self.n_estimated} estimated)",
-                 f"  white noise   : {'yes' if self.fits_to_noise else 'NO'} (chi2/dof band and Ljung-Box at "
-                 f"level {self.level:g})",
-                 "Channels (residual = model - measured; e = residual / sigma)", self.table(),
-                 "Statistic criterion (7.10)",
-                 f"  eta           : {crit['eta']:.4g} = |s1| {crit['|s1|']:.3g} + |k1-3| {crit['|k1-3|']:.3g} "
-                 f"+ |s1-s2| {crit['|s1-s2|']:.3g} + |k1-k2| {crit['|k1-k2|']:.3g}",
-                 f"  moments       : s1 {crit['s1']:.3g}, k1 {crit['k1']:.4g}, s2 {crit['s2']:.3g}, k2 {crit['k2']:.4g}",
-                 f"  computed by   : {self.criterion_source}"]
-        if self.notes:
-            lines.append("Notes")
-            lines += [f"  [{i}] {n}" for i, n in enumerate(self.notes, 1)]
-        return "\n".join(lines)
+        overall = Section("Overall", (
+            ("chi2 / dof", f"{self.chi2_per_dof:.4f}  ({self.n_data} values, {self.n_estimated} estimated)"),
+            ("white noise", f"{'yes' if self.fits_to_noise else 'NO'} (chi2/dof band and Ljung-Box at level "
+                            f"{self.level:g})")))
+        channels = Section("Channels (residual = model - measured; e = residual / sigma)", (self.channel_table(),))
+        eta = Section("Statistic criterion (7.10)", (
+            ("eta", f"{crit['eta']:.4g} = |s1| {crit['|s1|']:.3g} + |k1-3| {crit['|k1-3|']:.3g} "
+                    f"+ |s1-s2| {crit['|s1-s2|']:.3g} + |k1-k2| {crit['|k1-k2|']:.3g}"),
+            ("moments", f"s1 {crit['s1']:.3g}, k1 {crit['k1']:.4g}, s2 {crit['s2']:.3g}, k2 {crit['k2']:.4g}"),
+            ("computed by", self.criterion_source)))
+        return SummaryText(Summary(f"rocketid comparison: {self.model}", (overall, channels, eta), self.notes))
 
     def to_dict(self) -> dict:
         return {"model": self.model, "chi2_per_dof": self.chi2_per_dof, "n_data": self.n_data,
@@ -395,16 +396,32 @@ class Comparison:
                 "predicted_only": [name for name, _, _ in self.predicted_only]}
 
     # ---- plots
-    def plot(self, path=None, *, title: str | None = None):
+    def plot(self, axes=None, *, path=None, title: str | None = None):
         """Per channel: measured and model against time (left), normalized residual
-        against time with the +-2 sigma band and a 1 s running mean (right).
+        against time with the +-2 sigma band and a 1 s running mean (right); a row for each
+        output the data do not measure (its prediction).
 
-        Returns the matplotlib figure (saved to ``path`` when given).
+        Parameters
+        ----------
+        axes : array of matplotlib Axes, shape (n_rows, 2), optional
+            Default: a new figure's, outside pyplot (no backend is touched).
+        path : str or path, optional
+            Save the figure there (``plot("compare.png")`` works too).
+        title : str, optional
+
+        Returns
+        -------
+        ndarray of matplotlib Axes, shape (n_rows, 2)
         """
-        plt = _pyplot()
+        axes, path = plot_target(axes, path)
         n = len(self.channels) + len(self.predicted_only)
-        fig, axes = plt.subplots(n, 2, figsize=(11, 2.5 * n + 0.6), squeeze=False,
-                                 gridspec_kw={"width_ratios": [1, 1.4]})
+        own = axes is None
+        if own:
+            axes = new_axes((11, 2.5 * n + 0.6), n, 2, squeeze=False, gridspec_kw={"width_ratios": [1, 1.4]})
+        axes = np.asarray(axes, dtype=object)
+        if axes.size != 2 * n:
+            raise SettingsError(f"Comparison.plot draws {n} rows of 2 panels; it got {axes.size} axes")
+        axes = axes.reshape(n, 2)
         for (a1, a2), (name, t, y) in zip(axes[len(self.channels):], self.predicted_only):
             a1.plot(t, y, "-", lw=1.2, color="tab:blue", label="model (not measured)")
             a1.set_ylabel(name)
@@ -423,19 +440,35 @@ class Comparison:
                          f"LB p {c.whiteness.p_value:.2g}", fontsize=9)
         axes[-1, 0].set_xlabel("t (s)")
         axes[-1, 1].set_xlabel("t (s)")
-        fig.suptitle(title or f"{self.model}: measured vs model, normalized residuals (chi2/dof "
-                              f"{self.chi2_per_dof:.3g}, eta {self.eta:.3g})", fontsize=11)
-        fig.tight_layout()
+        fig = axes[0, 0].figure
+        if own or title:
+            fig.suptitle(title or f"{self.model}: measured vs model, normalized residuals (chi2/dof "
+                                  f"{self.chi2_per_dof:.3g}, eta {self.eta:.3g})", fontsize=11)
+        if own:
+            fig.tight_layout()
         if path is not None:
             save_figure(fig, path, dpi=110)
-        return fig
+        return axes
 
-    def plot_autocorrelation(self, path=None, *, max_lag: float = 5.0):
+    def plot_autocorrelation(self, ax=None, *, path=None, max_lag: float = 5.0):
         """Autocorrelation of each channel's normalized residuals against the lag in
         seconds (up to ``max_lag`` s, at most a quarter of the samples), with the
-        +-2/sqrt(n) band of white noise; the Ljung-Box lags are marked."""
-        plt = _pyplot()
-        fig, ax = plt.subplots(figsize=(7, 3.2))
+        +-2/sqrt(n) band of white noise; the Ljung-Box lags are marked.
+
+        Parameters
+        ----------
+        ax : matplotlib Axes, optional
+            Default: a new figure's, outside pyplot.
+        path : str or path, optional
+            Save the figure there.
+
+        Returns
+        -------
+        matplotlib Axes
+        """
+        ax, path = plot_target(ax, path)
+        own = ax is None
+        ax = new_axes((7, 3.2)) if own else ax
         for c in self.channels:
             dt = float(np.median(np.diff(c.times))) if c.n > 1 else 1.0
             k = int(max(c.whiteness.dof, min(c.n // 4, round(max_lag / dt))))
@@ -449,15 +482,11 @@ class Comparison:
         ax.set_ylabel("autocorrelation of e")
         ax.set_ylim(min(-0.2, ax.get_ylim()[0]), 1.02)
         ax.legend(fontsize=8)
-        fig.tight_layout()
+        if own:
+            ax.figure.tight_layout()
         if path is not None:
-            save_figure(fig, path, dpi=110)
-        return fig
-
-
-def _pyplot():
-    import matplotlib.pyplot as plt  # the user's backend is left alone
-    return plt
+            save_figure(ax.figure, path, dpi=110)
+        return ax
 
 
 #: Most samples a scatter plot draws per channel (every k-th sample beyond; statistics use all).
@@ -530,28 +559,44 @@ def compare(fit: EstimationResult, *, lags: int | None = None, level: float = 0.
 
     nlp = fit.nlp
     sig = dict(zip(nlp.channel_names, (float(s) for s in nlp.channel_sigmas)))
-    N, p = fit.n_data, fit.n_estimated
-    chans = []
-    for name in nlp.channel_names:
-        ch = fit.prepared.measurements[name]
-        r = np.asarray(fit.residuals[name], float)
-        yhat = np.asarray(fit.predictions[name], float)
-        s = sig[name]
-        e = r / s
-        n = e.size
-        dof = max(1.0, n - p * n / N)
-        chans.append(ChannelComparison(
-            name=name, times=np.asarray(ch.times), measured=np.asarray(ch.values), predicted=yhat, sigma=s,
-            residual=r, normalized=e, rms=float(np.sqrt(np.mean(r ** 2))), bias=float(np.mean(r)),
-            std=float(np.std(r)), chi2_per_dof=float(e @ e / dof), theil=theil(yhat, ch.values),
-            outside_2sigma=float(np.mean(np.abs(e) > 2)), whiteness=ljung_box(e, lags), normality=normality(e)))
+    chans = [_channel_comparison(fit, name, sig[name], lags) for name in nlp.channel_names]
     crit, source = criterion_terms(fit.residuals, sig)
     q = sum(c.whiteness.statistic for c in chans)
     h = sum(c.whiteness.dof for c in chans)
     pooled = LjungBox(q, h, float(chi2.sf(q, h)), np.mean([c.whiteness.autocorrelation for c in chans], axis=0)
                       if len({c.whiteness.dof for c in chans}) == 1 else chans[0].whiteness.autocorrelation)
+    predicted = tuple((name, np.asarray(fit.node_times, float), np.asarray(fit.predict(name), float))
+                      for name in fit.unmeasured_outputs)
+    notes = _comparison_notes(fit, chans, crit, predicted, level)
+    return Comparison(model=fit.spec.name, channels=tuple(chans), chi2_per_dof=float(fit.chi2_per_dof),
+                      n_data=int(fit.n_data), n_estimated=int(fit.n_estimated), criterion=crit,
+                      criterion_source=source, whiteness=pooled, level=float(level), notes=tuple(notes),
+                      predicted_only=predicted)
+
+
+def _channel_comparison(fit: EstimationResult, name: str, sigma: float, lags: int | None) -> ChannelComparison:
+    """One channel of ``fit`` against its measurements, with its statistics."""
+    N, p = fit.n_data, fit.n_estimated
+    ch = fit.prepared.measurements[name]
+    r = np.asarray(fit.residuals[name], float)
+    yhat = np.asarray(fit.predictions[name], float)
+    e = r / sigma
+    n = e.size
+    dof = max(1.0, n - p * n / N)
+    return ChannelComparison(
+        name=name, times=np.asarray(ch.times), measured=np.asarray(ch.values), predicted=yhat, sigma=sigma,
+        residual=r, normalized=e, rms=float(np.sqrt(np.mean(r ** 2))), bias=float(np.mean(r)),
+        std=float(np.std(r)), chi2_per_dof=float(e @ e / dof), theil=theil(yhat, ch.values),
+        outside_2sigma=float(np.mean(np.abs(e) > 2)), whiteness=ljung_box(e, lags), normality=normality(e))
+
+
+def _comparison_notes(fit: EstimationResult, chans: list, crit: dict, predicted: tuple, level: float) -> list[str]:
+    """The comparison's notes: convergence, chi2/dof against its band, each channel's failed tests
+    (Bonferroni over channels), outputs predicted but not measured, eta small on coloured residuals."""
+    from scipy.stats import chi2
+
     notes = []
-    dof = max(1, N - p)
+    dof = max(1, fit.n_data - fit.n_estimated)
     hi = chi2.isf(0.001, dof) / dof
     if not fit.success:
         notes.append(f"the fit did not converge ({fit.message}): these statistics describe the last iterate")
@@ -580,14 +625,10 @@ def compare(fit: EstimationResult, *, lags: int | None = None, level: float = 0.
                         f"{c.normality.skewness:.2f}, kurtosis {c.normality.kurtosis:.2f})")
         if bits:
             notes.append(f"channel {c.name} residuals are " + "; ".join(bits))
-    predicted = tuple((name, np.asarray(fit.node_times, float), np.asarray(fit.predict(name), float))
-                      for name in fit.unmeasured_outputs)
     if predicted:
         notes.append(f"output(s) {', '.join(n for n, _, _ in predicted)} are not in the data: predicted (plotted), "
                      "not fitted")
     if crit["eta"] < 0.1 and any(c.whiteness.p_value < level / m for c in chans):
         notes.append(f"eta = {crit['eta']:.3g} is small although the residuals are not white: eta (7.10) tests "
                      "skewness and kurtosis, not whiteness")
-    return Comparison(model=fit.spec.name, channels=tuple(chans), chi2_per_dof=float(fit.chi2_per_dof),
-                      n_data=int(N), n_estimated=int(p), criterion=crit, criterion_source=source, whiteness=pooled,
-                      level=float(level), notes=tuple(notes), predicted_only=predicted)
+    return notes

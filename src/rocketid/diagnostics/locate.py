@@ -47,8 +47,9 @@ import numpy as np
 
 from ..errors import DataError, SettingsError
 from ..simulate import evaluate_along
-from ..output import save_figure
+from ..output import new_axes, plot_target, save_figure
 from ..solve import EstimationResult
+from ..summary import Section, Summary, SummaryText, Table
 from .compare import Comparison, compare
 
 __all__ = ["Phase", "WindowTable", "Cusum", "Finding", "Location", "locate", "flight_conditions", "flight_phases",
@@ -436,42 +437,43 @@ class Location:
         """The findings in words, most significant first."""
         return [f.text for f in self.findings[:limit]]
 
-    def summary(self) -> str:
-        """Fixed sections (settings, phases, per-phase statistics, findings) and numbered notes."""
-        lines = [f"rocketid location: {self.model}", "=" * 60, "Settings",
-                 f"  windows       : {self.window:.3g} s, step {self.step:.3g} s; {self.n_tests} tests; |z| > "
-                 f"{self.z_critical:.2f} flags (level {self.level:g}, Bonferroni)",
-                 "  conditions    : " + (", ".join(CONDITIONS[k][0] for k in CONDITIONS if k in self.conditions)
-                                         or "none (the model defines no flight condition: time windows only)")]
+    def summary(self) -> SummaryText:
+        """Fixed sections (settings, phases, per-phase statistics, findings, cumulative sums) and
+        numbered notes: a :class:`~rocketid.summary.Summary`, as its text (:class:`~rocketid.summary.SummaryText`)."""
+        sections = [Section("Settings", (
+            ("windows", f"{self.window:.3g} s, step {self.step:.3g} s; {self.n_tests} tests; |z| > "
+                        f"{self.z_critical:.2f} flags (level {self.level:g}, Bonferroni)"),
+            ("conditions", ", ".join(CONDITIONS[k][0] for k in CONDITIONS if k in self.conditions)
+             or "none (the model defines no flight condition: time windows only)")))]
         if self.phases:
-            lines.append("Phases")
-            lines += [f"  {p.name:<17} t = {p.t_start:5.1f} - {min(p.t_end, self.condition_times[-1]):5.1f} s"
-                      f"  {p.description}" for p in self.phases]
-            lines.append("Per phase (bias z = mean(e) sqrt(n); scatter = std(e))")
+            end = self.condition_times[-1]
+            sections.append(Section("Phases", (Table(
+                ("phase", "from (s)", "to (s)", "description"),
+                [(p.name, p.t_start, min(p.t_end, end), p.description) for p in self.phases], (None, ".1f", ".1f")),)))
             chans = list(self.windows)
-            lines.append(f"  {'phase':<17}" + "".join(f"{c + ' z':>10}{c + ' sd':>8}" for c in chans))
+            rows = []
             for p in self.phases:
-                row = f"  {p.name:<17}"
+                row = [p.name]
                 for c in chans:
                     r = next((x for x in self.phase_table if x["phase"] == p.name and x["channel"] == c), None)
-                    row += f"{r['z']:>10.1f}{r['rms_ratio']:>8.2f}" if r else f"{'-':>10}{'-':>8}"
-                lines.append(row)
-        lines.append("Findings")
+                    row += [r["z"], r["rms_ratio"]] if r else [float("nan"), float("nan")]
+                rows.append(row)
+            sections.append(Section("Per phase (bias z = mean(e) sqrt(n); scatter = std(e))", (Table(
+                ["phase"] + [h for c in chans for h in (f"{c} z", f"{c} sd")], rows,
+                [None] + [f for _ in chans for f in (".1f", ".2f")]),)))
         if self.findings:
-            lines += [f"  - {t}" for t in self.sentences()]
+            found = [f"- {t}" for t in self.sentences()]
             if len(self.findings) > 6:
-                lines.append(f"  ({len(self.findings) - 6} more in to_dict())")
+                found.append(f"({len(self.findings) - 6} more in to_dict())")
         else:
-            lines.append("  no window fails: the residuals look like white noise everywhere")
-        lines.append("Cumulative sums (change point of the mean)")
-        for c in self.cusums.values():
-            lines.append(f"  {c.channel:<6} change at t = {c.change_time:5.1f} s, max|bridge| {c.statistic:.2f} "
-                         f"(p = {c.p_value:.2g})" + (f", leaves the +-3 band at t = {c.departure_time:.1f} s"
-                                                     if c.departure_time is not None else ""))
-        if self.notes:
-            lines.append("Notes")
-            lines += [f"  [{i}] {n}" for i, n in enumerate(self.notes, 1)]
-        return "\n".join(lines)
+            found = ["no window fails: the residuals look like white noise everywhere"]
+        sections.append(Section("Findings", found))
+        sections.append(Section("Cumulative sums (change point of the mean)", (Table(
+            ("channel", "change at t (s)", "max |bridge|", "p", "leaves the +-3 band at t (s)"),
+            [(c.channel, c.change_time, c.statistic, c.p_value,
+              "-" if c.departure_time is None else f"{c.departure_time:.1f}") for c in self.cusums.values()],
+            (None, ".1f", ".2f", ".2g")),)))
+        return SummaryText(Summary(f"rocketid location: {self.model}", tuple(sections), self.notes))
 
     def to_dict(self) -> dict:
         return {
@@ -489,15 +491,34 @@ class Location:
         }
 
     # ---- plot
-    def plot(self, path=None, *, title: str | None = None):
+    def plot(self, axes=None, *, path=None, title: str | None = None):
         """Four panels on one time axis, phases shaded: window bias z per channel
         (flagged windows marked), scatter ratio, cumulative sums with their
-        +-2 sqrt(k/n) band, and the flight conditions."""
-        from .compare import _pyplot
-        plt = _pyplot()
+        +-2 sqrt(k/n) band, and the flight conditions (three panels for a model without them).
+
+        Parameters
+        ----------
+        axes : sequence of matplotlib Axes, optional
+            One per panel (default: a new figure's, outside pyplot: no backend is touched).
+        path : str or path, optional
+            Save the figure there (``plot("locate.png")`` works too).
+        title : str, optional
+
+        Returns
+        -------
+        ndarray of matplotlib Axes, shape (n_panels,)
+        """
+        import matplotlib
+
+        axes, path = plot_target(axes, path)
         n_panels = 4 if self.conditions else 3
-        fig, axes = plt.subplots(n_panels, 1, figsize=(10, 2.3 * n_panels + 0.5), sharex=True)
-        colors = dict(zip(self.windows, plt.rcParams["axes.prop_cycle"].by_key()["color"]))
+        own = axes is None
+        axes = (new_axes((10, 2.3 * n_panels + 0.5), n_panels, 1, sharex=True) if own
+                else np.asarray(axes, dtype=object).ravel())
+        if axes.size != n_panels:
+            raise SettingsError(f"Location.plot draws {n_panels} panels; it got {axes.size} axes")
+        fig = axes[0].figure
+        colors = dict(zip(self.windows, matplotlib.rcParams["axes.prop_cycle"].by_key()["color"]))
         shades = ["#f3f3f3", "#e2ecf6"]
         for ax in axes:
             for i, p in enumerate(self.phases):
@@ -546,12 +567,14 @@ class Location:
             a.set_ylabel("condition / max")
             a.legend(loc="upper left", fontsize=7, frameon=False)
         axes[-1].set_xlabel("t (s)")
-        fig.suptitle(title or f"{self.model}: where the residuals fail ({len(self.findings)} finding"
-                              f"{'s' if len(self.findings) != 1 else ''})", fontsize=11)
-        fig.tight_layout()
+        if own or title:
+            fig.suptitle(title or f"{self.model}: where the residuals fail ({len(self.findings)} finding"
+                                  f"{'s' if len(self.findings) != 1 else ''})", fontsize=11)
+        if own:
+            fig.tight_layout()
         if path is not None:
             save_figure(fig, path, dpi=110)
-        return fig
+        return axes
 
 
 # ---------------------------------------------------------------------------
@@ -605,15 +628,34 @@ def locate(fit: EstimationResult, comparison: Comparison | None = None, *, windo
     SettingsError
         A window or step that is not positive, or a level not in (0, 1).
     """
-    from scipy.stats import chi2, norm
-
     if not 0 < level < 1:
         raise SettingsError(f"level must be in (0, 1), got {level}")
     comp = comparison if comparison is not None else compare(fit, level=level)
     chans = comp.channels
     t_lo = min(float(c.times[0]) for c in chans)
     t_hi = max(float(c.times[-1]) for c in chans)
-    span = t_hi - t_lo
+    window, step = _window_settings(chans, t_hi - t_lo, window, step)
+    windows, zc, n_tests = _window_tables(chans, t_lo, t_hi, window, step, level)
+    tg = np.linspace(t_lo, t_hi, max(int(n_conditions), 3))
+    conds, phases, notes = _conditions_and_phases(fit, tg)
+    cus = {c.name: cusum(c.name, c.times, c.normalized) for c in chans}
+    findings = _findings(windows, tg, conds, phases, t_hi - t_lo, zc)
+    if findings and not comp.fits_to_noise:
+        pass
+    elif findings:
+        notes.append("some windows fail although the whole-flight statistics pass: a local, short-lived misfit")
+    elif not comp.fits_to_noise:
+        notes.append("no single window fails, yet the whole-flight statistics do: the misfit is spread thinly over "
+                     "the flight (see the cumulative sums)")
+    return Location(model=fit.spec.name, window=window, step=step, level=float(level), z_critical=zc,
+                    n_tests=int(n_tests), condition_times=tg, conditions=conds, phases=phases, windows=windows,
+                    cusums=cus, phase_table=_phase_table(phases, chans), findings=tuple(findings),
+                    notes=tuple(notes))
+
+
+def _window_settings(chans, span: float, window: float | None, step: float | None) -> tuple[float, float]:
+    """The window length (default: the span / 22, and at least :data:`MIN_WINDOW_SAMPLES` samples)
+    and step (default half the window), checked."""
     dt = max(float(np.median(np.diff(c.times))) if c.n > 1 else span for c in chans)
     if window is None:
         window = max(span / 22.0, MIN_WINDOW_SAMPLES * dt)
@@ -623,14 +665,24 @@ def locate(fit: EstimationResult, comparison: Comparison | None = None, *, windo
     step = window / 2 if step is None else float(step)
     if not step > 0:
         raise SettingsError(f"step must be a positive number of seconds, got {step}")
+    return window, step
+
+
+def _window_tables(chans, t_lo: float, t_hi: float, window: float, step: float,
+                   level: float) -> tuple[dict, float, int]:
+    """``({channel: WindowTable}, z_critical, n_tests)``: each channel's windows of at least
+    :data:`MIN_WINDOW_SAMPLES` samples tested at the Bonferroni-corrected ``level``."""
+    from scipy.stats import chi2, norm
+
+    span = t_hi - t_lo
     starts, ends = _window_grid(t_lo, t_hi, window, step)
     per_channel = []
     for c in chans:
         idx = [(int(np.searchsorted(c.times, a, "left")), int(np.searchsorted(c.times, b, "right")))
                for a, b in zip(starts, ends)]
         good = [(a, b, i) for i, (a, b) in enumerate(idx) if b - a >= MIN_WINDOW_SAMPLES]
-        per_channel.append((c, idx, good))
-    too_short = [(c.name, len(good)) for c, _, good in per_channel if len(good) < MIN_WINDOWS]
+        per_channel.append((c, good))
+    too_short = [(c.name, len(good)) for c, good in per_channel if len(good) < MIN_WINDOWS]
     if too_short:
         name, k = too_short[0]
         raise DataError(
@@ -638,11 +690,11 @@ def locate(fit: EstimationResult, comparison: Comparison | None = None, *, windo
             f"{next(c.n for c in chans if c.name == name)} samples, which gives {k} window(s) of {window:.3g} s holding "
             f"at least {MIN_WINDOW_SAMPLES} samples; {MIN_WINDOWS} are needed. Pass a shorter window "
             f"(locate(..., window=...)) or use longer data; compare() still works on these data")
-    n_tests = sum(len(good) for _, _, good in per_channel)
+    n_tests = sum(len(good) for _, good in per_channel)
     zc = float(norm.isf(level / (2 * n_tests)))
     pc = level / n_tests
     windows = {}
-    for c, idx, good in per_channel:
+    for c, good in per_channel:
         e = c.normalized
         rows = []
         for a, b, i in good:
@@ -657,8 +709,12 @@ def locate(fit: EstimationResult, comparison: Comparison | None = None, *, windo
         ts, te, nn, bias, z, rr, sp_, ac = arr.T
         windows[c.name] = WindowTable(c.name, ts, te, nn.astype(int), bias, z, rr, sp_, ac, np.abs(z) > zc,
                                       (sp_ < pc) & (rr > 1), ac * np.sqrt(nn) > zc)
-    # conditions and phases on a grid
-    tg = np.linspace(t_lo, t_hi, max(int(n_conditions), 3))
+    return windows, zc, n_tests
+
+
+def _conditions_and_phases(fit: EstimationResult, tg: np.ndarray) -> tuple[dict, tuple, list]:
+    """The flight conditions on the grid ``tg`` (those the model's roles give, finite), the ascent
+    phases, and notes on what the model's roles leave out."""
     notes = []
     try:
         conds = flight_conditions(fit, tg)
@@ -680,27 +736,20 @@ def locate(fit: EstimationResult, comparison: Comparison | None = None, *, windo
     elif missing:
         notes.append(f"model {fit.spec.name!r} declares no {', '.join(missing)} role: the location cannot use "
                      f"{'it' if len(missing) == 1 else 'them'} (declare with m.declare_role)")
-    # per-phase statistics
-    phase_rows = []
+    return conds, phases, notes
+
+
+def _phase_table(phases: tuple, chans) -> tuple:
+    """Per phase and channel: ``phase, channel, n, bias, z, rms_ratio`` of the normalized residuals."""
+    rows = []
     for p in phases:
         for c in chans:
             sel = p.contains(c.times)
             if sel.sum() >= 2:
                 w = c.normalized[sel]
-                phase_rows.append({"phase": p.name, "channel": c.name, "n": int(sel.sum()), "bias": float(w.mean()),
-                                   "z": float(w.mean() * math.sqrt(w.size)), "rms_ratio": float(w.std())})
-    cus = {c.name: cusum(c.name, c.times, c.normalized) for c in chans}
-    findings = _findings(windows, tg, conds, phases, span, zc)
-    if findings and not comp.fits_to_noise:
-        pass
-    elif findings:
-        notes.append("some windows fail although the whole-flight statistics pass: a local, short-lived misfit")
-    elif not comp.fits_to_noise:
-        notes.append("no single window fails, yet the whole-flight statistics do: the misfit is spread thinly over "
-                     "the flight (see the cumulative sums)")
-    return Location(model=fit.spec.name, window=window, step=step, level=float(level), z_critical=zc,
-                    n_tests=int(n_tests), condition_times=tg, conditions=conds, phases=phases, windows=windows,
-                    cusums=cus, phase_table=tuple(phase_rows), findings=tuple(findings), notes=tuple(notes))
+                rows.append({"phase": p.name, "channel": c.name, "n": int(sel.sum()), "bias": float(w.mean()),
+                             "z": float(w.mean() * math.sqrt(w.size)), "rms_ratio": float(w.std())})
+    return tuple(rows)
 
 
 def _findings(windows: dict, tg: np.ndarray, conds: dict, phases: tuple, span: float, zc: float) -> list[Finding]:
