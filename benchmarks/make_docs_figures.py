@@ -59,7 +59,10 @@ def time_knot_model(lower: float = 1e-4, upper: float = 1.0):
     return m.freeze()
 
 
-def _save(fig, name):
+def _save(drawn, name):
+    """Save what a plot drew (a figure, its Axes or an array of them)."""
+    from rocketid.output import figure_of
+    fig = figure_of(drawn)
     FIGURES.mkdir(parents=True, exist_ok=True)
     fig.savefig(FIGURES / name, dpi=90)
     plt.close(fig)

@@ -126,3 +126,52 @@ def test_location_uses_the_roles_of_a_users_model():
     fit2 = ri.estimate(bare, data)
     loc2 = locate(fit2)
     assert any("declares none of the roles altitude, mach, dynamic_pressure" in n for n in loc2.notes)
+
+
+def _named_cd_model() -> ri.Model:
+    """A 20 s ascent declared with the ascent builders whose drag table is called ``Cd`` and whose
+    lift slope ``Kl``: names the name patterns (CD*, CL*) do not recognize."""
+    from rocketid.physics.ascent import ascent_dynamics, ascent_states, flight_conditions
+
+    m = ri.Model("named-Cd", 0.0, 20.0)
+    st = ascent_states(m, (0.0, 0.0, 20.0, math.radians(85.0)))
+    fc = flight_conditions(m, st)
+    alpha = m.input("alpha", sp.Float(0.02) * sp.sin(m.t / 3))
+    cd = m.table("Cd", fc.mach, (0.0, 0.5, 1.0), 0.3, bounds=(-1.0, 3.0))
+    kl = m.parameter("Kl", 2.0, bounds=(-10.0, 10.0))
+    ascent_dynamics(m, st, fc, thrust=sp.Float(300000.0), mass=15000.0 - 90.0 * m.t, area=1.2, cd=cd,
+                    cl=kl * alpha, alpha=alpha)
+    for s in (st.x, st.h, st.v):
+        m.output(str(s), s, sigma=0.5)
+    return m
+
+
+def test_coefficient_checks_find_the_drag_by_its_role_whatever_its_name():
+    from rocketid.diagnostics.plausibility import check_plausibility, coefficient_kinds
+
+    spec = _named_cd_model().freeze()
+    kinds, notes = coefficient_kinds(spec)
+    assert kinds == {"Cd_0": "drag", "Cd_1": "drag", "Cd_2": "drag", "Kl": "lift slope"} and not notes
+    # a negative drag coefficient, one beyond any launch vehicle's, one held by its bound
+    truth = {"Cd_0": -0.3, "Cd_1": 2.4, "Cd_2": 3.0, "Kl": 2.0}
+    data = ri.simulate_measurements(spec, truth, np.linspace(0.0, 20.0, 401), seed=1)
+    fit = ri.estimate(spec.with_guess({"Cd_0": 0.3, "Cd_1": 2.0, "Cd_2": 2.9}), data)
+    pl = check_plausibility(fit)
+    codes = {(f.code, f.parameters[0]) for f in pl.flags if f.severity == "fail"}
+    assert ("wrong-sign", "Cd_0") in codes, pl.summary()
+    assert ("implausible", "Cd_1") in codes, pl.summary()
+    assert ("at-bound", "Cd_2") in codes and "an even larger drag coefficient" in pl.summary(), pl.summary()
+    assert pl.kinds[list(pl.names).index("Cd_0")] == "drag"
+
+
+def test_coefficient_kinds_fall_back_to_names_without_the_roles():
+    from rocketid.diagnostics.plausibility import coefficient_kinds
+
+    kinds, notes = coefficient_kinds(ri.ra66())
+    assert kinds["CD0"] == "drag" and kinds["CL"] == "lift" and not notes
+    spec = user_model(roles=False).freeze()
+    kinds, notes = coefficient_kinds(spec)
+    # by name: CDm_* match CD*, and CLa matches CL* (a lift, where its role would say lift slope)
+    assert kinds == {"CDm_0": "drag", "CDm_1": "drag", "CDm_2": "drag", "CLa": "lift"}
+    assert coefficient_kinds(user_model().freeze())[0]["CLa"] == "lift slope"
+    assert len(notes) == 1 and "'drag_coefficient' or 'lift_coefficient'" in notes[0] and "by name" in notes[0]

@@ -23,7 +23,7 @@ import numpy as np
 from scipy import stats
 
 from ..errors import SettingsError
-from ..output import nulls_for_non_finite, save_figure, write_json
+from ..output import new_axes, nulls_for_non_finite, plot_target, save_figure, write_json
 from ..solve import EstimationResult
 from .refit import DEFAULT_LAGS, information_criteria, ljung_box
 
@@ -196,13 +196,27 @@ class ModelHistory:
     def to_json(self, path) -> Path:
         return write_json(path, nulls_for_non_finite(self.to_dict()))
 
-    def plot_residuals(self, path=None, *, revisions: Sequence[int] | None = None, window: float = 1.0):
+    def plot_residuals(self, axes=None, *, path=None, revisions: Sequence[int] | None = None, window: float = 1.0):
         """Residuals against time, one panel per channel, before (first revision) and after
         (last), or the given revisions: the samples lightly, their ``window``-second moving
-        average boldly. Returns the figure; saves it to ``path`` when given (Agg backend)."""
+        average boldly.
+
+        Parameters
+        ----------
+        axes : sequence of matplotlib Axes, optional
+            One per channel (default: a new figure's, outside pyplot: no backend is touched).
+        path : str or path, optional
+            Save the figure there (``plot_residuals("history.png")`` works too).
+
+        Returns
+        -------
+        ndarray of matplotlib Axes, shape (n_channels,)
+        """
+        import matplotlib
+
+        axes, path = plot_target(axes, path)
         if not self.revisions:
             raise SettingsError("the history is empty; add a revision first")
-        import matplotlib.pyplot as plt
         if revisions is None:
             revisions = [0, len(self.revisions) - 1] if len(self.revisions) > 1 else [0]
         try:
@@ -210,9 +224,13 @@ class ModelHistory:
         except IndexError:
             raise SettingsError(f"revisions must index 0..{len(self.revisions) - 1}, got {list(revisions)}") from None
         chans = list(chosen[0].fit.residuals)
-        fig, axes = plt.subplots(len(chans), 1, figsize=(10, 2.6 * len(chans)), sharex=True, squeeze=False)
-        colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-        for ax, ch in zip(axes[:, 0], chans):
+        own = axes is None
+        axes = (new_axes((10, 2.6 * len(chans)), len(chans), 1, sharex=True, squeeze=False) if own
+                else np.asarray(axes, dtype=object)).ravel()
+        if axes.size != len(chans):
+            raise SettingsError(f"plot_residuals draws one panel per channel ({len(chans)}); it got {axes.size} axes")
+        colors = matplotlib.rcParams["axes.prop_cycle"].by_key()["color"]
+        for ax, ch in zip(axes, chans):
             for k, r in enumerate(chosen):
                 t = r.fit.prepared.measurements[ch].times
                 e = r.fit.residuals[ch]
@@ -227,9 +245,11 @@ class ModelHistory:
             ax.axhline(0.0, color="k", lw=0.6)
             ax.set_ylabel(f"{ch} residual")
             ax.legend(loc="upper left", fontsize=8)
-        axes[-1, 0].set_xlabel("t, s")
-        fig.suptitle("residuals (model - measurement): samples and " + f"{window:g} s moving average")
-        fig.tight_layout()
+        axes[-1].set_xlabel("t, s")
+        fig = axes[0].figure
+        if own:
+            fig.suptitle("residuals (model - measurement): samples and " + f"{window:g} s moving average")
+            fig.tight_layout()
         if path is not None:
             save_figure(fig, path, dpi=110)
-        return fig
+        return axes

@@ -71,19 +71,27 @@ import fnmatch
 from dataclasses import dataclass
 
 import numpy as np
+import sympy as sp
 
 from ..errors import RocketidError, SettingsError
 from ..simulate import evaluate_along
-from ..output import save_figure
+from ..output import new_axes, plot_target, save_figure
 from ..solve import EstimationResult
+from ..summary import Section, Summary, SummaryText, Table
 
-__all__ = ["Flag", "MachConsistency", "Plausibility", "check_plausibility", "COEFFICIENT_RULES", "SEVERITIES"]
+__all__ = ["Flag", "MachConsistency", "Plausibility", "check_plausibility", "coefficient_kinds", "COEFFICIENT_RULES",
+           "SEVERITIES"]
 
 #: Severity of a flag, most severe first.
 SEVERITIES = ("fail", "warn", "info")
 
-#: ``(glob pattern of parameter names, kind)``; the first match wins.
+#: ``(glob pattern of parameter names, kind)``; the first match wins. The fallback for a model
+#: without the ``drag_coefficient`` / ``lift_coefficient`` roles (:func:`coefficient_kinds`):
+#: with the roles, a parameter's kind is what it enters, whatever its name.
 COEFFICIENT_RULES = (("dCD*", "effect"), ("CD*", "drag"), ("CL_alpha*", "lift slope"), ("CL*", "lift"))
+
+#: The kinds each coefficient role gives (and that its name rules give without the role).
+_ROLE_KINDS = {"drag_coefficient": ("drag",), "lift_coefficient": ("lift slope", "lift")}
 
 
 @dataclass(frozen=True)
@@ -220,35 +228,37 @@ class Plausibility:
                 out += [p for p in f.parameters if p not in out]
         return tuple(out)
 
-    def table(self) -> str:
-        lines = [f"  {'name':<14}{'kind':<12}{'estimate':>12}{'std err':>11}{'lower':>10}{'upper':>10}  flags"]
-        for i, n in enumerate(self.names):
-            codes = sorted({f.code for f in self.flags if n in f.parameters})
-            lines.append(f"  {n:<14}{self.kinds[i]:<12}{self.estimates[i]:>12.5g}{self.standard_errors[i]:>11.3g}"
-                         f"{self.lower[i]:>10.3g}{self.upper[i]:>10.3g}  {', '.join(codes)}")
-        return "\n".join(lines)
+    def coefficient_table(self) -> Table:
+        """One row per parameter: kind, estimate, standard error, bounds, the codes of its flags."""
+        return Table(("name", "kind", "estimate", "std err", "lower", "upper", "flags"),
+                     [(n, self.kinds[i], self.estimates[i], self.standard_errors[i], self.lower[i], self.upper[i],
+                       ", ".join(sorted({f.code for f in self.flags if n in f.parameters})))
+                      for i, n in enumerate(self.names)],
+                     (None, None, ".5g", ".3g", ".3g", ".3g"))
 
-    def summary(self) -> str:
-        """Fixed sections (verdict, coefficients, Mach consistency) and numbered flags."""
+    def table(self) -> str:
+        """:meth:`coefficient_table` as text."""
+        return "\n".join("  " + line for line in self.coefficient_table().text_lines())
+
+    def summary(self) -> SummaryText:
+        """Fixed sections (verdict, coefficients, Mach consistency, flags) and numbered notes: a
+        :class:`~rocketid.summary.Summary`, as its text (:class:`~rocketid.summary.SummaryText`)."""
         n_fail = len(self.flagged(severity="fail"))
         n_warn = len(self.flagged(severity="warn"))
-        lines = [f"rocketid plausibility: {self.model}", "=" * 60,
-                 f"  verdict       : {'plausible' if self.passed else 'IMPLAUSIBLE'} ({n_fail} fail, {n_warn} warn, "
-                 f"{len(self.flags) - n_fail - n_warn} info)", "Coefficients", self.table()]
+        sections = [Section("", (("verdict", f"{'plausible' if self.passed else 'IMPLAUSIBLE'} ({n_fail} fail, "
+                                             f"{n_warn} warn, {len(self.flags) - n_fail - n_warn} info)"),)),
+                    Section("Coefficients", (self.coefficient_table(),))]
         for mc in self.mach_checks:
-            lines += [f"Time-knot {mc.family}(t) against a smooth drag curve ({mc.family_name}; "
-                      f"tolerance {mc.tolerance:g})",
-                      f"  {'knot':<8}{'t (s)':>7}{'Mach':>7}{'value':>10}{'smooth':>10}{'std resid':>11}"]
-            for k, t, m, v, s, z in zip(mc.knots, mc.times, mc.mach, mc.values, mc.smooth, mc.standardized):
-                lines.append(f"  {k:<8}{t:>7.1f}{m:>7.2f}{v:>10.4f}{s:>10.4f}{z:>11.2f}")
-            lines.append(f"  misfit chi2 = {mc.statistic:.3g} on {mc.dof} dof, p = {mc.p_value:.2g}")
+            sections.append(Section(
+                f"Time-knot {mc.family}(t) against a smooth drag curve ({mc.family_name}; tolerance {mc.tolerance:g})",
+                (Table(("knot", "t (s)", "Mach", "value", "smooth", "std resid"),
+                       list(zip(mc.knots, mc.times, mc.mach, mc.values, mc.smooth, mc.standardized)),
+                       (None, ".1f", ".2f", ".4f", ".4f", ".2f")),
+                 f"misfit chi2 = {mc.statistic:.3g} on {mc.dof} dof, p = {mc.p_value:.2g}")))
         if self.flags:
-            lines.append("Flags")
-            lines += [f"  [{i}] {f.severity.upper()} {f.code}: {f.message}" for i, f in enumerate(self.flags, 1)]
-        if self.notes:
-            lines.append("Notes")
-            lines += [f"  [{i}] {n}" for i, n in enumerate(self.notes, 1)]
-        return "\n".join(lines)
+            sections.append(Section("Flags", [f"[{i}] {f.severity.upper()} {f.code}: {f.message}"
+                                              for i, f in enumerate(self.flags, 1)]))
+        return SummaryText(Summary(f"rocketid plausibility: {self.model}", tuple(sections), self.notes))
 
     def to_dict(self) -> dict:
         return {"model": self.model, "passed": self.passed,
@@ -259,63 +269,141 @@ class Plausibility:
                 "flags": [f.to_dict() for f in self.flags], "mach_checks": [m.to_dict() for m in self.mach_checks],
                 "notes": list(self.notes)}
 
-    def plot(self, path=None):
+    def plot(self, axes=None, *, path=None):
         """For each time-knot drag family: the knots against Mach with +-2 sqrt(se^2 + tau^2)
         bars and the smooth fit (left), and against time (right). Without such a family:
-        each coefficient with its bounds and 2-sigma bar, flagged ones in red. Returns the
-        figure (None when there is nothing to plot)."""
-        from .compare import _pyplot
-        plt = _pyplot()
-        flagged = set(self.flagged_parameters())
+        each coefficient with its bounds and 2-sigma bar, flagged ones in red.
+
+        Parameters
+        ----------
+        axes : matplotlib Axes, or array of them, shape (n_families, 2), optional
+            Default: a new figure's, outside pyplot (no backend is touched).
+        path : str or path, optional
+            Save the figure there (``plot("plausibility.png")`` works too).
+
+        Returns
+        -------
+        ndarray of matplotlib Axes, shape (n_families, 2), or one Axes without a time-knot drag family
+        """
+        axes, path = plot_target(axes, path)
+        own = axes is None
         if self.mach_checks:
             n = len(self.mach_checks)
-            fig, axes = plt.subplots(n, 2, figsize=(10, 3.4 * n), squeeze=False)
-            for (a1, a2), mc in zip(axes, self.mach_checks):
-                bar = 2 * np.sqrt(np.nan_to_num(mc.standard_errors, nan=0.0) ** 2 + mc.tolerance ** 2)
-                col = ["tab:red" if k in flagged else "tab:blue" for k in mc.knots]
-                mm = np.linspace(min(mc.mach.min(), 0), mc.mach.max() * 1.05, 200)
-                a1.plot(mm, mc.curve(mm), "-", color="0.3", label=f"{mc.family_name} (p = {mc.p_value:.2g})")
-                a1.errorbar(mc.mach, mc.values, yerr=bar, fmt="none", ecolor="0.5", capsize=3)
-                a1.scatter(mc.mach, mc.values, c=col, zorder=3, s=28)
-                for k, m_, v in zip(mc.knots, mc.mach, mc.values):
-                    a1.annotate(k, (m_, v), textcoords="offset points", xytext=(4, 4), fontsize=7)
-                a1.set_xlabel("Mach number at the knot time")
-                a1.set_ylabel(f"{mc.family} knot value")
-                a1.legend(fontsize=7, loc="best")
-                a2.plot(mc.times, mc.values, "o-", color="tab:blue")
-                a2.scatter(mc.times, mc.values, c=col, zorder=3, s=28)
-                i = self.names.index(mc.knots[0])
-                a2.axhline(self.lower[i], color="tab:red", ls=":", lw=0.8, label="bounds")
-                a2.axhline(self.upper[i], color="tab:red", ls=":", lw=0.8)
-                a2.set_xlabel("knot time (s)")
-                a2.set_ylabel(f"{mc.family}(t)")
-                a2.legend(fontsize=7)
-            fig.suptitle(f"{self.model}: is the time-knot drag a smooth function of Mach?", fontsize=11)
+            axes = new_axes((10, 3.4 * n), n, 2, squeeze=False) if own else np.asarray(axes, dtype=object)
+            if axes.size != 2 * n:
+                raise SettingsError(f"Plausibility.plot draws {n} rows of 2 panels; it got {axes.size} axes")
+            axes = axes.reshape(n, 2)
+            fig = axes[0, 0].figure
+            self._plot_mach_checks(axes)
+            if own:
+                fig.suptitle(f"{self.model}: is the time-knot drag a smooth function of Mach?", fontsize=11)
         else:
-            fig, ax = plt.subplots(figsize=(max(5.0, 0.7 * len(self.names) + 2), 3.4))
-            x = np.arange(len(self.names))
-            span = np.where(np.isfinite(self.upper - self.lower), self.upper - self.lower, np.abs(self.estimates) + 1)
-            rel = (self.estimates - np.where(np.isfinite(self.lower), self.lower, self.estimates - span / 2)) / span
-            err = 2 * np.nan_to_num(self.standard_errors) / span
-            col = ["tab:red" if n in flagged else "tab:blue" for n in self.names]
-            ax.errorbar(x, rel, yerr=err, fmt="none", ecolor="0.5", capsize=3)
-            ax.scatter(x, rel, c=col, zorder=3)
-            ax.axhline(0, color="tab:red", ls=":", lw=0.8)
-            ax.axhline(1, color="tab:red", ls=":", lw=0.8)
-            ax.set_xticks(x, self.names, rotation=30, fontsize=8)
-            ax.set_ylabel("position between bounds")
-            ax.set_title(f"{self.model}: estimates between their bounds (red: flagged)", fontsize=10)
-        fig.tight_layout()
+            axes = new_axes((max(5.0, 0.7 * len(self.names) + 2), 3.4)) if own else axes
+            fig = axes.figure
+            self._plot_estimates(axes)
+        if own:
+            fig.tight_layout()
         if path is not None:
             save_figure(fig, path, dpi=110)
-        return fig
+        return axes
+
+    def _plot_mach_checks(self, axes) -> None:
+        flagged = set(self.flagged_parameters())
+        for (a1, a2), mc in zip(axes, self.mach_checks):
+            bar = 2 * np.sqrt(np.nan_to_num(mc.standard_errors, nan=0.0) ** 2 + mc.tolerance ** 2)
+            col = ["tab:red" if k in flagged else "tab:blue" for k in mc.knots]
+            mm = np.linspace(min(mc.mach.min(), 0), mc.mach.max() * 1.05, 200)
+            a1.plot(mm, mc.curve(mm), "-", color="0.3", label=f"{mc.family_name} (p = {mc.p_value:.2g})")
+            a1.errorbar(mc.mach, mc.values, yerr=bar, fmt="none", ecolor="0.5", capsize=3)
+            a1.scatter(mc.mach, mc.values, c=col, zorder=3, s=28)
+            for k, m_, v in zip(mc.knots, mc.mach, mc.values):
+                a1.annotate(k, (m_, v), textcoords="offset points", xytext=(4, 4), fontsize=7)
+            a1.set_xlabel("Mach number at the knot time")
+            a1.set_ylabel(f"{mc.family} knot value")
+            a1.legend(fontsize=7, loc="best")
+            a2.plot(mc.times, mc.values, "o-", color="tab:blue")
+            a2.scatter(mc.times, mc.values, c=col, zorder=3, s=28)
+            i = self.names.index(mc.knots[0])
+            a2.axhline(self.lower[i], color="tab:red", ls=":", lw=0.8, label="bounds")
+            a2.axhline(self.upper[i], color="tab:red", ls=":", lw=0.8)
+            a2.set_xlabel("knot time (s)")
+            a2.set_ylabel(f"{mc.family}(t)")
+            a2.legend(fontsize=7)
+
+    def _plot_estimates(self, ax) -> None:
+        flagged = set(self.flagged_parameters())
+        x = np.arange(len(self.names))
+        span = np.where(np.isfinite(self.upper - self.lower), self.upper - self.lower, np.abs(self.estimates) + 1)
+        rel = (self.estimates - np.where(np.isfinite(self.lower), self.lower, self.estimates - span / 2)) / span
+        err = 2 * np.nan_to_num(self.standard_errors) / span
+        col = ["tab:red" if n in flagged else "tab:blue" for n in self.names]
+        ax.errorbar(x, rel, yerr=err, fmt="none", ecolor="0.5", capsize=3)
+        ax.scatter(x, rel, c=col, zorder=3)
+        ax.axhline(0, color="tab:red", ls=":", lw=0.8)
+        ax.axhline(1, color="tab:red", ls=":", lw=0.8)
+        ax.set_xticks(x, self.names, rotation=30, fontsize=8)
+        ax.set_ylabel("position between bounds")
+        ax.set_title(f"{self.model}: estimates between their bounds (red: flagged)", fontsize=10)
 
 
 def _kind(name: str) -> str:
+    """A parameter's kind by its name (:data:`COEFFICIENT_RULES`)."""
     for pattern, kind in COEFFICIENT_RULES:
         if fnmatch.fnmatchcase(name, pattern):
             return kind
     return "other"
+
+
+def _role_parameters(spec, role: str) -> list:
+    """The parameter symbols the role's expression depends on (a time family by its knots), in
+    declaration order."""
+    used = spec.expand(spec.role(role)).free_symbols
+    fams = {k for f in spec.families if f.symbol in used for k in f.knots}
+    return [ps.symbol for ps in spec.parameters if ps.symbol in used or ps.symbol in fams]
+
+
+def coefficient_kinds(spec) -> tuple[dict, tuple]:
+    """Each parameter's kind (``drag``, ``lift slope``, ``lift``, ``effect``, ``other``) by the
+    model's roles, and notes on what fell back to names.
+
+    A parameter the ``drag_coefficient`` role's expression depends on is ``drag`` (an effect's
+    correction named ``dCD*`` stays ``effect``); one the ``lift_coefficient`` role depends on is
+    a ``lift slope`` when its term moves with the ``attack_angle`` role, else ``lift``. A model
+    without a role gets that role's kinds by the name patterns of :data:`COEFFICIENT_RULES`
+    (``CD*`` drag, ``CL_alpha*`` lift slope, ``CL*`` lift), and a note says so.
+
+    Returns
+    -------
+    ({name: kind}, notes)
+    """
+    names = spec.parameter_names
+    by_name = {n: _kind(n) for n in names}
+    kinds = {n: "effect" if k == "effect" else "other" for n, k in by_name.items()}
+    alpha = spec.role("attack_angle")
+    alpha_syms = spec.expand(alpha).free_symbols if alpha is not None else set()
+    missing = []
+    for role, role_kinds in _ROLE_KINDS.items():
+        if spec.role(role) is None:
+            missing.append(role)
+            kinds.update({n: k for n, k in by_name.items() if k in role_kinds})
+            continue
+        expr = spec.expand(spec.role(role))
+        for sym in _role_parameters(spec, role):
+            n = str(sym)
+            if kinds[n] in ("effect", "drag"):
+                continue
+            if role == "drag_coefficient":
+                kinds[n] = "drag"
+            else:
+                fam = next((f.symbol for f in spec.families if sym in f.knots), sym)
+                slope = alpha_syms and (sp.diff(expr, fam).free_symbols & alpha_syms)
+                kinds[n] = "lift slope" if slope else "lift"
+    notes = ()
+    if missing:
+        notes = (f"model {spec.name!r} declares no {' or '.join(repr(r) for r in missing)} role: its coefficients "
+                 "are recognized by name (CD* drag, CL_alpha* lift slope, CL* lift); declare the role "
+                 "(m.declare_role) to have them checked whatever their names",)
+    return kinds, notes
 
 
 def _realistic_sizes() -> dict:
@@ -373,10 +461,32 @@ def check_plausibility(fit: EstimationResult, *, uncertainty=None, level: float 
     spec = fit.spec
     names = spec.parameter_names
     p = np.asarray(fit.p, float)
-    lo, hi = spec.lower, spec.upper
+    se, cov, notes = _standard_errors(fit, uncertainty)
+    by_role, kind_notes = coefficient_kinds(spec)
+    kinds = tuple(by_role[n] for n in names)
+    notes += kind_notes
+    real = _realistic_sizes() if realistic is None else dict(realistic)
+    flags = _coefficient_flags(fit, se, kinds, real, drag_range, effect_factor)
+    mach_checks, shape_flags, shape_notes = _drag_shape_checks(fit, se, cov, level, mach_degree, mach_tolerance,
+                                                               transonic, subsonic_spread)
+    flags += shape_flags
+    notes += shape_notes
+    rise = _supersonic_rise(fit, cov, supersonic_tolerance)
+    if rise is not None:
+        flags.append(rise)
+    order = {s: i for i, s in enumerate(SEVERITIES)}
+    flags.sort(key=lambda f: order[f.severity])
+    return Plausibility(model=spec.name, names=names, estimates=p, standard_errors=se, lower=spec.lower,
+                        upper=spec.upper, kinds=kinds, flags=tuple(flags), mach_checks=tuple(mach_checks),
+                        level=float(level), notes=tuple(notes))
+
+
+def _standard_errors(fit: EstimationResult, uncertainty) -> tuple[np.ndarray, np.ndarray | None, list]:
+    """``(standard errors, covariance or None, notes)`` of the fit's parameters (NaN when the
+    uncertainty cannot be formed)."""
     notes = []
     cov = None
-    se = np.full(p.size, np.nan)
+    se = np.full(len(fit.spec.parameter_names), np.nan)
     if uncertainty is None:
         try:
             from ..estimability import uncertainty as _uncertainty
@@ -389,14 +499,18 @@ def check_plausibility(fit: EstimationResult, *, uncertainty=None, level: float 
         if fit.chi2_per_dof > 1.5:
             notes.append(f"chi2/dof = {fit.chi2_per_dof:.3g}: standard errors assume the stated sigma and are "
                          f"too small by about sqrt({fit.chi2_per_dof:.3g}); the residuals also fail (see compare)")
-    kinds = tuple(_kind(n) for n in names)
-    real = _realistic_sizes() if realistic is None else dict(realistic)
+    return se, cov, notes
+
+
+def _coefficient_flags(fit: EstimationResult, se: np.ndarray, kinds: tuple, real: dict, drag_range: tuple,
+                       effect_factor: float) -> list[Flag]:
+    """Each parameter on its own: at a bound, a drag coefficient or lift slope of the wrong sign, a
+    drag coefficient out of range, an effect beyond its realistic size, a standard error above the value."""
+    spec = fit.spec
+    p, lo, hi = np.asarray(fit.p, float), spec.lower, spec.upper
     flags = []
-    at_bound = {}
-    for s, side in fit.active_bounds(rtol=1e-5):
-        n = str(s)
-        at_bound[n] = side
-    for i, n in enumerate(names):
+    at_bound = {str(s): side for s, side in fit.active_bounds(rtol=1e-5)}
+    for i, n in enumerate(spec.parameter_names):
         v, s, kind = p[i], se[i], kinds[i]
         sd = f" +- {s:.2g}" if np.isfinite(s) else ""
         if n in at_bound:
@@ -423,7 +537,16 @@ def check_plausibility(fit: EstimationResult, *, uncertainty=None, level: float 
         if np.isfinite(s) and s > abs(v) and n not in at_bound:
             flags.append(Flag("undetermined", "info", (n,), f"{n} = {v:.4g} has a standard error {s:.3g} larger than "
                               "itself: the data hardly determine it"))
-    mach_checks = []
+    return flags
+
+
+def _drag_shape_checks(fit: EstimationResult, se: np.ndarray, cov, level: float, mach_degree: int,
+                       mach_tolerance: float, transonic: bool,
+                       subsonic_spread: float) -> tuple[list, list[Flag], list[str]]:
+    """``(mach_checks, flags, notes)``: each time-knot drag family against a smooth function of Mach
+    (``mach-smooth``), and its spread below Mach 0.8 (``subsonic-flat``)."""
+    spec = fit.spec
+    mach_checks, flags, notes = [], [], []
     cd_role = spec.role("drag_coefficient")
     if cd_role is not None:
         used = spec.expand(cd_role).free_symbols
@@ -434,40 +557,34 @@ def check_plausibility(fit: EstimationResult, *, uncertainty=None, level: float 
     if drag_fams and mach is None:
         notes.append(f"model {spec.name!r} declares no 'mach' role: the time-knot drag cannot be checked against Mach "
                      "(declare it with m.declare_role('mach', symbol))")
-    elif drag_fams:
-        for fam in drag_fams:
-            mc = _mach_check(fit, fam, mach, se, cov, mach_degree, mach_tolerance, transonic)
-            if mc is None:
-                notes.append(f"{fam.symbol}: too few distinct knots (or Mach numbers) for the Mach-consistency check")
-                continue
-            mach_checks.append(mc)
-            if mc.p_value < level:
-                worst = np.argsort(-np.abs(mc.standardized))[:3]
-                who = ", ".join(f"{mc.knots[j]} = {mc.values[j]:.3g} at Mach {mc.mach[j]:.2f} "
-                                f"({mc.standardized[j]:+.1f})" for j in sorted(worst))
-                flags.append(Flag("mach-smooth", "fail", tuple(mc.knots[j] for j in sorted(worst)),
-                                  f"{fam.symbol}(t) is not a smooth function of Mach: the best smooth drag curve "
-                                  f"({mc.family_name}) misses the knots by chi2 = {mc.statistic:.3g} on {mc.dof} dof "
-                                  f"(p = {mc.p_value:.2g}, tolerance {mc.tolerance:g}); worst {who}"))
-            sub = mc.mach < 0.8
-            if sub.sum() >= 2:
-                vals = mc.values[sub]
-                spread = float(vals.max() - vals.min())
-                mean = float(np.mean(np.abs(vals)))
-                err = float(np.nanmax(mc.standard_errors[sub])) if np.any(np.isfinite(mc.standard_errors[sub])) else 0.0
-                if mean > 0 and spread > subsonic_spread * mean and spread > 3 * err:
-                    ks = tuple(k for k, s_ in zip(mc.knots, sub) if s_)
-                    flags.append(Flag("subsonic-flat", "warn", ks,
-                                      f"{fam.symbol} varies from {vals.min():.3g} to {vals.max():.3g} "
-                                      f"({100 * spread / mean:.0f} % of its mean) between knots below Mach 0.8 "
-                                      f"({', '.join(ks)}); a slender body's subsonic drag is nearly constant"))
-    rise = _supersonic_rise(fit, cov, supersonic_tolerance)
-    if rise is not None:
-        flags.append(rise)
-    order = {s: i for i, s in enumerate(SEVERITIES)}
-    flags.sort(key=lambda f: order[f.severity])
-    return Plausibility(model=spec.name, names=names, estimates=p, standard_errors=se, lower=lo, upper=hi, kinds=kinds,
-                        flags=tuple(flags), mach_checks=tuple(mach_checks), level=float(level), notes=tuple(notes))
+        return mach_checks, flags, notes
+    for fam in drag_fams:
+        mc = _mach_check(fit, fam, mach, se, cov, mach_degree, mach_tolerance, transonic)
+        if mc is None:
+            notes.append(f"{fam.symbol}: too few distinct knots (or Mach numbers) for the Mach-consistency check")
+            continue
+        mach_checks.append(mc)
+        if mc.p_value < level:
+            worst = np.argsort(-np.abs(mc.standardized))[:3]
+            who = ", ".join(f"{mc.knots[j]} = {mc.values[j]:.3g} at Mach {mc.mach[j]:.2f} "
+                            f"({mc.standardized[j]:+.1f})" for j in sorted(worst))
+            flags.append(Flag("mach-smooth", "fail", tuple(mc.knots[j] for j in sorted(worst)),
+                              f"{fam.symbol}(t) is not a smooth function of Mach: the best smooth drag curve "
+                              f"({mc.family_name}) misses the knots by chi2 = {mc.statistic:.3g} on {mc.dof} dof "
+                              f"(p = {mc.p_value:.2g}, tolerance {mc.tolerance:g}); worst {who}"))
+        sub = mc.mach < 0.8
+        if sub.sum() >= 2:
+            vals = mc.values[sub]
+            spread = float(vals.max() - vals.min())
+            mean = float(np.mean(np.abs(vals)))
+            err = float(np.nanmax(mc.standard_errors[sub])) if np.any(np.isfinite(mc.standard_errors[sub])) else 0.0
+            if mean > 0 and spread > subsonic_spread * mean and spread > 3 * err:
+                ks = tuple(k for k, s_ in zip(mc.knots, sub) if s_)
+                flags.append(Flag("subsonic-flat", "warn", ks,
+                                  f"{fam.symbol} varies from {vals.min():.3g} to {vals.max():.3g} "
+                                  f"({100 * spread / mean:.0f} % of its mean) between knots below Mach 0.8 "
+                                  f"({', '.join(ks)}); a slender body's subsonic drag is nearly constant"))
+    return mach_checks, flags, notes
 
 
 TRANSONIC_CENTRE = 1.1
@@ -525,7 +642,8 @@ def _supersonic_rise(fit: EstimationResult, cov, tolerance: float) -> Flag | Non
         sd = float(np.sqrt(var)) if np.isfinite(var) and var > 0 else 0.0
     if rises[b] <= tolerance + 2 * sd:
         return None
-    drag = tuple(n for n in names if n in used and _kind(n) == "drag") or tuple(names[i] for i in cols)
+    kinds = coefficient_kinds(spec)[0]
+    drag = tuple(n for n in names if n in used and kinds[n] == "drag") or tuple(names[i] for i in cols)
     return Flag("supersonic-rise", "fail", drag,
                 f"the drag coefficient rises from {c[a]:.3g} at Mach {m[a]:.2f} to {c[b]:.3g} at Mach {m[b]:.2f} "
                 f"(+{rises[b]:.3g} +- {sd:.2g}; tolerance {tolerance:g}): above Mach {SUPERSONIC_MACH:g} a launch "

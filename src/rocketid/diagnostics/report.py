@@ -25,7 +25,7 @@ from typing import Any, Iterable, Sequence
 import numpy as np
 
 from ..errors import SettingsError
-from ..output import nulls_for_non_finite, save_figure, write_bytes, write_json, write_text
+from ..output import figure_of, new_axes, nulls_for_non_finite, write_bytes, write_json, write_text
 
 __all__ = ["write_report", "render_html", "figure_png", "data_uri", "html_table", "PAGE"]
 
@@ -228,9 +228,11 @@ class _Figures:
 
 
 def _png_of(fig) -> bytes | None:
-    """PNG bytes of a figure, or of the figure a function makes (None: no figure)."""
+    """PNG bytes of a figure, or of the figure a function draws (it may return the figure, its
+    Axes or an array of them; None: no figure)."""
     if not hasattr(fig, "savefig") and callable(fig):
         fig = fig()
+    fig = figure_of(fig)
     return None if fig is None else figure_png(fig)
 
 
@@ -242,17 +244,31 @@ def _attempt(make) -> tuple:
 
 
 def _make_child(makes, indices, conn, parent_pid) -> None:   # pragma: no cover - runs in a worker process
+    """Make the jobs ``indices`` in a forked worker and send ``[(index, value)]`` of those made.
+
+    The worker ends with ``os._exit``: nothing of the parent's (its exit handlers, its
+    buffered output) runs twice, and a failure is silent (the parent makes what is missing).
+    """
+    import os
+
     from ..sampling.executors import die_with_parent
-    die_with_parent(parent_pid)
-    out = []
+    code = 1
     try:
+        die_with_parent(parent_pid)
+        out = []
         for i in indices:
             ok, value = _attempt(makes[i])
             if ok:
                 out.append((i, value))
         conn.send(out)
+        code = 0
+    except BaseException:  # noqa: BLE001 - the parent makes the jobs the worker did not send
+        pass
     finally:
-        conn.close()
+        try:
+            conn.close()
+        finally:
+            os._exit(code)
 
 
 def _make_all(makes: Sequence, workers: int | None = None) -> list:
@@ -414,12 +430,11 @@ def _plausibility_section(pl, figs: _Figures) -> str:
 
 
 def _ranking_plot(ranking):
-    from .compare import _pyplot
-    plt = _pyplot()
     cands = list(ranking.candidates)[:15]
     if not cands:
         return None
-    fig, ax = plt.subplots(figsize=(8, 0.32 * len(cands) + 1.2))
+    ax = new_axes((8, 0.32 * len(cands) + 1.2))
+    fig = ax.figure
     y = np.arange(len(cands))[::-1]
     stat = np.array([max(float(c.statistic), 1e-3) for c in cands])
     col = ["tab:red" if getattr(c, "significant", False) else "tab:gray" for c in cands]
@@ -574,12 +589,7 @@ def _history_section(report, figs: _Figures) -> str:
         path = figs.folder / "history.png"
 
         def make():
-            res = h.plot_residuals(path)
-            if res is not None and hasattr(res, "savefig"):
-                if not path.is_file():
-                    save_figure(res, path, dpi=100)
-                import matplotlib.pyplot as plt
-                plt.close(res)
+            h.plot_residuals(path=path)
             return path.read_bytes() if path.is_file() else None
 
         def html_of(png):
