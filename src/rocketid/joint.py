@@ -279,7 +279,8 @@ class JointNLP:
         """``X`` from each flight's ``x_f`` (their parameter parts are ignored) and ``theta``."""
         X = np.empty(self.n)
         for f, x in enumerate(xs):
-            X[self._colmaps[f][: self.nlps[f].layout.n_state_vars]] = np.asarray(x)[: self.nlps[f].layout.n_state_vars]
+            states = self.nlps[f].layout.states(np.asarray(x))
+            X[self._colmaps[f][: states.size]] = states
         X[self.n_state_total:] = theta
         return X
 
