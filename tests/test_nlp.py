@@ -140,6 +140,19 @@ def test_use_cache_false_neither_reads_nor_writes_the_cache(tmp_path, monkeypatc
     assert not generate(spec, use_cache=False).cached
 
 
+def test_use_cache_false_leaves_no_folder_behind(tmp_path, monkeypatch):
+    import gc
+
+    from rocketid.codegen import generate
+    monkeypatch.setenv("ROCKETID_CACHE_DIR", str(tmp_path / "cache"))
+    g = generate(_tiny_spec(), use_cache=False)
+    folder = g.path.parent
+    assert folder.is_dir() and g.hessian_source            # the Hessian is written beside it on first use
+    del g
+    gc.collect()
+    assert not folder.exists()
+
+
 def test_the_cache_key_follows_the_generator(monkeypatch, tmp_path):
     from rocketid import codegen
     monkeypatch.setenv("ROCKETID_CACHE_DIR", str(tmp_path))

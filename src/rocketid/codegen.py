@@ -29,8 +29,10 @@ import hashlib
 import importlib.util
 import keyword
 import os
+import shutil
 import sys
 import tempfile
+import weakref
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import ModuleType
@@ -399,7 +401,8 @@ def generate(spec: ModelSpec, *, use_cache: bool = True) -> GeneratedModel:
     spec : ModelSpec
     use_cache : bool
         Look up and store the generated module by content hash. False: generate afresh into a
-        private temporary folder; the cache is neither read nor written.
+        private temporary folder; the cache is neither read nor written, and the folder is removed
+        when the returned model is garbage-collected (or at exit).
 
     Returns
     -------
@@ -422,4 +425,9 @@ def generate(spec: ModelSpec, *, use_cache: bool = True) -> GeneratedModel:
         path = folder / f"{modname}.py"
     write_text(path, source)  # atomic: concurrent processes never read half a file
     module = _load(path, modname)
-    return GeneratedModel(source, path, module, False, spec=spec)
+    gen = GeneratedModel(source, path, module, False, spec=spec)
+    if not use_cache:
+        # the private folder lives as long as the generated model (its Hessian is written there on
+        # first use) and is removed with it, or at exit
+        weakref.finalize(gen, shutil.rmtree, folder, ignore_errors=True)
+    return gen
