@@ -119,6 +119,8 @@ class DiagnosisReport:
     final : FinalModel or None
     variant : DiagnosisReport or None
         For a model with time-knot drag: the same discovery on its Mach-indexed variant.
+    ranking_failed : str
+        Why the score test could not be made at the base fit (empty when it was).
     """
 
     model: str
@@ -139,6 +141,7 @@ class DiagnosisReport:
     discovery: Any = None
     final: FinalModel | None = None
     variant: Any = None
+    ranking_failed: str = ""
 
     # ---- verdicts
     @property
@@ -266,7 +269,7 @@ class DiagnosisReport:
         """``{"candidates": [...]}``, best first, each with ``name``, ``statistic``,
         ``p_value`` (corrected) and ``group`` (the content of candidates.json)."""
         if self.ranking is None:
-            return {"candidates": [], "note": "no ranking: " + "; ".join(n for n in self.notes if "rank" in n)}
+            return {"candidates": [], "note": "no ranking: " + (self.ranking_failed or "the score test was not made")}
         payload = dict(self.ranking.to_dict())
         cands = list(payload.get("candidates", []))
         objs = list(getattr(self.ranking, "candidates", []))
@@ -534,17 +537,11 @@ def _final(disc, ranking, level, window) -> FinalModel | None:
         blind = _blind_spots(ranking, exclude=disc.effect_names)
         if blind:
             text += f" These data cannot show whether these are present too, as the coefficients take them up: {blind}."
-        further = [n.split("; ", 1)[1] for n in disc.notes if "a further effect may be present" in n]
-        ties = [n.split(": ", 1)[1] for n in disc.notes if "BIC within" in n and ": " in n and "ambiguous" not in n
-                and "a further effect may be present" not in n]
-        if ties:
-            text += f" Rivals: {ties[-1]}."
-        if further:
-            text += f" {further[-1][0].upper()}{further[-1][1:]}."
+        if disc.rivals:
+            text += f" Rivals: {disc.rivals}."
     elif disc.verdict == "partly explained":
         if disc.fits_to_noise:
-            why = next((n.split(": ", 1)[1] for n in disc.notes
-                        if n.startswith("the final model reaches the noise but is not an explanation")), "")
+            why = disc.not_an_explanation
             text = (f"the model with {names} reaches the noise (chi2/dof {fit.chi2_per_dof:.4g}, band <= "
                     f"{band.upper:.4g}) but is not an explanation{': ' + why if why else ''}.{amb}")
         else:
@@ -689,7 +686,7 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
     meas = fit.prepared.measurements  # with the estimated sigmas, if any
     comp, loc, plaus = timed("describe_s", _describe, fit, level, window, notes)
     effects = _candidate_effects(candidates)
-    disc, ranking = None, None
+    disc, ranking, failed = None, None, ""
     if confirm_top > 0:
         try:
             disc = timed("discover_s", discover, fit, effects, level=level, max_effects=int(max_effects),
@@ -700,12 +697,13 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
         if disc is not None:
             notes.extend(disc.notes)
             ranking = disc.steps[0].screen.ranking if disc.steps else None
-            notes.extend(n for s in disc.steps[:1] for n in s.screen.notes if "ranking failed" in n)
+            failed = disc.ranking_failed
     else:
         from .screen import screen
         scr = timed("rank_s", screen, fit, effects, level=level)
-        ranking = scr.ranking
-        notes.extend(n for n in scr.notes if "ranking failed" in n)
+        ranking, failed = scr.ranking, scr.failed
+    if failed:
+        notes.append(f"the candidate ranking failed: {failed}")
     confs, names, pls = timed("confirm_s", _confirm_final, fit, disc, holdout, level, refit_timeout, options, notes)
     history = _history(spec, fit, disc, notes)
     after = compare(disc.fit, level=level) if disc is not None and disc.effects else None
@@ -718,7 +716,8 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
     report = DiagnosisReport(model=label, data_label=data_label, fit=fit, comparison=comp, location=loc,
                              plausibility=plaus, ranking=ranking, confirmations=confs, confirmed=names,
                              refit_plausibility=pls, after=after, history=history, level=float(level),
-                             timings=timings, notes=tuple(notes), discovery=disc, final=final, variant=var)
+                             timings=timings, notes=tuple(notes), discovery=disc, final=final, variant=var,
+                             ranking_failed=failed)
     if out is not None:
         report.write(out)
     return report

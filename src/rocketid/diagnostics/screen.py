@@ -72,11 +72,14 @@ class Screen:
         None when no candidate could be scored (see :attr:`notes`).
     contenders : tuple of Contender
     notes : tuple of str
+    failed : str
+        Why the ranking could not be made (empty when it was).
     """
 
     ranking: CandidateRanking | None
     contenders: tuple
     notes: tuple = ()
+    failed: str = ""
 
     @property
     def names(self) -> tuple:
@@ -201,7 +204,7 @@ def screen(fit: EstimationResult, candidates: Sequence[Effect], *, level: float 
             # from the start, base fit locally infeasible at chi2/dof 1.4e6, found nothing without this)
             return Screen(None, tuple(Contender(e, "the ranking could not be made: every candidate is refitted")
                                       for e in candidates),
-                          (f"the candidate ranking failed ({exc}); every candidate is refitted",))
+                          (f"the candidate ranking failed ({exc}); every candidate is refitted",), failed=str(exc))
     vehicle = vehicle if vehicle is not None else vehicle_of(fit)
     sig = [c for c in ranking.candidates if c.significant]
     if not sig:
