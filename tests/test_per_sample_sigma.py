@@ -201,3 +201,22 @@ def test_read_channels_sigma_columns(tmp_path):
     assert m["x"].sigma is None
     with pytest.raises(DataError, match="'v', which has no file"):
         read_channels({"x": x, "h": h}, sigma_columns={"v": "sig_v"})
+
+
+def test_the_diagnosis_reads_each_samples_sigma(growing_fit, growing_noise):
+    """compare() normalizes each sample by its own sigma (early and late residuals alike, eta as the sampling
+    computes it), the hold-out split keeps the per-sample sigmas, and the score test's model cache compares
+    them as arrays."""
+    import importlib
+
+    from rocketid.diagnostics.compare import compare
+    refit = importlib.import_module("rocketid.diagnostics.refit")
+    comp = compare(growing_fit)
+    for c in comp.channels:
+        n = c.normalized.size
+        assert 0.9 < np.std(c.normalized[: n // 3]) < 1.1 and 0.9 < np.std(c.normalized[-n // 3:]) < 1.1, c.name
+        assert abs(c.chi2_per_dof - 1) < 0.08, c.name
+    assert comp.criterion["eta"] == pytest.approx(criterion_of(growing_fit).eta, rel=1e-9)
+    late = refit._after(growing_noise, 40.0)
+    for c, full in zip(late.channels, growing_noise.channels):
+        np.testing.assert_array_equal(c.sigma, full.sigma[full.times > 40.0])

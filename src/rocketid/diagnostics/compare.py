@@ -560,7 +560,8 @@ def compare(fit: EstimationResult, *, lags: int | None = None, level: float = 0.
     nlp = fit.nlp
     sig = dict(zip(nlp.channel_names, (float(s) for s in nlp.channel_sigmas)))
     chans = [_channel_comparison(fit, name, sig[name], lags) for name in nlp.channel_names]
-    crit, source = criterion_terms(fit.residuals, sig)
+    # eta with each sample's own sigma (per-sample sigmas included), as the sampling's criterion computes it
+    crit, source = criterion_terms(fit.residuals, nlp.channel_sigma_arrays())
     q = sum(c.whiteness.statistic for c in chans)
     h = sum(c.whiteness.dof for c in chans)
     pooled = LjungBox(q, h, float(chi2.sf(q, h)), np.mean([c.whiteness.autocorrelation for c in chans], axis=0)
@@ -580,7 +581,7 @@ def _channel_comparison(fit: EstimationResult, name: str, sigma: float, lags: in
     ch = fit.prepared.measurements[name]
     r = np.asarray(fit.residuals[name], float)
     yhat = np.asarray(fit.predictions[name], float)
-    e = r / sigma
+    e = np.asarray(fit.normalized_residuals[name], float)     # r / sigma_i, each sample's own sigma
     n = e.size
     dof = max(1.0, n - p * n / N)
     return ChannelComparison(

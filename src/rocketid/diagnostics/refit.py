@@ -32,7 +32,7 @@ from typing import Any, Mapping, NamedTuple, Sequence
 import numpy as np
 from scipy import stats
 
-from ..data import Channel, Measurements
+from ..data import Measurements
 from ..errors import DataError, RocketidError, SensitivityError, SettingsError
 from ..estimability import uncertainty
 from ..nlp import ParameterTransform
@@ -237,7 +237,7 @@ def _after(measurements: Measurements, t_split: float) -> Measurements | None:
         keep = c.times > t_split
         if not keep.any():
             return None
-        chans.append(Channel(c.name, c.times[keep], c.values[keep], c.sigma))
+        chans.append(c.select(keep))
     return Measurements(tuple(chans))
 
 

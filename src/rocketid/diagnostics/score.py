@@ -340,7 +340,8 @@ class AugmentedModel:
         a, b = self.prepared.measurements, fit.prepared.measurements
         if a.names != b.names:
             return False
-        return all(np.array_equal(a[n].times, b[n].times) and a[n].sigma == b[n].sigma for n in a.names)
+        return all(np.array_equal(a[n].times, b[n].times) and np.array_equal(np.asarray(a[n].sigma), np.asarray(b[n].sigma))
+                   for n in a.names)
 
 
 def augment(fit: EstimationResult, candidates: Iterable[Effect | str] | None = None) -> AugmentedModel:
