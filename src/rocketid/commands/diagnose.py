@@ -22,6 +22,7 @@ written), 2 bad input.
 from __future__ import annotations
 
 import time
+from pathlib import Path
 
 import click
 
@@ -35,9 +36,10 @@ __all__ = ["command"]
 
 
 @click.command("diagnose")
-@click.argument("data_file", metavar="DATA.csv", type=click.Path(dir_okay=False))
+@click.argument("data_files", metavar="DATA.csv...", nargs=-1, required=True, type=click.Path(dir_okay=False))
 @click.option("--out", "out", required=True, type=click.Path(file_okay=False), metavar="DIR",
-              help="Folder for report.html, candidates.json, diagnosis.json, summary.txt and figures/.")
+              help="Folder for report.html, candidates.json, diagnosis.json, summary.txt and figures/ (several "
+                   "files: DIR/<flight>/ each, and DIR/diagnosis.json, summary.txt, index.html).")
 @model_option
 @click.option("--level", type=float, default=0.05, show_default=True,
               help="Significance level of the tests and of the candidate ranking (0 < level < 1).")
@@ -66,7 +68,7 @@ __all__ = ["command"]
 @sigma_column_option_decl()
 @unmeasured_option_decl()
 @verbose_option
-def command(data_file, out, model, level, confirm_top, holdout, max_effects, workers, refit_timeout, locate_window,
+def command(data_files, out, model, level, confirm_top, holdout, max_effects, workers, refit_timeout, locate_window,
             window_text, columns, time_column, sigmas, sigma_columns, unmeasured):
     """Fit a model to DATA.csv and diagnose what it misses; write DIR/report.html.
 
@@ -74,6 +76,12 @@ def command(data_file, out, model, level, confirm_top, holdout, max_effects, wor
     residuals fail (time, flight phase, Mach, dynamic pressure, altitude),
     checks the coefficients' plausibility, ranks candidate physical effects by
     the score test and confirms the leaders by refitting.
+
+    Several files are several flights of one vehicle: each is diagnosed alone
+    (DIR/<flight>/, the flight being the file's name), then the model is fitted
+    to all jointly and each flight refitted alone; DIR/diagnosis.json and
+    DIR/index.html say which effects are found in every flight and which in one
+    flight only.
     """
     from ..diagnostics.api import diagnose, resolve_model
 
@@ -99,6 +107,13 @@ def command(data_file, out, model, level, confirm_top, holdout, max_effects, wor
     check_folder(out, "--out")  # before the work: a bad --out fails at once, not after the fits
     spec, label = resolve_model(model)
     sigma = sigma_argument(sigmas, spec)
+    if len(data_files) > 1:
+        _several(data_files, out, spec, label, sigma, flight, columns=columns, time_column=time_column,
+                 sigma_columns=sigma_columns, unmeasured=unmeasured,
+                 settings=dict(level=level, confirm_top=confirm_top, window=window, holdout=holdout,
+                               max_effects=max_effects, workers=workers, refit_timeout=refit_timeout))
+        return
+    data_file = data_files[0]
     data = read_data(data_file, spec, time_column=time_column, columns=assignments(columns, "--column"),
                      sigma=given_sigmas(sigma), unmeasured=tuple(unmeasured),
                      sigma_columns=assignments(sigma_columns, "--sigma-column"))
@@ -115,6 +130,35 @@ def command(data_file, out, model, level, confirm_top, holdout, max_effects, wor
         click.echo(line)
     click.echo(f"wrote {path} and {path.parent / 'candidates.json'} ({time.perf_counter() - t0:.1f} s)")
     if not report.fit.success:
+        click.get_current_context().exit(EXIT_NOT_CONVERGED)
+
+
+def _several(data_files, out, spec, model_label, sigma, flight, *, columns, time_column, sigma_columns, unmeasured,
+             settings):
+    """Several flights: each diagnosed alone, then jointly (:mod:`rocketid.commands.diagnose_flights`)."""
+    from ..cli import flight_labels
+    from .diagnose_flights import diagnose_flights
+
+    labels = flight_labels(data_files)
+    datas = [read_data(f, spec, time_column=time_column, columns=assignments(columns, "--column"),
+                       sigma=given_sigmas(sigma), unmeasured=tuple(unmeasured),
+                       sigma_columns=assignments(sigma_columns, "--sigma-column")) for f in data_files]
+    with folder_lock(out):
+        t0 = time.perf_counter()
+
+        def done(label, report):
+            final = report.final
+            status(f"flight {label}: " + ("no effects searched" if final is None else
+                                          f"{final.verdict} ({', '.join(final.effects) or 'no effect added'})")
+                   + f"; wrote {Path(out) / label / 'report.html'}")
+
+        status(f"diagnosing {len(labels)} flights ({', '.join(labels)}) with {spec.name}, one at a time, then jointly")
+        result = diagnose_flights(datas, labels, spec, files=[str(f) for f in data_files], model_label=model_label,
+                                  flight_window=flight, sigma=sigma, out=out, on_flight=done, **settings)
+    click.echo(result.summary().text())
+    click.echo(f"wrote {Path(out) / 'index.html'}, {Path(out) / 'diagnosis.json'} and each flight's report in "
+               f"{Path(out)}/<flight>/ ({time.perf_counter() - t0:.1f} s)")
+    if not result.success:
         click.get_current_context().exit(EXIT_NOT_CONVERGED)
 
 

@@ -1,0 +1,303 @@
+"""``rocketid diagnose F1.csv F2.csv ...``: the diagnosis per flight and joint.
+
+::
+
+    rocketid diagnose f1.csv f2.csv --model ra66m --out diag/
+
+Several data files are several flights of one vehicle (one model). Each flight is
+diagnosed on its own (:func:`rocketid.diagnostics.diagnose`, its report written to
+``DIR/<label>/``, the label being the file's name without extension as in the joint
+estimate), then the base model is fitted to all flights jointly
+(:func:`rocketid.joint.joint_estimate`) and each flight is refitted alone
+(:meth:`rocketid.joint.JointResult.consistency`). The effects each flight's diagnosis
+ends with are compared: found in every flight, in some, or in one flight only.
+
+Written: ``DIR/<label>/`` (each flight's report.html, diagnosis.json, ...),
+``DIR/diagnosis.json`` (``flights``, ``joint``, ``common``), ``DIR/summary.txt`` and
+``DIR/index.html`` (linking each flight's report).
+"""
+
+from __future__ import annotations
+
+import html
+import math
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any, Sequence
+
+from ..errors import RocketidError
+from ..output import finite_or_none, write_json, write_text
+from ..summary import Section, Summary, Table
+
+__all__ = ["FlightsDiagnosis", "diagnose_flights", "common_effects"]
+
+
+def common_effects(effects: dict[str, tuple | None]) -> dict:
+    """Which final effects are found in every flight, in some, in one flight only.
+
+    Parameters
+    ----------
+    effects : dict
+        ``{flight label: effects its diagnosis added}`` (None: not searched, ``--confirm 0``).
+
+    Returns
+    -------
+    dict
+        ``in_every_flight`` (list), ``in_one_flight_only`` (``{effect: label}``),
+        ``in_some_flights`` (``{effect: [labels]}``, more than one but not all),
+        ``none_found`` (labels whose diagnosis added nothing), ``not_searched`` (labels)
+        and ``statements`` (one sentence per effect, e.g. "bias_h: found in flight B only").
+    """
+    searched = [l for l, e in effects.items() if e is not None]
+    found: dict[str, list[str]] = {}
+    for label in searched:
+        for e in effects[label]:
+            found.setdefault(str(e), [])
+            if label not in found[str(e)]:
+                found[str(e)].append(label)
+    every = [e for e, ls in found.items() if len(searched) > 1 and len(ls) == len(searched)]
+    one = {e: ls[0] for e, ls in found.items() if len(ls) == 1 and e not in every}
+    some = {e: ls for e, ls in found.items() if e not in every and e not in one}
+    statements = []
+    for e in every:
+        statements.append(f"{e}: found in every flight ({', '.join(searched)})")
+    for e, ls in some.items():
+        missing = [l for l in searched if l not in ls]
+        statements.append(f"{e}: found in flights {', '.join(ls)} (not in {', '.join(missing)})")
+    for e, l in one.items():
+        statements.append(f"{e}: found in flight {l} only")
+    none_found = [l for l in searched if not effects[l]]
+    if searched and not found:
+        statements.append("no effect found in any flight")
+    elif none_found:
+        statements.append(f"no effect found in flight{'s' if len(none_found) > 1 else ''} {', '.join(none_found)}")
+    return {"in_every_flight": every, "in_one_flight_only": one, "in_some_flights": some, "none_found": none_found,
+            "not_searched": [l for l, e in effects.items() if e is None], "statements": statements}
+
+
+@dataclass(frozen=True)
+class FlightsDiagnosis:
+    """The diagnosis of several flights of one vehicle: each alone, and the joint fit.
+
+    Attributes
+    ----------
+    model : str
+    labels : tuple of str
+        The flights' labels (the data files' names).
+    files : tuple of str
+    reports : tuple of DiagnosisReport
+        Each flight's own diagnosis, in the order of :attr:`labels`.
+    joint : JointResult or None
+        The base model fitted to all flights jointly (None when it failed: :attr:`joint_failed`).
+    joint_failed : str
+        Why the joint fit could not be made (empty when it was).
+    timings : dict
+        ``diagnose_s`` (all flights), ``joint_s`` (the joint fit and each flight refitted alone).
+    """
+
+    model: str
+    labels: tuple
+    files: tuple
+    reports: tuple
+    joint: Any
+    joint_failed: str = ""
+    timings: Any = None
+
+    # ---- per flight
+    def effects(self) -> dict[str, tuple | None]:
+        """``{label: final effects}`` (None when the diagnosis searched none)."""
+        return {l: (None if r.final is None else tuple(r.final.effects)) for l, r in zip(self.labels, self.reports)}
+
+    def common(self) -> dict:
+        """:func:`common_effects` of the flights' final effects."""
+        return common_effects(self.effects())
+
+    @property
+    def success(self) -> bool:
+        """Every flight's base fit and the joint fit converged."""
+        return all(r.fit.success for r in self.reports) and self.joint is not None and bool(self.joint.success)
+
+    def _flight_row(self, label, report) -> dict:
+        final = report.final
+        chi2 = report.fit.chi2_per_dof if final is None else final.chi2_per_dof
+        return {"file": self.files[self.labels.index(label)],
+                "verdict": None if final is None else final.verdict,
+                "final_effects": None if final is None else list(final.effects),
+                "chi2_per_dof": finite_or_none(float(chi2)),
+                "base_chi2_per_dof": finite_or_none(float(report.fit.chi2_per_dof)),
+                "fits_to_noise": None if final is None else bool(final.fits_to_noise),
+                "converged": bool(report.fit.success),
+                "report": f"{label}/report.html"}
+
+    # ---- joint
+    def _consistency_rows(self) -> dict:
+        if self.joint is None:
+            return {}
+        return {l: {"chi2_per_dof_alone": finite_or_none(float(a.chi2_per_dof)),
+                    "chi2_per_dof_joint": finite_or_none(float(j.chi2_per_dof)),
+                    "objective_excess": finite_or_none(float(j.data_objective - a.data_objective))}
+                for l, j, a in zip(self.joint.labels, self.joint.flights, self.joint.alone)}
+
+    def _joint_notes(self) -> list[str]:
+        if self.joint is None:
+            return [f"the joint fit failed: {self.joint_failed}"]
+        notes = list(self.joint.consistency().notes)
+        if not self.joint.success:
+            notes.insert(0, f"the joint fit did not converge: {self.joint.message}")
+        return notes
+
+    # ---- reports
+    def verdict(self) -> list[str]:
+        """The diagnosis of the flights in a few sentences."""
+        out = []
+        for label, r in zip(self.labels, self.reports):
+            row = self._flight_row(label, r)
+            if row["verdict"] is None:
+                out.append(f"Flight {label}: no effects searched (chi2/dof {row['chi2_per_dof']:.4g}).")
+            else:
+                eff = ", ".join(row["final_effects"]) or "no effect added"
+                out.append(f"Flight {label}: {row['verdict']} ({eff}; chi2/dof {row['chi2_per_dof']:.4g}).")
+        out += [s[0].upper() + s[1:] + "." for s in self.common()["statements"]]
+        if self.joint is not None:
+            out.append(f"Joint fit of {self.reports[0].fit.spec.name} to {len(self.labels)} flights: chi2/dof "
+                       f"{self.joint.chi2_per_dof:.4g} ("
+                       + ", ".join(f"{l} {r.chi2_per_dof:.4g}" for l, r in zip(self.joint.labels, self.joint.flights))
+                       + ").")
+        out += [n[0].upper() + n[1:] + ("" if n.endswith(".") else ".") for n in self._joint_notes()]
+        return out
+
+    def summary(self) -> Summary:
+        """Fixed sections: flights, effects, joint fit; the joint notes."""
+        flights = Table(("flight", "file", "verdict", "effects added", "chi2/dof base", "chi2/dof final"),
+                        [(l, f, row["verdict"] or "not searched", ", ".join(row["final_effects"] or []) or "-",
+                          float(r.fit.chi2_per_dof), row["chi2_per_dof"] if row["chi2_per_dof"] is not None else math.nan)
+                         for l, f, r in zip(self.labels, self.files, self.reports)
+                         for row in (self._flight_row(l, r),)],
+                        (None, None, None, None, ".4g", ".4g"))
+        effects = Section("Effects", tuple(self.common()["statements"])
+                          or ("no flight's effects were searched (--confirm 0)",))
+        if self.joint is not None:
+            rows = self._consistency_rows()
+            joint_items = (("chi2 / dof", f"{self.joint.chi2_per_dof:.4g} (all flights, base model)"),
+                           ("status", "converged" if self.joint.success else f"FAILED ({self.joint.message})"),
+                           Table(("flight", "chi2/dof alone", "chi2/dof joint", "J joint - J alone"),
+                                 [(l, d["chi2_per_dof_alone"], d["chi2_per_dof_joint"], d["objective_excess"])
+                                  for l, d in rows.items()], (None, ".4g", ".4g", ".4g")))
+        else:
+            joint_items = (("status", f"not made ({self.joint_failed})"),)
+        return Summary(f"rocketid diagnosis of {len(self.labels)} flights: {self.reports[0].fit.spec.name}",
+                       (Section("Flights", (flights,)), effects, Section("Joint fit", joint_items)),
+                       self._joint_notes())
+
+    def to_dict(self) -> dict:
+        """The content of ``DIR/diagnosis.json``."""
+        joint: dict = {"success": False, "failed": self.joint_failed}
+        if self.joint is not None:
+            fit = self.joint.to_dict()
+            joint = {"success": bool(self.joint.success), "chi2_per_dof": finite_or_none(self.joint.chi2_per_dof),
+                     "per_flight": fit["per_flight"], "parameters": fit["parameters"],
+                     "standard_errors": fit["standard_errors"], "sigma": fit["sigma"],
+                     "consistency": self._consistency_rows(), "notes": self._joint_notes()}
+        return {"model": self.model, "flights": {l: self._flight_row(l, r) for l, r in zip(self.labels, self.reports)},
+                "joint": joint, "common": self.common(), "verdict": self.verdict(),
+                "timings": dict(self.timings or {})}
+
+    def index_html(self) -> str:
+        """A small page linking each flight's report, with the summary."""
+        esc = html.escape
+        rows = "".join(
+            f"<tr><td><a href=\"{esc(row['report'])}\">{esc(l)}</a></td><td>{esc(row['file'])}</td>"
+            f"<td>{esc(row['verdict'] or 'not searched')}</td><td>{esc(', '.join(row['final_effects'] or []) or '-')}"
+            f"</td><td>{'-' if row['chi2_per_dof'] is None else format(row['chi2_per_dof'], '.4g')}</td></tr>"
+            for l, r in zip(self.labels, self.reports) for row in (self._flight_row(l, r),))
+        verdict = "".join(f"<li>{esc(s)}</li>" for s in self.verdict())
+        title = esc(f"rocketid diagnosis of {len(self.labels)} flights: {self.reports[0].fit.spec.name}")
+        return ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\"><title>" + title + "</title>"
+                "<style>body{font-family:sans-serif;max-width:60em;margin:2em auto}table{border-collapse:collapse}"
+                "td,th{border:1px solid #ccc;padding:.2em .6em;text-align:left}</style></head><body>"
+                f"<h1>{title}</h1><h2>Verdict</h2><ul>{verdict}</ul><h2>Flights</h2><table><tr><th>flight</th>"
+                f"<th>file</th><th>verdict</th><th>effects added</th><th>chi2/dof</th></tr>{rows}</table>"
+                f"<h2>Summary</h2>{self.summary().html()}"
+                "<p>diagnosis.json holds the same; each flight's folder holds its full report.</p></body></html>\n")
+
+    def write(self, out: str | Path) -> Path:
+        """Write ``out/<label>/`` (each flight's report), ``out/diagnosis.json``,
+        ``out/summary.txt`` and ``out/index.html``; returns index.html's path."""
+        out = Path(out)
+        for label, r in zip(self.labels, self.reports):
+            r.write(out / label)
+        return self.write_joint(out)
+
+    def write_joint(self, out: str | Path) -> Path:
+        """The joint files only (the flights' reports written already)."""
+        out = Path(out)
+        payload, text, page = self.to_dict(), self.summary().text() + "\n", self.index_html()
+        write_json(out / "diagnosis.json", payload)
+        write_text(out / "summary.txt", text)
+        return write_text(out / "index.html", page)
+
+
+def diagnose_flights(datas: Sequence, labels: Sequence[str], spec, *, files: Sequence[str] | None = None,
+                     model_label: str | None = None, flight_window=None, sigma=None, out: str | Path | None = None,
+                     on_flight=None, **settings) -> FlightsDiagnosis:
+    """Diagnose each flight alone, then fit the base model to all flights jointly.
+
+    Parameters
+    ----------
+    datas : sequence of Measurements
+        One per flight, not cut to the window.
+    labels : sequence of str
+        The flights' labels (folder names of their reports).
+    spec : ModelSpec
+        The one model of every flight.
+    files : sequence of str, optional
+        The data files (for the reports); default the labels.
+    flight_window : (float, float), optional
+        Each flight's window (its model and data cut to it, initial states free).
+    sigma : optional
+        Noise levels, the same request for every flight (``"estimate"``: each flight's own).
+    out : path, optional
+        Write each flight's report to ``out/<label>/`` as soon as it is made, then the joint files.
+    on_flight : callable, optional
+        ``on_flight(label, report)`` after each flight's diagnosis (progress).
+    **settings
+        Passed to :func:`rocketid.diagnostics.diagnose` for each flight (``level``,
+        ``confirm_top``, ``holdout``, ``max_effects``, ``workers``, ``refit_timeout``, ``window``).
+    """
+    from ..cli import windowed_inputs
+    from ..diagnostics import diagnose
+    from ..joint import Flight, joint_estimate
+    from ..solve import check_determined
+
+    files = tuple(str(f) for f in (files or labels))
+    labels = tuple(labels)
+    # every flight's joint input is formed (and checked) before any work
+    flights = []
+    for label, data in zip(labels, datas):
+        spec_f, data_f, _, mesh, _ = windowed_inputs(spec, data, spec.guess, flight_window, None, 4)
+        check_determined(spec_f, data_f)
+        flights.append(Flight(label, spec_f, data_f, mesh))
+    t0 = time.perf_counter()
+    reports = []
+    for label, f, data in zip(labels, files, datas):
+        rep = diagnose(data, spec, sigma=sigma, flight_window=flight_window, **settings)
+        rep = replace(rep, model=model_label or spec.name, data_label=f)
+        if out is not None:
+            rep.write(Path(out) / label)
+        if on_flight is not None:
+            on_flight(label, rep)
+        reports.append(rep)
+    t1 = time.perf_counter()
+    joint, failed = None, ""
+    try:
+        joint = joint_estimate(flights, sigma=sigma)
+        joint.consistency()  # each flight refitted alone (cached)
+    except RocketidError as exc:
+        joint, failed = None, str(exc)
+    result = FlightsDiagnosis(model=model_label or spec.name, labels=labels, files=files, reports=tuple(reports),
+                              joint=joint, joint_failed=failed,
+                              timings={"diagnose_s": t1 - t0, "joint_s": time.perf_counter() - t1})
+    if out is not None:
+        result.write_joint(out)
+    return result
