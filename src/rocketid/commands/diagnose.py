@@ -5,6 +5,7 @@
     rocketid diagnose data.csv --out report/                 # the chapter's RA-66 parameterization
     rocketid diagnose data.csv --out report/ --model ra66m   # Mach-indexed CD(M), CL = CL_alpha alpha
     rocketid diagnose data.csv --out report/ --model my_model.py --holdout 0:40 --max-effects 2
+    rocketid diagnose f1.csv f2.csv --out report/ --model ra66m   # several flights: each alone, then jointly
 
 Runs :func:`rocketid.diagnostics.api.diagnose` (fit, compare, locate,
 plausibility, candidate ranking, every contender refitted, the acceptance test,
@@ -17,6 +18,12 @@ value and std, chi2/dof, fits_to_noise and the verdict), ``DIR/summary.txt`` and
 ``DIR/figures/*.png``; prints the verdict. Exit codes as every rocketid command: 0 the report is written
 (whatever it finds), 1 the base fit did not converge (the report is still
 written), 2 bad input.
+
+Several data files are several flights of one model
+(:mod:`rocketid.commands.diagnose_flights`): each flight's report in
+``DIR/<flight>/``, then ``DIR/diagnosis.json``, ``DIR/summary.txt`` and
+``DIR/index.html``; exit 0 also when the flights disagree, 1 when a flight's base
+fit or the joint fit did not converge, 2 bad input in any file (before any work).
 """
 
 from __future__ import annotations

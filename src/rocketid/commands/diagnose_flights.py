@@ -158,7 +158,7 @@ class FlightsDiagnosis:
             else:
                 eff = ", ".join(row["final_effects"]) or "no effect added"
                 out.append(f"Flight {label}: {row['verdict']} ({eff}; chi2/dof {row['chi2_per_dof']:.4g}).")
-        out += [s[0].upper() + s[1:] + "." for s in self.common()["statements"]]
+        out += [f"Effects: {s}." for s in self.common()["statements"]]   # effect names keep their case
         if self.joint is not None:
             out.append(f"Joint fit of {self.reports[0].fit.spec.name} to {len(self.labels)} flights: chi2/dof "
                        f"{self.joint.chi2_per_dof:.4g} ("
