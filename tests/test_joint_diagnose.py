@@ -87,3 +87,53 @@ def test_common_effects_names_every_flight_some_and_one_only():
     assert common_effects({"A": (), "B": ()})["statements"] == ["no effect found in any flight"]
     none = common_effects({"A": None, "B": ()})
     assert none["not_searched"] == ["A"] and none["in_one_flight_only"] == {}
+
+
+def test_the_per_flight_options_reach_each_flights_diagnosis(flight_files, tmp_path, monkeypatch):
+    """--column, --sigma-column, --sigma, --window, --holdout, --max-effects, --workers and --refit-timeout
+    are given to every flight's diagnose() (recorded here instead of diagnosing)."""
+    from dataclasses import dataclass
+
+    import numpy as np
+
+    import rocketid.diagnostics as diagnostics
+    from rocketid.errors import SettingsError
+
+    files = []
+    for path in flight_files:
+        data = ri.read_csv(path, ["x", "h", "v"])
+        t = data["x"].times
+        new = tmp_path / path.name
+        rows = np.column_stack([t, data["x"].values, data["h"].values, data["v"].values, np.full(t.size, 0.5)])
+        new.write_text("t,x,alt,v,sv\n" + "\n".join(",".join(f"{v:.10g}" for v in r) for r in rows) + "\n")
+        files.append(new)
+    calls = []
+
+    @dataclass(frozen=True)
+    class Recorded:
+        model: str = ""
+        data_label: str = ""
+        final: None = None
+
+        def write(self, out):
+            return None
+
+    def record(data, spec, **kw):
+        calls.append((data, kw))
+        if len(calls) == 2:
+            raise SettingsError("recorded")
+        return Recorded()
+
+    monkeypatch.setattr(diagnostics, "diagnose", record)
+    res = CliRunner().invoke(main, ["diagnose", *map(str, files), "--model", "ra66m", "--out", str(tmp_path / "d"),
+                                    "--column", "h=alt", "--sigma-column", "v=sv", "--sigma", "x=2",
+                                    "--window", "5:60", "--holdout", "none", "--max-effects", "1", "--workers", "1",
+                                    "--refit-timeout", "50", "--level", "0.01"])
+    assert res.exit_code == 2 and "recorded" in res.output, res.output
+    assert len(calls) == 2
+    for data, kw in calls:
+        assert kw["flight_window"] == (5.0, 60.0) and kw["holdout"] is None and kw["max_effects"] == 1
+        assert kw["workers"] == 1 and kw["refit_timeout"] == 50.0 and kw["level"] == 0.01
+        assert kw["sigma"] == {"x": 2.0}
+        assert data["x"].sigma == 2.0 and np.all(data["v"].sigma == 0.5)   # given and per-sample sigmas read
+    assert calls[0][0]["h"].values[0] != calls[1][0]["h"].values[0]        # each flight its own file's altitude
