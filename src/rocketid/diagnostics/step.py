@@ -449,11 +449,10 @@ def discover(fit: EstimationResult, candidates: Sequence[Effect], *, level: floa
     from .accept import noise_band
 
     t_start = time.perf_counter()
-    base_spec = fit.spec
     band = band if band is not None else noise_band(fit)
-    vehicle = vehicle_of(fit)
+    ctx = _Search(fit.spec, band, vehicle_of(fit), level, options, timeout, workers, refine, holdout)
     notes = [band.note] if band.note else []
-    current, chosen_effects, last_pick = fit, [], None
+    current, chosen, last = fit, [], None
     steps = []
     ambiguous, rivals = "", ""
     ok, detail = fits_to_noise(fit, band)
@@ -464,131 +463,175 @@ def discover(fit: EstimationResult, candidates: Sequence[Effect], *, level: floa
         # wind_pl_13 had reached the noise -- a wrong effect called explained -- so it is not done.)
         if number > 1 and ok:
             break
-        remaining = [e for e in candidates if e.name not in {c.name for c in chosen_effects}]
-        scr = screen(current, remaining, level=level, vehicle=vehicle)
+        keep = tuple(e.name for e in chosen)
+        scr = screen(current, [e for e in candidates if e.name not in keep], level=level, vehicle=ctx.vehicle)
         if not scr.contenders:
-            steps.append(Step(number, scr, (), None, "; ".join(scr.notes) or "no contender", (),
-                              tuple(e.name for e in chosen_effects), None))
+            steps.append(Step(number, scr, (), None, "; ".join(scr.notes) or "no contender", (), keep, None))
             break
-        tasks = [_task(base_spec, current, chosen_effects + [c.effect], (c.effect.name,), c.start, vehicle,
-                       base=current, options=options, timeout=timeout, level=level, band_upper=band.upper) for c in scr.contenders]
-        refits = refit_all(tasks, workers=workers)
-        accs = [accept(r, band, level=level, n_tests=len(tasks)) for r in refits]
-        i, why = _choose(accs)
-        n_tests = len(tasks)
-
-        def vtask(v):
-            return _task(base_spec, current, chosen_effects + [v], (v.name,), {}, vehicle, base=current,
-                         options=options, timeout=timeout, level=level, band_upper=band.upper)
-
-        def vaccept(r):
-            return accept(r, band, level=level, n_tests=n_tests + n_variants)
-
-        n_variants = sum(len(c.effect.refinements(vehicle)) for c in scr.contenders)
-        if i is None and refine:
-            # nothing admissible: the right family may need another shape (a surface wind, a jet off the
-            # basis); refine the families of the refits that lowered J most
-            fam = _families_to_refine(accs, scr, vehicle, None)
-            if fam:
-                found = _refine_families([scr.contenders[j].effect.refinements(vehicle) for j in fam], vtask, vaccept,
-                                         workers)
-                va = [a for _, a in found]
-                j, why_v = _choose(va)
-                accs += va
-                scr = replace(scr, contenders=scr.contenders + tuple(Contender(v, "a refined shape") for v, _ in found))
-                if j is not None:
-                    i, why = len(accs) - len(va) + j, f"refined shape {found[j][0].name}: {why_v}"
+        scr, accs, i, why, n_tests = _refit_contenders(ctx, current, chosen, scr)
         if i is None:
-            steps.append(Step(number, scr, tuple(accs), None, why, (), tuple(e.name for e in chosen_effects), None))
+            steps.append(Step(number, scr, tuple(accs), None, why, (), keep, None))
             break
-        i, tie = _tie_break(accs, i, current, chosen_effects, [c.effect for c in scr.contenders], holdout, level,
-                            options, timeout)
-        if tie and i is not None:
-            rivals = tie
+        i, tie = _tie_break(accs, i, current, chosen, [c.effect for c in scr.contenders], holdout, level, options,
+                            timeout)
         if tie:
             why = f"{why}; {tie}"
             notes.append(f"step {number}: {tie}")
-        if i is None:
-            ambiguous = tie
-            steps.append(Step(number, scr, tuple(accs), None, why, (), tuple(e.name for e in chosen_effects), None))
-            break
-        effect = scr.contenders[i].effect
-        pick = accs[i]
-        # shape refinement: when the chosen effect leaves a residual, the more flexible shapes of its family
-        # and of the next significant families (a wind with a surface value, a drag table on more knots)
-        snug = pick.accepted and pick.refit.chi2_per_dof <= 1.0 + math.sqrt(2.0 / max(1, band.dof)) and \
-            _holm(pick.refit.whiteness) >= 0.05
-        if refine and not snug:
-            fam = _families_to_refine(accs, scr, vehicle, i)
-            families = [scr.contenders[j].effect.refinements(vehicle) for j in fam]
-            families = [f for f in families if f and f[0].name not in {a.refit.name for a in accs}]
-            if families:
-                found = _refine_families(families, vtask, vaccept, workers)
-                va = [a for _, a in found]
-                accs += va
-                scr = replace(scr, contenders=scr.contenders + tuple(Contender(v, "a refined shape") for v, _ in found))
-                j, why_v = _choose([pick] + va)
-                if j is not None and j > 0 and va[j - 1].refit.bic[1] < pick.refit.bic[1] - (BIC_TIE if pick.accepted else 0):
-                    effect, pick = found[j - 1][0], va[j - 1]
-                    why = f"{why}; refined to {effect.name} ({why_v})"
-        new_effects = chosen_effects + [effect]
-        dropped = []
-        # backward check: an earlier effect whose removal lowers BIC no longer helps
-        if len(new_effects) > 1 and pick.refit.success:
-            bt = []
-            for k, e in enumerate(new_effects[:-1]):
-                rest = [x for x in new_effects if x is not e]
-                bt.append((e, _task(base_spec, current, rest, (effect.name,), {}, vehicle, base=current,
-                                    options=options, timeout=timeout, level=level, band_upper=band.upper)))
-            br = refit_all([t for _, t in bt], workers=workers)
-            for (e, _), r in zip(bt, br):
-                if r.success and r.bic[1] < pick.refit.bic[1]:
-                    dropped.append(e.name)
-            if dropped:
-                new_effects = [e for e in new_effects if e.name not in dropped]
-                notes.append(f"step {number}: the backward check dropped {', '.join(dropped)} (BIC lower without it)")
+            if i is None:
+                ambiguous = tie
+                steps.append(Step(number, scr, tuple(accs), None, why, (), keep, None))
+                break
+            rivals = tie
+        scr, accs, effect, pick, why = _refine_choice(ctx, current, chosen, scr, accs, i, why, n_tests)
+        new_effects, dropped = _backward(ctx, current, chosen + [effect], pick)
+        if dropped:
+            notes.append(f"step {number}: the backward check dropped {', '.join(dropped)} (BIC lower without it)")
         try:
-            new_fit = _fit_of(base_spec, new_effects, pick.refit, current.prepared.measurements,
-                              current.prepared.transcription.mesh, options) if not dropped else None
-            if new_fit is None:
-                # refit the reduced set in this process
-                rt = _task(base_spec, current, new_effects, (effect.name,), {}, vehicle, base=current,
-                           options=options, timeout=timeout, level=level, band_upper=band.upper)
-                r = refit_all([rt], workers=1)[0]
-                pick = accept(r, band, level=level, n_tests=1)
-                new_fit = _fit_of(base_spec, new_effects, r, current.prepared.measurements,
-                                  current.prepared.transcription.mesh, options)
+            new_fit, pick = _fit_chosen(ctx, current, new_effects, effect, pick, bool(dropped))
         except RocketidError as exc:
             notes.append(f"step {number}: the chosen model could not be fitted here ({exc}); the search stops")
-            steps.append(Step(number, scr, tuple(accs), None, why, tuple(dropped),
-                              tuple(e.name for e in chosen_effects), None))
+            steps.append(Step(number, scr, tuple(accs), None, why, tuple(dropped), keep, None))
             break
-        chosen_effects = new_effects
-        current, last_pick = new_fit, pick
+        chosen, current, last = new_effects, new_fit, pick
         ok, detail = fits_to_noise(current, band)
-        steps.append(Step(number, scr, tuple(accs), pick, why, tuple(dropped), tuple(e.name for e in chosen_effects),
-                          current))
-    if len(chosen_effects) >= 2 and not ambiguous:
-        swap = _exchange(steps, chosen_effects, last_pick, fit, base_spec, vehicle, band, level=level,
-                         options=options, timeout=timeout, workers=workers)
-        if swap is not None:
-            new_effects, pick, why_x = swap
-            try:
-                new_fit = _fit_of(base_spec, new_effects, pick.refit, fit.prepared.measurements,
-                                  fit.prepared.transcription.mesh, options)
-            except RocketidError as exc:
-                notes.append(f"exchange: {why_x}, but the model could not be fitted here ({exc}); kept the one found")
-            else:
-                chosen_effects, current, last_pick = list(new_effects), new_fit, pick
-                ok, detail = fits_to_noise(current, band)
-                notes.append(f"exchange: {why_x}")
-                steps.append(Step(len(steps) + 1, steps[-1].screen, (pick,), pick, f"exchange: {why_x}", (),
-                                  tuple(e.name for e in chosen_effects), current))
+        steps.append(Step(number, scr, tuple(accs), pick, why, tuple(dropped), tuple(e.name for e in chosen), current))
+    if len(chosen) >= 2 and not ambiguous:
+        swapped = _apply_exchange(ctx, fit, steps, chosen, last, notes)
+        if swapped is not None:
+            chosen, current, last = swapped
+            ok, detail = fits_to_noise(current, band)
     if ambiguous:
         notes.append(f"ambiguous: {ambiguous}")
-    verdict, why = final_verdict(bool(chosen_effects), bool(ok), base_ok, last_pick, ambiguous)
+    verdict, why = final_verdict(bool(chosen), bool(ok), base_ok, last, ambiguous)
     notes += why
-    return Discovery(fit, band, vehicle, tuple(steps), tuple(chosen_effects), current,
-                     last_pick.refit if last_pick is not None else None, bool(ok), detail,
+    return Discovery(fit, band, ctx.vehicle, tuple(steps), tuple(chosen), current,
+                     last.refit if last is not None else None, bool(ok), detail,
                      verdict, tuple(notes), {"discover_s": time.perf_counter() - t_start}, ambiguous, rivals,
-                     not_an_explanation(last_pick) if verdict == "partly explained" and ok else "")
+                     not_an_explanation(last) if verdict == "partly explained" and ok else "")
+
+
+@dataclass(frozen=True)
+class _Search:
+    """What every step of one stepwise search shares: the base model, the noise band, the vehicle's scales
+    and the settings of the refits."""
+
+    base_spec: Any
+    band: NoiseBand
+    vehicle: Vehicle
+    level: float
+    options: Any
+    timeout: float
+    workers: int | None
+    refine: bool
+    holdout: Any
+
+    def task(self, current: EstimationResult, effects: Sequence[Effect], added: Sequence[str],
+             start: Mapping | None = None) -> RefitTask:
+        """The refit of ``effects`` on the base model, started from ``current`` (``added`` judged)."""
+        return _task(self.base_spec, current, list(effects), tuple(added), start or {}, self.vehicle, base=current,
+                     options=self.options, timeout=self.timeout, level=self.level, band_upper=self.band.upper)
+
+    def refit(self, tasks: Sequence[RefitTask], workers: int | None = None) -> tuple:
+        return refit_all(list(tasks), workers=self.workers if workers is None else workers)
+
+
+def _refit_contenders(ctx: _Search, current: EstimationResult, chosen: list, scr: Screen) -> tuple:
+    """Refit every contender (with the effects chosen so far), test each, and choose; when nothing is
+    admissible, refine the families of the refits that lowered J most (the right family may need another
+    shape: a surface wind, a jet off the basis). Returns ``(screen, acceptances, index or None, why, n_tests)``,
+    ``n_tests`` the contenders and their refined shapes (the Bonferroni count of the refined shapes' LR tests)."""
+    refits = ctx.refit([ctx.task(current, chosen + [c.effect], (c.effect.name,), c.start) for c in scr.contenders])
+    n_tests = len(refits) + sum(len(c.effect.refinements(ctx.vehicle)) for c in scr.contenders)
+    accs = [accept(r, ctx.band, level=ctx.level, n_tests=len(refits)) for r in refits]
+    i, why = _choose(accs)
+    if i is None and ctx.refine:
+        fam = _families_to_refine(accs, scr, ctx.vehicle, None)
+        if fam:
+            found = _refine_families([scr.contenders[j].effect.refinements(ctx.vehicle) for j in fam],
+                                     _variant_task(ctx, current, chosen), _judge(ctx, n_tests), ctx.workers)
+            va = [a for _, a in found]
+            j, why_v = _choose(va)
+            accs += va
+            scr = replace(scr, contenders=scr.contenders + tuple(Contender(v, "a refined shape") for v, _ in found))
+            if j is not None:
+                i, why = len(accs) - len(va) + j, f"refined shape {found[j][0].name}: {why_v}"
+    return scr, accs, i, why, n_tests
+
+
+def _variant_task(ctx: _Search, current: EstimationResult, chosen: list):
+    return lambda v: ctx.task(current, chosen + [v], (v.name,))
+
+
+def _judge(ctx: _Search, n_tests: int):
+    return lambda r: accept(r, ctx.band, level=ctx.level, n_tests=n_tests)
+
+
+def _refine_choice(ctx: _Search, current: EstimationResult, chosen: list, scr: Screen, accs: list, i: int,
+                   why: str, n_tests: int) -> tuple:
+    """Shape refinement: when the chosen effect leaves a residual, the more flexible shapes of its family and
+    of the other significant families (a wind with a surface value, a drag table on more knots); a refined
+    shape replaces the choice when its BIC is lower (by :data:`BIC_TIE` when the choice was accepted).
+    Returns ``(screen, acceptances, effect, acceptance, why)``."""
+    effect, pick = scr.contenders[i].effect, accs[i]
+    snug = pick.accepted and pick.refit.chi2_per_dof <= 1.0 + math.sqrt(2.0 / max(1, ctx.band.dof)) and \
+        _holm(pick.refit.whiteness) >= 0.05
+    if not ctx.refine or snug:
+        return scr, accs, effect, pick, why
+    fam = _families_to_refine(accs, scr, ctx.vehicle, i)
+    families = [scr.contenders[j].effect.refinements(ctx.vehicle) for j in fam]
+    families = [f for f in families if f and f[0].name not in {a.refit.name for a in accs}]
+    if not families:
+        return scr, accs, effect, pick, why
+    found = _refine_families(families, _variant_task(ctx, current, chosen), _judge(ctx, n_tests), ctx.workers)
+    va = [a for _, a in found]
+    accs = accs + va
+    scr = replace(scr, contenders=scr.contenders + tuple(Contender(v, "a refined shape") for v, _ in found))
+    j, why_v = _choose([pick] + va)
+    if j is not None and j > 0 and va[j - 1].refit.bic[1] < pick.refit.bic[1] - (BIC_TIE if pick.accepted else 0):
+        effect, pick = found[j - 1][0], va[j - 1]
+        why = f"{why}; refined to {effect.name} ({why_v})"
+    return scr, accs, effect, pick, why
+
+
+def _backward(ctx: _Search, current: EstimationResult, effects: list, pick: Acceptance) -> tuple:
+    """Backward check: refit without each earlier effect; one whose removal lowers BIC no longer helps.
+    Returns ``(effects kept, names dropped)``."""
+    if len(effects) < 2 or not pick.refit.success:
+        return effects, []
+    last = effects[-1]
+    earlier = effects[:-1]
+    refits = ctx.refit([ctx.task(current, [x for x in effects if x is not e], (last.name,)) for e in earlier])
+    dropped = [e.name for e, r in zip(earlier, refits) if r.success and r.bic[1] < pick.refit.bic[1]]
+    return [e for e in effects if e.name not in dropped], dropped
+
+
+def _fit_chosen(ctx: _Search, current: EstimationResult, effects: list, effect: Effect, pick: Acceptance,
+                dropped: bool) -> tuple:
+    """The chosen model's fit here, started from the worker's estimate (after a drop, the reduced set is
+    refitted first). Returns ``(fit, acceptance)``; raises RocketidError when it cannot be fitted."""
+    data, mesh = current.prepared.measurements, current.prepared.transcription.mesh
+    if dropped:
+        r = ctx.refit([ctx.task(current, effects, (effect.name,))], workers=1)[0]
+        pick = accept(r, ctx.band, level=ctx.level, n_tests=1)
+    return _fit_of(ctx.base_spec, effects, pick.refit, data, mesh, ctx.options), pick
+
+
+def _apply_exchange(ctx: _Search, base: EstimationResult, steps: list, chosen: list, last: Acceptance | None,
+                    notes: list) -> tuple | None:
+    """The exchange (module note 7) applied: ``(effects, fit, acceptance)`` of the better set, its step appended
+    to ``steps`` and its note to ``notes``; None when no swap is better."""
+    swap = _exchange(steps, chosen, last, base, ctx.base_spec, ctx.vehicle, ctx.band, level=ctx.level,
+                     options=ctx.options, timeout=ctx.timeout, workers=ctx.workers)
+    if swap is None:
+        return None
+    effects, pick, why = swap
+    try:
+        fit = _fit_of(ctx.base_spec, effects, pick.refit, base.prepared.measurements, base.prepared.transcription.mesh,
+                      ctx.options)
+    except RocketidError as exc:
+        notes.append(f"exchange: {why}, but the model could not be fitted here ({exc}); kept the one found")
+        return None
+    notes.append(f"exchange: {why}")
+    steps.append(Step(len(steps) + 1, steps[-1].screen, (pick,), pick, f"exchange: {why}", (),
+                      tuple(e.name for e in effects), fit))
+    return list(effects), fit, pick
