@@ -236,34 +236,35 @@ class DiagnosisReport:
 
     def summary(self) -> str:
         """Fixed sections (verdict, compare, locate, plausibility, candidates, steps,
-        confirmations, history) and numbered notes."""
-        lines = [f"rocketid diagnosis: {self.fit.spec.name} on {self.data_label}", "=" * 60, "Verdict"]
-        lines += [f"  {s}" for s in self.verdict()]
-        lines += ["", self.comparison.summary()]
-        lines += ["", self.location.summary() if self.location is not None else "Location: not available (see notes)"]
-        lines += ["", self.plausibility.summary()]
+        confirmations, history) and numbered notes: a :class:`~rocketid.summary.Summary`
+        (as :class:`~rocketid.summary.SummaryText`, so it prints and joins as text)."""
+        from ..summary import Section, Summary, SummaryText
+        sections = [Section("Verdict", tuple(self.verdict())),
+                    Section("", (self.comparison.summary(),)),
+                    Section("", (self.location.summary() if self.location is not None
+                                 else "Location: not available (see notes)",)),
+                    Section("", (self.plausibility.summary(),))]
         if self.ranking is not None:
-            lines += ["", self.ranking.summary()]
+            sections.append(Section("", (self.ranking.summary(),)))
         if self.steps:
-            lines += ["", "Stepwise search (every contender refitted; accepted = reaches the noise with plausible "
-                          "sizes and coefficients)"]
-            for s in self.steps:
-                lines.append(f"  step {s.number}: {s.why}")
-                for a in s.acceptances:
+            lines = []
+            for st in self.steps:
+                lines.append(f"step {st.number}: {st.why}")
+                for a in st.acceptances:
                     r = a.refit
-                    lines.append(f"    {r.name:<22} chi2/dof {r.chi2_per_dof:>9.4g}  BIC {r.bic[1]:>12.6g}  "
+                    lines.append(f"  {r.name:<22} chi2/dof {r.chi2_per_dof:>9.4g}  BIC {r.bic[1]:>12.6g}  "
                                  f"{'ACCEPTED' if a.accepted else ('admissible' if a.admissible else 'rejected')}"
                                  + ("" if a.accepted else f": {a.reason()}"))
-        for c in self.confirmations:
-            lines += ["", c.summary()]
+            sections.append(Section("Stepwise search (every contender refitted; accepted = reaches the noise with "
+                                    "plausible sizes and coefficients)", tuple(lines)))
+        sections += [Section("", (c.summary(),)) for c in self.confirmations]
         if self.history is not None:
             try:
-                lines += ["", "History", str(self.history.table())]
+                sections.append(Section("History", (str(self.history.table()),)))
             except Exception as exc:  # noqa: BLE001 - a report must not fail on a table
-                lines += ["", f"History: not available ({exc})"]
-        if self.notes:
-            lines += ["", "Notes"] + [f"  [{i}] {n}" for i, n in enumerate(self.notes, 1)]
-        return "\n".join(lines)
+                sections.append(Section("History", (f"not available ({exc})",)))
+        return SummaryText(Summary(f"rocketid diagnosis: {self.fit.spec.name} on {self.data_label}", tuple(sections),
+                                   tuple(self.notes)))
 
     def candidates_payload(self) -> dict:
         """``{"candidates": [...]}``, best first, each with ``name``, ``statistic``,
