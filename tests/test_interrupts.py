@@ -205,10 +205,212 @@ def test_simulate_killed_while_writing_leaves_the_previous_file(tmp_path, sig):
     if sig == signal.SIGINT:
         assert not list(tmp_path.glob(".data.csv.*.tmp")), "the temporary file was not removed"
     else:
-        # a killed writer cannot clean up; the next write of the same file removes its leftover
+        # a killed writer cannot clean up; the next command that checks the same file (here one that
+        # is then refused) removes its leftover, and the next write leaves none
         assert list(tmp_path.glob(".data.csv.*.tmp"))
+        refused = _run("simulate", "--out", str(target), "--param", "CD0=-5")
+        assert refused.returncode == 2, refused.stderr
+        assert not list(tmp_path.glob(".data.csv.*.tmp")), "the dead writer's temporary file is still there"
+        assert target.read_bytes() == previous
         target.unlink()
         done = _run("simulate", "--out", str(target))
         assert done.returncode == 0, done.stderr
         assert not list(tmp_path.glob(".data.csv.*.tmp"))
         assert target.read_text().startswith("t,x,h,v\n")
+
+
+# ---------------------------------------------------------------------------
+# rocketid diagnose: its forked figure and refit workers
+# ---------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def ra66_csv(tmp_path_factory):
+    path = tmp_path_factory.mktemp("data") / "ra66.csv"
+    done = _run("simulate", "--out", str(path))
+    assert done.returncode == 0, done.stderr
+    return path
+
+
+def _family(proc: subprocess.Popen) -> list:
+    try:
+        return psutil.Process(proc.pid).children(recursive=True)
+    except psutil.NoSuchProcess:
+        return []
+
+
+def _workers(proc: subprocess.Popen) -> list:
+    """The command's worker processes (not its interrupt watchdog, a `python -S -E -c` process)."""
+    return [p for p in _family(proc) if "-S" not in p.cmdline()[1:3]]
+
+
+def _diagnose_and_signal(ra66_csv: Path, out: Path, sig: int, after_worker: float | None, after_start: float = 0.0):
+    """Start `diagnose`, send ``sig`` ``after_worker`` s after its first forked worker appears (or
+    ``after_start`` s after the start), return (process, stderr, the family seen at the signal)."""
+    t0 = time.monotonic()
+    proc = _start("diagnose", str(ra66_csv), "--out", str(out))
+    if after_worker is not None:
+        _wait_for(lambda: bool(_workers(proc)), proc, "a forked worker")
+        time.sleep(after_worker)
+    else:
+        time.sleep(max(0.0, t0 + after_start - time.monotonic()))
+    family = _family(proc)
+    if proc.poll() is not None:
+        pytest.skip("diagnose ended before the signal")  # pragma: no cover - a very fast machine
+    os.kill(proc.pid, sig)
+    try:
+        _, err = proc.communicate(timeout=60)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        _, err = proc.communicate()
+        _assert_no_survivors(family)
+        pytest.fail("diagnose did not end after the signal")
+    _assert_no_survivors(family)
+    return proc, err, family
+
+
+@pytest.mark.parametrize("after_worker, after_start", [(None, 2.5), (0.0, 0.0), (0.3, 0.0), (1.0, 0.0)],
+                         ids=["fitting", "worker-started", "worker-0.3s", "worker-1s"])
+def test_sigint_to_diagnose_exits_130_without_traceback_or_leftovers(tmp_path, ra66_csv, after_worker, after_start):
+    out = tmp_path / "rep"
+    proc, err, _ = _diagnose_and_signal(ra66_csv, out, signal.SIGINT, after_worker, after_start)
+    if proc.returncode == 0:  # pragma: no cover - the run finished before the signal landed
+        assert (out / "report.html").exists()
+    else:
+        assert proc.returncode == 130, err
+        assert "interrupted" in err
+    assert "Traceback" not in err, err
+    assert "KeyboardInterrupt" not in err and "Interrupted" not in err, err
+    assert not list(tmp_path.rglob("*.tmp")), sorted(map(str, tmp_path.rglob("*.tmp")))
+    assert not (out / ".rocketid.lock").exists()
+
+
+def test_sigkill_of_diagnose_leaves_no_orphan(tmp_path, ra66_csv):
+    proc, _, family = _diagnose_and_signal(ra66_csv, tmp_path / "rep", signal.SIGKILL, 0.2)
+    assert proc.returncode == -signal.SIGKILL
+    assert family, "expected a forked worker"
+
+
+def test_a_second_diagnose_into_the_same_folder_is_refused_with_the_holders_pid(tmp_path, ra66_csv):
+    out = tmp_path / "rep"
+    first = _start("diagnose", str(ra66_csv), "--out", str(out))
+    try:
+        _wait_for(lambda: (out / ".rocketid.lock").exists(), first, "the folder's lock")
+        second = _run("diagnose", str(ra66_csv), "--out", str(out))
+        assert second.returncode == 2, second.stderr
+        assert f"is in use by another rocketid run (PID {first.pid})" in second.stderr, second.stderr
+        assert "Traceback" not in second.stderr
+        assert first.poll() is None or first.returncode == 0, "the first run must be unaffected"
+    finally:
+        if first.poll() is None:
+            os.kill(first.pid, signal.SIGINT)
+        first.communicate(timeout=TIMEOUT)
+    assert first.returncode in (0, 130)
+    assert not (out / ".rocketid.lock").exists()
+
+
+# ---------------------------------------------------------------------------
+# Ctrl-C during a long IPOPT factorization (Python gets no chance to act on it)
+# ---------------------------------------------------------------------------
+
+LONG_SOLVE = ["-v", "estimate", "--elements", "5000"]  # minutes of MUMPS factorizations
+
+
+def _start_long_solve(ra66_csv: Path, out: Path) -> tuple[subprocess.Popen, list]:
+    """Start a fit that spends minutes inside MUMPS; return it once IPOPT runs (plus 4 s)."""
+    lines: list = []
+    proc = _start(*LONG_SOLVE, str(ra66_csv), "--out", str(out))
+    import threading
+
+    def read():
+        for line in proc.stderr:
+            lines.append(line)
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    _wait_for(lambda: any("solving with IPOPT" in x for x in lines), proc, "the solve")
+    time.sleep(4.0)
+    assert proc.poll() is None, "".join(lines)
+    proc._reader = reader  # joined by _ended
+    return proc, lines
+
+
+def _ended(proc: subprocess.Popen, lines: list, limit: float) -> float:
+    t0 = time.monotonic()
+    try:
+        proc.wait(timeout=limit)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+        pytest.fail(f"the process ran on {limit:.0f} s after the interrupt")
+    proc._reader.join(5.0)
+    return time.monotonic() - t0
+
+
+def test_ctrl_c_during_a_long_factorization_ends_the_command(tmp_path, ra66_csv):
+    out = tmp_path / "fit.json"
+    proc, lines = _start_long_solve(ra66_csv, out)
+    family = _family(proc)
+    os.kill(proc.pid, signal.SIGINT)
+    took = _ended(proc, lines, 15.0)
+    err = "".join(lines)
+    # 130: the main thread acted on the signal; killed by SIGINT (the shell's 130): the watchdog
+    # ended a main thread stuck in MUMPS, after INTERRUPT_GRACE_S
+    assert proc.returncode in (130, -signal.SIGINT), err
+    assert "Error: interrupted" in err and "Traceback" not in err, err
+    assert not out.exists() and not list(tmp_path.glob(".*.tmp"))
+    _assert_no_survivors(family)
+    print(f"ended {took:.1f} s after SIGINT with {proc.returncode}")
+
+
+def test_a_second_ctrl_c_ends_the_command_at_once(tmp_path, ra66_csv):
+    proc, lines = _start_long_solve(ra66_csv, tmp_path / "fit.json")
+    family = _family(proc)
+    os.kill(proc.pid, signal.SIGINT)
+    time.sleep(0.5)
+    t0 = time.monotonic()
+    if proc.poll() is None:
+        os.kill(proc.pid, signal.SIGINT)
+    _ended(proc, lines, 10.0)
+    took = time.monotonic() - t0
+    assert proc.returncode in (130, -signal.SIGINT), "".join(lines)
+    assert took < 3.0, f"ended {took:.1f} s after the second Ctrl-C"
+    _assert_no_survivors(family)
+
+
+# ---------------------------------------------------------------------------
+# rocketid reproduce --executor dask: the client's tasks end with it
+# ---------------------------------------------------------------------------
+
+
+def test_sigkill_of_a_dask_client_leaves_nothing_processing(tmp_path):
+    """distributed's scheduler releases a client's tasks when its connection closes: a killed
+    `reproduce --executor dask` leaves no task of its on the cluster (a batch already running on a
+    worker runs to its end, a few seconds, and its result is dropped)."""
+    distributed = pytest.importorskip("distributed")
+    out = tmp_path / "study"
+    # STUDY on dask, with enough draws to be still running when it is killed
+    args = ["--runs", "2", "--n-iter", "400", "--batch-size", "4", "--perturbations", "1", "--no-plots", "-q",
+            "--executor", "dask"]
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                  dashboard_address=None) as cluster, distributed.Client(cluster) as client:
+        proc = _start("reproduce", "--out", str(out), *args, "--scheduler", cluster.scheduler_address)
+        _wait_for(lambda: any(client.processing().values()), proc, "tasks on the cluster")
+        time.sleep(1.0)
+        clients_before = set(client.run_on_scheduler(lambda dask_scheduler: list(dask_scheduler.clients)))
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.communicate(timeout=60)
+        end = time.monotonic() + 30
+
+        def busy():
+            on_scheduler = client.run_on_scheduler(lambda dask_scheduler: len(dask_scheduler.tasks))
+            on_workers = client.run(lambda dask_worker: sum(
+                ts.state in ("executing", "cancelled", "ready", "waiting", "constrained", "fetch")
+                for ts in dask_worker.state.tasks.values()))
+            return any(client.processing().values()) or on_scheduler or any(on_workers.values())
+
+        while busy() and time.monotonic() < end:
+            time.sleep(0.5)
+        assert not busy(), (client.processing(), client.run(lambda dask_worker: dict(
+            (str(k), ts.state) for k, ts in dask_worker.state.tasks.items())))
+        clients = set(client.run_on_scheduler(lambda dask_scheduler: list(dask_scheduler.clients)))
+        assert len(clients) < len(clients_before), "the killed client is still known to the scheduler"

@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-from rocketid.output import LOCK_NAME, atomic_open, folder_lock, remove_stale_tree, write_text
+from rocketid.output import LOCK_NAME, atomic_open, check_file, folder_lock, remove_stale_tree, write_text
 
 
 def _dead_pid() -> int:
@@ -64,3 +64,19 @@ def test_a_second_run_is_refused_with_the_holders_pid(tmp_path):
         assert f"PID {os.getpid()}" in done.stderr
     with folder_lock(tmp_path):  # released: the next run takes it
         pass
+
+
+def test_checking_a_target_sweeps_its_temporary_files_of_dead_writers_only(tmp_path):
+    dead = _dead_pid()
+    stale = tmp_path / f".data.csv.{dead}.tmp"
+    other = tmp_path / f".other.csv.{dead}.tmp"  # another target's: left to its own check
+    with subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"]) as live_proc:
+        try:
+            live = tmp_path / f".data.csv.{live_proc.pid}.tmp"
+            for p in (stale, other, live):
+                p.write_text("partial")
+            assert check_file(tmp_path / "data.csv") == tmp_path / "data.csv"
+            assert not stale.exists()
+            assert other.exists() and live.exists()
+        finally:
+            live_proc.kill()

@@ -76,6 +76,7 @@ __all__ = [
 EXIT_OK, EXIT_NOT_CONVERGED, EXIT_BAD_INPUT = 0, 1, 2
 _VERBOSE = "rocketid.verbose"
 _COMMAND = "rocketid.command"
+_GUARD = "rocketid.interrupt_guard"
 EXIT_INTERRUPTED = 130  # 128 + SIGINT; SIGTERM gives 143
 
 
@@ -501,21 +502,191 @@ class Interrupted(KeyboardInterrupt):
     signum = signal.SIGTERM
 
 
+#: After the first Ctrl-C (or SIGTERM) a command whose main thread cannot act on it (a long
+#: IPOPT factorization holds the interpreter) is ended after this long (s) ...
+INTERRUPT_GRACE_S = 5.0
+#: ... and one that acts on it (its clean-up runs) after this long.
+INTERRUPT_CLEANUP_S = 30.0
+
+# The watchdog process (see _InterruptGuard): argv parent pid, grace, clean-up grace, wake-up fd; the
+# message to print on stdin (the last line); signal numbers (0: the main thread acted) on the fd.
+_WATCHDOG = r"""
+import os, select, signal, sys, time
+parent, grace, cleanup, wake = int(sys.argv[1]), float(sys.argv[2]), float(sys.argv[3]), int(sys.argv[4])
+signal.signal(signal.SIGINT, signal.SIG_IGN)
+signal.signal(signal.SIGTERM, signal.SIG_IGN)
+try:
+    import ctypes
+    ctypes.CDLL(None).prctl(1, 9, 0, 0, 0)
+except Exception:
+    pass
+if os.getppid() != parent:
+    sys.exit(0)
+message, buf, first, start, acted = "interrupted", b"", None, None, False
+inp = sys.stdin.fileno()
+while True:
+    if first is None:
+        timeout = 1.0
+    else:
+        timeout = max(0.0, start + (cleanup if acted else grace) - time.monotonic())
+    ready, _, _ = select.select([inp, wake], [], [], timeout)
+    if os.getppid() != parent:
+        sys.exit(0)
+    if first is not None and not ready and time.monotonic() >= start + (cleanup if acted else grace):
+        try:
+            os.write(2, ("\nError: " + message + "\n").encode())
+            os.kill(parent, first)
+            time.sleep(2.0)
+            os.kill(parent, signal.SIGKILL)
+        except OSError:
+            pass
+        sys.exit(0)
+    if inp in ready:
+        data = os.read(inp, 4096)
+        if not data:
+            sys.exit(0)
+        buf += data
+        lines = buf.split(b"\n")
+        buf = lines[-1]
+        if len(lines) > 1 and lines[-2]:
+            message = lines[-2].decode()
+    if wake in ready:
+        for signum in os.read(wake, 64):
+            if signum == 0:
+                acted = True
+            elif signum in (signal.SIGINT, signal.SIGTERM) and first is None:
+                first, start = signum, time.monotonic()
+"""
+
+
+def _reset_on_delivery(*signums: int) -> bool:
+    """Add ``SA_RESETHAND`` to the handlers of ``signums`` (Linux, glibc's ``struct sigaction``):
+    the first delivery resets the signal to its default action, so that a second one ends the
+    process even when no Python code can run. False when it cannot be done here."""
+    import platform
+    if not sys.platform.startswith("linux") or platform.machine() not in ("x86_64", "aarch64"):
+        return False
+    try:
+        import ctypes
+
+        class SigAction(ctypes.Structure):
+            _fields_ = [("handler", ctypes.c_void_p), ("mask", ctypes.c_ulong * 16), ("flags", ctypes.c_int),
+                        ("restorer", ctypes.c_void_p)]
+        libc = ctypes.CDLL(None, use_errno=True)
+        for signum in signums:
+            act = SigAction()
+            if libc.sigaction(signum, None, ctypes.byref(act)) != 0:
+                return False
+            act.flags |= 0x80000000  # SA_RESETHAND
+            if libc.sigaction(signum, ctypes.byref(act), None) != 0:
+                return False
+        return True
+    except (OSError, AttributeError):  # pragma: no cover - no libc sigaction
+        return False
+
+
+class _InterruptGuard:
+    """Ctrl-C and SIGTERM while a command runs.
+
+    The first signal raises :class:`KeyboardInterrupt` (SIGTERM: :class:`Interrupted`) in the
+    main thread, so that worker pools are shut down and temporary files removed. A signal only
+    reaches Python code between bytecodes, and no Python thread runs while a C call holds the
+    interpreter (cyipopt holds it through IPOPT, a MUMPS factorization can take minutes). So:
+
+    - the handlers are reset to the default action on their first delivery (``SA_RESETHAND``):
+      a second Ctrl-C ends the process at once, as killed by SIGINT (the shell's code 130);
+    - a small watchdog process reads the signal wake-up file descriptor (the C-level handler
+      writes each signal's number there whatever the main thread does) and, when the command
+      has not ended :data:`INTERRUPT_GRACE_S` seconds after the first signal (or
+      :data:`INTERRUPT_CLEANUP_S` once its clean-up started), prints the interrupted message
+      and sends the signal again, which now ends the process.
+
+    That is safe because every write is atomic (:mod:`rocketid.output`): a temporary file left
+    behind is removed by the next write of its target, and worker processes die with their
+    parent.
+    """
+
+    def __init__(self):
+        self.owner = os.getpid()
+        self._watchdog = None
+        self._read = self._write = -1
+
+    def handler(self, signum, frame):
+        if os.getpid() != self.owner:  # a forked worker before it reset its handlers: the parent decides
+            if signum == signal.SIGTERM:
+                os._exit(128 + int(signum))
+            return
+        if self._write >= 0:
+            try:
+                os.write(self._write, b"\0")  # the watchdog: the clean-up runs
+            except OSError:
+                pass
+        raise KeyboardInterrupt() if signum == signal.SIGINT else Interrupted()
+
+    def tell(self, message: str) -> None:
+        """The message the watchdog prints if it ends the command."""
+        if self._watchdog is not None:
+            try:
+                self._watchdog.stdin.write(" ".join(message.split()) + "\n")
+                self._watchdog.stdin.flush()
+            except (OSError, ValueError):  # pragma: no cover - the watchdog ended
+                pass
+
+    def _start_watchdog(self) -> None:
+        import subprocess
+        self._read, self._write = os.pipe()
+        os.set_blocking(self._write, False)
+        try:
+            self._watchdog = subprocess.Popen(
+                [sys.executable, "-S", "-E", "-c", _WATCHDOG, str(os.getpid()), str(INTERRUPT_GRACE_S),
+                 str(INTERRUPT_CLEANUP_S), str(self._read)], stdin=subprocess.PIPE, pass_fds=(self._read,),
+                text=True)
+        except OSError:  # pragma: no cover - cannot start a process: Ctrl-C works as before
+            self._watchdog = None
+        os.close(self._read)
+        self._read = -1
+
+    @contextmanager
+    def installed(self):
+        previous = {s: signal.signal(s, self.handler) for s in (signal.SIGINT, signal.SIGTERM)}
+        wakeup = None
+        if _reset_on_delivery(signal.SIGINT, signal.SIGTERM):
+            self._start_watchdog()
+            try:
+                wakeup = signal.set_wakeup_fd(self._write, warn_on_full_buffer=False)
+            except ValueError:  # pragma: no cover - not the main thread
+                wakeup = None
+        try:
+            yield self
+        finally:
+            for s, h in previous.items():
+                signal.signal(s, h)
+            if wakeup is not None:
+                signal.set_wakeup_fd(wakeup)
+            if self._watchdog is not None:
+                try:
+                    self._watchdog.stdin.close()  # the watchdog ends
+                except OSError:  # pragma: no cover
+                    pass
+                try:
+                    self._watchdog.wait(5.0)
+                except Exception:  # pragma: no cover - it will die with this process
+                    pass
+            if self._write >= 0:
+                os.close(self._write)
+                self._write = -1
+
+
 @contextmanager
 def _terminate_as_interrupt():
-    """While a command runs, SIGTERM raises :class:`Interrupted` in the main thread:
-    worker pools are shut down and temporary files removed as on Ctrl-C."""
+    """While a command runs, SIGTERM raises :class:`Interrupted` in the main thread (worker
+    pools are shut down and temporary files removed as on Ctrl-C), and a command that cannot
+    act on the signal is ended (see :class:`_InterruptGuard`). Yields the guard (None in a thread)."""
     if threading.current_thread() is not threading.main_thread():
-        yield
+        yield None
         return
-
-    def handler(signum, frame):
-        raise Interrupted()
-    previous = signal.signal(signal.SIGTERM, handler)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGTERM, previous)
+    with _InterruptGuard().installed() as guard:
+        yield guard
 
 
 class RocketidGroup(click.Group):
@@ -548,18 +719,24 @@ class RocketidGroup(click.Group):
     def resolve_command(self, ctx, args):
         name, cmd, rest = super().resolve_command(ctx, args)
         ctx.meta[_COMMAND] = cmd
+        guard = ctx.meta.get(_GUARD)
+        if guard is not None:
+            guard.tell(self._interrupted_message(ctx))
         return name, cmd, rest
+
+    def _interrupted_message(self, ctx) -> str:
+        cmd = ctx.meta.get(_COMMAND)
+        resumable = cmd is not None and any(p.name == "resume" for p in cmd.params)
+        return "interrupted" + ("; continue with --resume" if resumable else "; nothing was written in part")
 
     def invoke(self, ctx):
         try:
-            with _terminate_as_interrupt():
+            with _terminate_as_interrupt() as guard:
+                ctx.meta[_GUARD] = guard
                 return super().invoke(ctx)
         except KeyboardInterrupt as exc:
             signum = getattr(exc, "signum", signal.SIGINT)
-            cmd = ctx.meta.get(_COMMAND)
-            resumable = cmd is not None and any(p.name == "resume" for p in cmd.params)
-            click.echo("\nError: interrupted" + ("; continue with --resume" if resumable else
-                                                 "; nothing was written in part"), err=True)
+            click.echo(f"\nError: {self._interrupted_message(ctx)}", err=True)
             ctx.exit(128 + int(signum))
         except RocketidError as exc:
             if _verbose(ctx):
@@ -620,6 +797,12 @@ def simulate_command(out, model, seed, no_noise, params):
     spec = src.spec
     overrides = assignments(params, "--param")
     p = parameter_values(spec, overrides, "--param", base=src.truth)
+    for name, value in overrides.items():  # a truth the estimate could never reach is a mistake
+        i = spec.parameter_names.index(name)
+        lo, hi = spec.lower[i], spec.upper[i]
+        if not (np.isfinite(value) and lo <= value <= hi):
+            raise SettingsError(f"--param {name}={value:g} lies outside the bounds of {name} in model "
+                                f"{spec.name!r}, [{lo:g}, {hi:g}]; give a value within them")
     t0 = time.perf_counter()
     data = simulate_measurements(spec, p, src.times, seed=seed, noise=not no_noise)
     status(f"simulated {spec.name} in {time.perf_counter() - t0:.2f} s")

@@ -6,7 +6,7 @@ folder (``.NAME.<pid>.tmp``), is flushed and fsynced, and then renamed over
 the target with :func:`os.replace`, so an interrupted or failed command
 leaves the previous file or none, never a partial one. A temporary file left
 by a process that was killed (``SIGKILL`` gives it no chance to clean up) is
-removed by the next write of the same target.
+removed when the same target is next checked (:func:`check_file`) or written.
 
 :func:`check_file` and :func:`check_folder` check an output location
 (writable, not a file where a folder is needed and not a folder where a file
@@ -273,6 +273,9 @@ def _nearest_existing(path: Path, option: str) -> Path:
 def check_file(path: str | os.PathLike, option: str = "--out") -> Path:
     """Check that ``path`` can be written as a file (before any work starts).
 
+    Temporary files of ``path`` left by writers that no longer run (a command
+    killed with ``SIGKILL`` while it wrote ``path``) are removed.
+
     Raises
     ------
     SettingsError
@@ -288,6 +291,7 @@ def check_file(path: str | os.PathLike, option: str = "--out") -> Path:
     if not os.access(folder, os.W_OK | os.X_OK):
         raise SettingsError(f"{option} {str(path)!r}: the folder {str(folder)!r} is not writable; "
                             "choose another location")
+    _remove_stale(path)  # a killed writer's .NAME.<pid>.tmp of this target goes now, not at the next write
     return path
 
 

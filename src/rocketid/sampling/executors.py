@@ -38,8 +38,20 @@ def die_with_parent(parent_pid: int) -> None:
     On Linux the kernel sends ``SIGKILL`` on the parent's death
     (``prctl(PR_SET_PDEATHSIG)``); elsewhere a daemon thread polls the parent
     once a second. A parent that died before this call ends the process at once.
+
+    ``SIGINT`` is ignored (the parent shuts its workers down on Ctrl-C) and
+    ``SIGTERM`` gets its default action, so that the parent's ``terminate()``
+    ends a worker at once and silently: a forked worker would otherwise inherit
+    the command's handler (SIGTERM raised as an interrupt, see
+    ``rocketid.cli``) and print a traceback while it dies. A forked worker also
+    stops writing the parent's signal wake-up file descriptor.
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent shuts the pool down on Ctrl-C
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # terminate() ends the worker, without a traceback
+    try:
+        signal.set_wakeup_fd(-1)  # inherited by a fork: the parent's interrupt watchdog reads it
+    except ValueError:  # pragma: no cover - not the main thread
+        pass
     armed = False
     if sys.platform.startswith("linux"):
         try:
