@@ -23,7 +23,7 @@ Solve
 Warm-started re-solves
     the same problem from its solution (rocketid ``estimate(..., warm_start=fit)``, peer
     ``resolve_fixed(p_hat, [], res)``); the peer's re-solve with CD0, CD6, CL fixed at the
-    truth (METHOD.md section 3's figure); and rocketid's (7.9) path: ``estimate_q1`` at q2 of
+    truth (its comparable figure, docs/performance.md); and rocketid's (7.9) path: ``estimate_q1`` at q2 of
     a uniform draw within the bounds, warm-started from the index-0 solution (nominal scaling).
 Breakdown (``--profile-sizes``)
     where the IPOPT call's time goes, from IPOPT's own timing statistics

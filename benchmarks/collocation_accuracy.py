@@ -5,7 +5,7 @@ truth (a square problem: ``ParameterTransform`` with ``P`` of shape (8, 0) and `
 truth), and the collocation polynomial's x, h, v at the 6600 sample times are compared
 with the high-accuracy simulation (``rocketid.simulate``, DOP853 at rtol = atol = 1e-12
 on deviations from the initial state). The noise is N(0, 1) in m, m, m/s, so 0.01 is
-1 % of it (METHOD.md section 2).
+1 % of it (docs/design.md, 'Default mesh').
 
 Run::
 

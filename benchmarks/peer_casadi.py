@@ -1,7 +1,7 @@
 """Independent CasADi peer of rocketid's RA-66 estimation NLP (chapter eq. 7.5).
 
 This file deliberately does not import rocketid: it is a second code base that
-solves the same problem (METHOD.md sections 1-3) so that rocketid's benchmark can
+solves the same problem (docs/design.md, 'The problem, as rocketid fixes it') so that rocketid's benchmark can
 compare against it.
 
 Contents
@@ -44,7 +44,7 @@ P0 = (0.1, 0.6, 0.1, 0.6, 0.1, 0.6, 0.1, 0.12)
 P_LB, P_UB = 1e-4, 1.0
 STATE0 = (0.0, 0.0, 0.0, math.pi / 2)  # x, h, v, theta
 
-# Yang's fit (METHOD.md section 1): rho = 1.2250 * c * W^a, H geopotential in km.
+# Yang's fit (docs/design.md, 'Yang's atmosphere'): rho = 1.2250 * c * W^a, H geopotential in km.
 RHO_SL = 1.2250
 R0_GEOPOT_KM = 6356.766
 _Z_BOUNDS_KM = (11.0191, 20.0631, 32.1619)  # geometric; above 47.3501 km the last layer is reused
@@ -113,7 +113,7 @@ def simulate_ra66(p_true=P_TRUE, t_eval=None, rtol=1e-12, atol=1e-12):
 
     Integrates (x, h, v, delta = theta - pi/2) with DOP853, split at the CD knots and
     at alpha's kinks; d(delta)/dt = 0 while v < 1e-9 (picks the solution that leaves
-    the pad vertically, METHOD.md section 1). Returns x, h, v, theta at t_eval.
+    the pad vertically, docs/design.md 'The simulator integrates deviations'). Returns x, h, v, theta at t_eval.
     """
     p = np.asarray(p_true, dtype=float)
     cd_nodes, cl = p[:7], float(p[7])

@@ -205,7 +205,8 @@ def test_cache_hit_skips_derivation(tmp_path, monkeypatch):
 
 
 # ---------------------------------------------------------------------------
-# Discretization error of RA-66 at the true parameters (METHOD.md section 3)
+# Discretization error of RA-66 at the true parameters: within 0.01 m, m, m/s, 1 % of the noise
+# (docs/design.md, 'Default mesh'; measured in docs/accuracy.md)
 # ---------------------------------------------------------------------------
 
 
@@ -233,6 +234,7 @@ def test_default_discretization_is_within_one_percent_of_the_noise(ra66_spec, ra
 
 def test_chapter_baseline_k3_is_not_within_one_percent(ra66_spec, ra66_clean, ra66_p_true):
     err = _collocation_error(ra66_spec, ra66_clean, ra66_p_true, ri.ra66_mesh(66, K=3))
-    # METHOD.md section 3: 4.5e-2 m with an independent implementation
+    # 4.5e-2 m, all of it in the first element (docs/design.md 'Default mesh', docs/accuracy.md), also
+    # measured by an independent implementation (benchmarks/peer_casadi.py)
     assert 0.03 < err["x"] < 0.06, err
     assert err["h"] > 0.01, err

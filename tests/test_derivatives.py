@@ -41,7 +41,7 @@ ATOL = 1e-10
 STEP = 1e-5          # Jacobian and Hessian (differences of analytic first derivatives)
 STEP_OBJECTIVE = 1e-4  # objective gradient: J sums ~2e4 squares, its round-off needs a longer step
 
-# Geometric altitudes (m) of the kinks of Yang's density fit (METHOD.md section 1): a
+# Geometric altitudes (m) of the kinks of Yang's density fit (docs/design.md, 'Yang's atmosphere'): a
 # difference stencil straddling one would compare against a one-sided slope.
 _DENSITY_KINKS_M = (11019.1, 20063.1, 32161.9)
 

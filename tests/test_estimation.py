@@ -5,8 +5,8 @@ The standard deviations of the RA-66 estimates (noise sigma = 1 in x, h, v) are
 ``sqrt(diag((S^T S)^-1))`` with ``S = dy/dp`` the output sensitivities, here computed by
 central differences of the high-accuracy *simulator* (not of the collocation NLP), so
 that they are independent of the code under test. Measured: CD0..CD6 = 5.56e-3, 1.15e-3,
-4.72e-4, 2.78e-4, 2.42e-4, 3.53e-4, 1.40e-3, CL = 7.1e-6 (METHOD.md: 5.6e-3, 1.2e-3,
-2.4e-4..4.7e-4, 1.4e-3, 1e-5).
+4.72e-4, 2.78e-4, 2.42e-4, 3.53e-4, 1.40e-3, CL = 7.1e-6 (the standard errors of the seed-0 fit in
+docs/reference-cases.md: 0.0056, 0.0011, 0.0005, 0.0003, 0.0002, 0.0004, 0.0014).
 """
 
 from __future__ import annotations
@@ -21,7 +21,8 @@ import sympy as sp
 import rocketid as ri
 from rocketid.errors import ModelError
 
-# METHOD.md section 4 figures, for a sanity check of the computed standard deviations
+# Rounded reference standard deviations (docs/reference-cases.md, RA-66 seed 0), for a sanity check of the
+# computed ones
 METHOD_SIGMA = {"CD0": 5.6e-3, "CD1": 1.2e-3, "CD6": 1.4e-3, "CL": 1e-5}
 METHOD_SIGMA_CD2_CD5 = (2.4e-4, 4.7e-4)
 
@@ -121,7 +122,7 @@ def test_result_accessors(ra66_spec, ra66_noisy_fit):
     assert all(isinstance(k, sp.Symbol) for k in fit.parameters)
     xs = fit.value(x)
     assert xs.shape == (66 * 4 + 1,) and xs[0] == pytest.approx(0.0, abs=1e-9)
-    assert xs[-1] == pytest.approx(12.5e3, rel=0.05)  # METHOD.md: x = 12.5 km at 66 s
+    assert xs[-1] == pytest.approx(12.5e3, rel=0.05)  # x = 12.5 km at 66 s (docs/reference-cases.md)
     with pytest.raises(ModelError, match="Cl"):
         fit.value("Cl")
     # the states at sample times follow the collocation polynomial through the data

@@ -151,6 +151,11 @@ CASES = [
     Case("IPOPT option of the wrong type", ["estimate", "{ra66}", "--ipopt", "max_iter=abc"], 2, "--ipopt"),
     # ---- models
     Case("unknown model", ["estimate", "{ra66}", "--model", "ra67"], 2, "unknown model 'ra67'"),
+    Case("--model is a folder", ["estimate", "{ra66}", "--model", "models"], 2,
+         "is a folder, not a model: give a built-in model (ra66, ra66m) or a model file, a Python file (.py) that "
+         "defines build_model()", {"models/m.py": DECAY}),
+    Case("simulate --model is a folder", ["simulate", "--model", "models", "--out", "o.csv"], 2, "is a folder, not a model",
+         {"models/m.py": DECAY}),
     Case("missing model file", ["estimate", "{ra66}", "--model", "gone.py"], 2, "does not exist"),
     Case("model file without build_model", ["estimate", "{ra66}", "--model", "m.py"], 2,
          "does not define build_model()", {"m.py": "x = 1\n"}),
@@ -179,6 +184,11 @@ CASES = [
     # ---- simulate
     Case("negative seed", ["simulate", "--seed", "-1", "--out", "o.csv"], 2, "-1 is not in the range x>=0"),
     Case("unknown --param", ["simulate", "--param", "CDX=1", "--out", "o.csv"], 2, "not a parameter"),
+    Case("--param below its bounds", ["simulate", "--param", "CD0=-5", "--out", "o.csv"], 2,
+         "--param CD0=-5 lies outside the bounds of CD0 in model 'RA-66', [0.0001, 1]"),
+    Case("--param above its bounds", ["simulate", "--param", "CL=3", "--out", "o.csv"], 2, "outside the bounds of CL"),
+    Case("--param outside a model file's bounds", ["simulate", "--model", "m.py", "--param", "k=11", "--out", "o.csv"],
+         2, "[0, 10]; give a value within them", {"m.py": DECAY}),
     Case("simulate --out is a folder", ["simulate", "--out", "folder"], 2, "is a directory", {"folder/keep": ""}),
     Case("simulate --out below a file", ["simulate", "--out", "afile/o.csv"], 2, "is a file, not a folder",
          {"afile": "x"}),

@@ -101,6 +101,10 @@ def load_model(name_or_path: str | Path) -> ModelSource:
         b = BUILTIN_MODELS[key]
         spec = b.build()
         return ModelSource(spec, key, b.truth(spec), b.times())
+    if Path(key).is_dir():
+        raise ModelError(f"--model {key!r} is a folder, not a model: give a built-in model "
+                         f"({', '.join(sorted(BUILTIN_MODELS))}) or a model file, a Python file (.py) that "
+                         "defines build_model() returning the model (see 'Model files' in docs/cli.md)")
     if Path(key).suffix != ".py":
         raise _unknown(key)
     spec, module = load_model_file(key)
@@ -149,6 +153,10 @@ def resolve_model(model: str | Path | ModelSpec | Model) -> tuple[ModelSpec, str
     key = str(model)
     if key in BUILTIN_MODELS:
         return BUILTIN_MODELS[key].build(), key
+    if Path(key).is_dir():
+        raise ModelError(f"--model {key!r} is a folder, not a model: give a built-in model "
+                         f"({', '.join(sorted(BUILTIN_MODELS))}) or a model file, a Python file (.py) that "
+                         "defines build_model() returning the model (see 'Model files' in docs/cli.md)")
     if Path(key).suffix != ".py":
         raise _unknown(key)
     spec, _ = load_model_file(key)
