@@ -377,6 +377,32 @@ def test_a_second_ctrl_c_ends_the_command_at_once(tmp_path, ra66_csv):
     _assert_no_survivors(family)
 
 
+def test_a_mesh_far_finer_than_the_data_is_warned_about_before_the_work(tmp_path, ra66_csv):
+    """``--elements 20000`` once printed nothing for minutes while growing to 2.3 GB: the size
+    warning with the expected memory comes first, then the progress line, both before the NLP
+    is built; the command is then interrupted (it would take minutes)."""
+    lines: list = []
+    proc = _start("-v", "estimate", "--elements", "20000", str(ra66_csv), "--out", str(tmp_path / "fit.json"))
+    import threading
+
+    reader = threading.Thread(target=lambda: lines.extend(proc.stderr), daemon=True)
+    reader.start()
+    try:
+        _wait_for(lambda: any("building the NLP" in x for x in lines), proc, "the progress line")
+    finally:
+        os.kill(proc.pid, signal.SIGINT)
+        proc.wait(timeout=30)
+        reader.join(5.0)
+    err = "".join(lines)
+    warning = next((x for x in lines if x.startswith("Warning: 200")), None)  # 20004: knots on boundaries
+    assert warning is not None, err
+    assert "6600 sample times" in warning and "use fewer --elements" in warning, warning
+    memory = float(warning.split("Expect about ")[1].split(" MB")[0])
+    assert 400 < memory < 2000, warning                      # 20000 x K = 4: about 620 MB before IPOPT
+    assert err.index(warning) < err.index("building the NLP"), err
+    assert proc.returncode in (130, -signal.SIGINT), err
+
+
 # ---------------------------------------------------------------------------
 # rocketid reproduce --executor dask: the client's tasks end with it
 # ---------------------------------------------------------------------------
