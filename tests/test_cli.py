@@ -197,6 +197,25 @@ def test_model_file_round_trip(tmp_path):
     assert payload["parameters"]["k"] == pytest.approx(1.3, abs=0.01)
 
 
+def test_code_generation_is_announced_on_first_use_only(tmp_path, monkeypatch):
+    """A long set-up says what it does: with -v, generating a new model's code is announced
+    before it starts and timed after; the second run loads it from the cache silently."""
+    monkeypatch.setenv("ROCKETID_CACHE_DIR", str(tmp_path / "cache"))
+    model = tmp_path / "decay.py"
+    model.write_text(DECAY)
+    data = tmp_path / "decay.csv"
+    assert invoke("simulate", "--model", model, "--out", data).exit_code == 0
+    first = invoke("-v", "estimate", data, "--model", model, "--out", tmp_path / "a.json")
+    assert first.exit_code == 0, first.stderr
+    lines = first.stderr.splitlines()
+    start = next(i for i, x in enumerate(lines) if x.startswith("generating the code of model 'decay'"))
+    assert lines[start + 1].startswith("generated the code in "), lines
+    assert any(x.startswith("building the NLP") for x in lines[start + 2:]), lines
+    second = invoke("-v", "estimate", data, "--model", model, "--out", tmp_path / "b.json")
+    assert second.exit_code == 0 and "generating the code" not in second.stderr, second.stderr
+    assert "code from the cache" in second.stderr
+
+
 def test_model_file_without_build_model(tmp_path):
     model = tmp_path / "nomodel.py"
     model.write_text("x = 1\n")

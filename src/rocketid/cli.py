@@ -441,9 +441,17 @@ def prepare_verbosely(spec: ModelSpec, data: Measurements, mesh):
     :func:`mesh_size_warning` (always shown) before the work."""
     from .solve import prepare
 
+    from .codegen import cache_path, generate
+
     warning = mesh_size_warning(spec, mesh, data)
     if warning:
         click.echo(warning, err=True)
+    if not cache_path(spec).exists():
+        status(f"generating the code of model {spec.name!r} (SymPy derivatives printed as NumPy; first use only, "
+               "then cached)")
+        t0 = time.perf_counter()
+        generate(spec)
+        status(f"generated the code in {time.perf_counter() - t0:.1f} s")
     status(f"building the NLP on {mesh.describe()} (about {expected_memory_mb(mesh):.0f} MB; the model's code is "
            "generated on first use and cached)")
     t0 = time.perf_counter()

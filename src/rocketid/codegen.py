@@ -47,7 +47,7 @@ from .output import write_text
 from .symbolic import SymbolicModel, derive
 
 __all__ = ["GeneratedModel", "OutputFunction", "generate", "generate_source", "generate_hessian_source",
-           "cache_dir"]
+           "cache_dir", "cache_path"]
 
 CODEGEN_VERSION = "3"
 
@@ -391,6 +391,15 @@ def _hessian_module(gen: GeneratedModel) -> ModuleType:
     return _load(path, modname)
 
 
+def cache_path(spec: ModelSpec) -> Path:
+    """Where :func:`generate` caches the module of ``spec`` (named by the hash of the model's
+    content and of the generator); ``cache_path(spec).exists()`` says whether generating it
+    will be a load (fast) or a derivation and printing (seconds to a minute)."""
+    key = hashlib.sha256(f"{CODEGEN_VERSION}:{generator_fingerprint()}:{spec.fingerprint()}".encode()
+                         ).hexdigest()[:20]
+    return cache_dir() / f"rocketid_gen_{key}.py"
+
+
 def generate(spec: ModelSpec, *, use_cache: bool = True) -> GeneratedModel:
     """Generate (or load from the cache) the NumPy functions of ``spec``.
 
@@ -408,11 +417,8 @@ def generate(spec: ModelSpec, *, use_cache: bool = True) -> GeneratedModel:
     -------
     GeneratedModel
     """
-    key = hashlib.sha256(f"{CODEGEN_VERSION}:{generator_fingerprint()}:{spec.fingerprint()}".encode()
-                         ).hexdigest()[:20]
-    folder = cache_dir()
-    path = folder / f"rocketid_gen_{key}.py"
-    modname = f"rocketid_gen_{key}"
+    path = cache_path(spec)
+    folder, modname = path.parent, path.stem
     if use_cache and path.exists():
         source = path.read_text()
         module = sys.modules.get(modname) or _load(path, modname)
