@@ -86,6 +86,31 @@ def test_ipopt_starts_at_the_prediction(draws):
     assert min(its_without) >= 2 and sum(its_without) > 3 * sum(its_with) + len(draws)
 
 
+#: Draws of run SEED whose prediction leaves the bounds of p (found by the predictor itself;
+#: the test below checks that they do).
+ACROSS_A_BOUND = (51, 67)
+
+
+def test_a_prediction_across_a_bound_is_not_used(ctx):
+    """A prediction that crosses a bound of p starts IPOPT badly (10-18 iterations against 4-8
+    from the reference): such a draw starts from the reference and still equals a cold solve."""
+    est, ref, D = ctx.recipe.estimability, ctx.reference, ctx.recipe.estimability.D
+    without = replace(ctx, predictor=None)
+    for k in ACROSS_A_BOUND:
+        q2 = est.q2_of(trial_parameters(ctx.recipe, SEED, k))
+        nlp = ref.nlp.with_offset(est.transform(q2).c)
+        prediction = ctx.predictor.predict(nlp)
+        assert prediction is not None and not prediction.feasible
+        p_pred = nlp.layout.parameters(prediction.x)
+        spec = ctx.prepared.spec
+        assert np.any(p_pred < spec.lower) or np.any(p_pred > spec.upper), p_pred
+        drawn, plain = evaluate_draw(ctx, SEED, k), evaluate_draw(without, SEED, k)
+        assert drawn.success and drawn.iterations == plain.iterations <= 8       # the reference's path
+        cold = estimate_q1(ctx.prepared, est, q2)
+        np.testing.assert_allclose(np.array(drawn.p) / D, cold.p / D, rtol=0, atol=1e-7)
+        assert abs(drawn.objective - cold.objective) <= 1e-9 * cold.objective
+
+
 def test_first_order_prediction(ctx):
     """One step with the reference factors is the first-order change of the solution: its
     error against IPOPT's converged solution falls with the square of the change of q2."""

@@ -350,7 +350,9 @@ def estimate_q1(prepared: Prepared, est: Estimability, q2: Sequence[float], *,
         The KKT factors at ``warm_start``'s solution (``SolutionPredictor.at(warm_start.nlp,
         warm_start.solution)``): IPOPT starts from the predicted solution of the new problem
         (primal and multipliers) instead of the previous one, and usually accepts it at once.
-        The estimate is IPOPT's either way; ignored without ``warm_start``.
+        A prediction that crosses a bound of ``p`` is not used (IPOPT starts from
+        ``warm_start``: 4-8 iterations, against 10-18 from such a prediction). The estimate is
+        IPOPT's either way; ignored without ``warm_start``.
 
     Returns
     -------
@@ -378,7 +380,7 @@ def estimate_q1(prepared: Prepared, est: Estimability, q2: Sequence[float], *,
             if predictor.solution is not warm:
                 raise SettingsError("the predictor was formed at another solution than warm_start's")
             pred = predictor.predict(nlp, tol=float((options or {}).get("tol", DEFAULT_IPOPT["tol"])))
-            if pred is not None:
+            if pred is not None and pred.feasible:  # else from the reference: fewer iterations
                 x0 = pred.x
                 warm = replace(warm, x=pred.x, mult_g=pred.mult_g)
 

@@ -289,6 +289,11 @@ class Prediction:
         ``max |c_eq|`` and ``max |grad f + J^T mult_g|`` at ``x``.
     converged : bool
         Both are within the tolerances IPOPT would apply (:meth:`SolutionPredictor.predict`).
+    feasible : bool
+        ``x`` is within the variable bounds and the inequality rows (the bounds of ``p`` as
+        linear rows in (7.9)) within theirs. A prediction that crosses a bound is a poor start:
+        IPOPT needed 10-18 iterations from it against 4-8 from the reference solution (RA-66,
+        10 of 300 draws), so the sampling starts those draws from the reference instead.
     """
 
     x: np.ndarray
@@ -297,6 +302,7 @@ class Prediction:
     primal: float
     dual: float
     converged: bool
+    feasible: bool = True
 
 
 @dataclass(frozen=True, eq=False)
@@ -427,7 +433,16 @@ class SolutionPredictor:
                 lam[:meq] += d[n:]
         if best is None or best.steps == 0:
             return None
-        return replace(best, mult_g=self._inequality_multipliers(nlp, best.x, best.mult_g))
+        return replace(best, mult_g=self._inequality_multipliers(nlp, best.x, best.mult_g),
+                       feasible=self._within_bounds(nlp, best.x))
+
+    @staticmethod
+    def _within_bounds(nlp: CollocationNLP, x: np.ndarray) -> bool:
+        """``x`` within the variable bounds and the inequality rows within theirs."""
+        rows = nlp.layout.linear_rows
+        a = nlp.structure.A_lin @ x if rows.stop > rows.start else np.empty(0)
+        return bool(np.all(x >= nlp.x_lower) and np.all(x <= nlp.x_upper)
+                    and np.all(a >= nlp.c_lower[rows]) and np.all(a <= nlp.c_upper[rows]))
 
     def _inequality_multipliers(self, nlp: CollocationNLP, x: np.ndarray, mult_g: np.ndarray) -> np.ndarray:
         """Multipliers of the inequality rows that keep each row's complementarity (slack times
