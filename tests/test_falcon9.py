@@ -2,9 +2,11 @@
 
 From a base model without a throttle schedule, the diagnosis must locate the failure in the
 broadcast's throttle-down window (the events file is the answer key, never an input) and name a
-thrust shortfall there; with the throttle effect added the error must fall to the reading noise
-where the effect acts, separately and jointly (and not after 110 s: a known failure, asserted so
-that a change shows). Marked slow (about 10-15 minutes on 2 busy cores):
+thrust shortfall there; with the throttle effect added and the noise estimated, separately and
+jointly: the altitude's estimated sigma is at the reading noise, the speed is at the reading
+noise through the throttle-down and, after 90 s, as close as a model-free smooth curve gets --
+but not at the reading noise (the estimated speed sigma is above it: a known failure, asserted
+so that a change shows). Marked slow (a few minutes on 2 busy cores):
 ``pytest -m slow tests/test_falcon9.py``. Quick checks of the shipped data run always.
 """
 
@@ -17,7 +19,7 @@ import rocketid as ri
 from rocketid.diagnostics import rank_candidates, throttle_effect, with_effects
 from rocketid.diagnostics.locate import locate
 from rocketid.examples.falcon9 import (FLIGHTS, falcon9_data_path, falcon9_events, falcon9_measurements,
-                                       falcon9_model, reading_noise)
+                                       falcon9_model, reading_noise, smooth_residuals)
 from rocketid.joint import Flight, joint_estimate
 
 CANDIDATES = ["thrust_level", "transonic_drag", "bias_v", "bias_h", "back_pressure"]
@@ -76,15 +78,39 @@ def test_diagnosis_finds_the_throttle_down_and_the_throttle_closes_it(flight):
     assert fit.rms["v"] < fit0.rms["v"] / 10
     # where the throttle acts (up to the end of the window) the speed error is at the reading noise;
     # after 110 s it is not (a known failure of this model, docs/real-telemetry.md)
+    _at_the_noise_as_the_page_says(fit, data, events)
+    # the noise estimated with the parameters: the altitude at its reading noise, the speed not
+    fit_s = ri.estimate(spec, data, sigma="estimate", warm_start=fit, options={"max_iter": 500})
+    assert fit_s.success and set(fit_s.sigma_estimated) == {"h", "v"}
+    _estimated_sigmas_as_the_page_says(fit_s.sigma, data)
+    _at_the_noise_as_the_page_says(fit_s, data, events)
+
+
+def _rms(r, k):
+    return float(np.sqrt(np.mean(r[k] ** 2)))
+
+
+def _at_the_noise_as_the_page_says(fit, data, events):
+    """Through the throttle-down the speed is at the reading noise; after 90 s it is as close as a
+    smooth curve with knots every 5 s gets (within 25 %), but not at the reading noise."""
     noise = reading_noise(data)
     r, t = fit.residuals["v"], data["v"].times
-    k = t <= events["throttle_down_end"]
-    assert np.sqrt(np.mean(r[k] ** 2)) < 1.5 * noise["v"]
-    assert np.sqrt(np.mean(r[t > 110] ** 2)) > 1.5 * noise["v"]
+    assert _rms(r, t <= events["throttle_down_end"]) < 1.5 * noise["v"]
+    late = t >= 90.0
+    assert _rms(r, late) < 1.25 * _rms(smooth_residuals(data, 5.0)["v"], late)
+    assert _rms(r, t >= 110.0) > 1.5 * noise["v"]
+
+
+def _estimated_sigmas_as_the_page_says(sigma, data):
+    """The altitude's estimated sigma within 30 % of its reading noise; the speed's at least 20 %
+    above it (a model error or reading errors the model cannot follow, not white noise)."""
+    noise = reading_noise(data)
+    assert noise["h"] <= sigma["h"] * 1.05 and sigma["h"] < 1.3 * noise["h"]
+    assert sigma["v"] > 1.2 * noise["v"]
 
 
 @pytest.mark.slow
-def test_both_flights_jointly_reach_the_reading_noise_through_the_throttle_down():
+def test_both_flights_jointly_with_the_noise_estimated():
     """The two flights together: drag, thrust and mass-flow scales shared, each flight its own
     attitude, throttle (knots from its own diagnosis), lift-off mass and start states."""
     flights, keys = [], {}
@@ -99,16 +125,15 @@ def test_both_flights_jointly_reach_the_reading_noise_through_the_throttle_down(
         keys[label] = falcon9_events(label)
     per = sorted({n for fl in flights for n in fl.spec.parameter_names
                   if n.startswith(("alpha", "d_throttle")) or n == "dm0"})
-    joint = joint_estimate(flights, per_flight=per, options={"max_iter": 500})
+    joint = joint_estimate(flights, per_flight=per, sigma="estimate", options={"max_iter": 500})
     assert joint.success
     assert set(joint.layout.shared) == {"k_P", "k_mdot", *(f"CD_{j}" for j in range(6))}
     for fl, r in zip(flights, joint.flights):
-        noise = reading_noise(fl.data)
-        res, t = r.residuals["v"], fl.data["v"].times
-        k = t <= keys[fl.label]["throttle_down_end"]
-        assert np.sqrt(np.mean(res[k] ** 2)) < 1.5 * noise["v"]
-        # and a known failure after 90 s: the model is not at the noise over the whole window
-        assert np.sqrt(np.mean(res[t > 110] ** 2)) > 1.5 * noise["v"]
+        _estimated_sigmas_as_the_page_says(joint.sigma[fl.label], fl.data)
+        _at_the_noise_as_the_page_says(r, fl.data, keys[fl.label])
+    # with the noise estimated the shared drag stays plausible: no knot at a bound
+    cd = [joint.theta[joint.layout.names.index(f"CD_{j}")] for j in range(6)]
+    assert all(0.15 < c < 1.0 for c in cd)
     est = joint.estimability()
     assert np.all(est.eigenvalues > 0)
     # the subsonic drag is known from the priors, not from the data
