@@ -273,3 +273,35 @@ def test_when_the_ranking_cannot_be_made_every_candidate_is_refitted(monkeypatch
     assert scr.ranking is None and scr.names == ("misalignment", "thrust_level", "bias_h")
     assert all(c.start == {} for c in scr.contenders)
     assert "ranking failed" in scr.notes[0] and "every candidate is refitted" in scr.notes[0]
+
+
+def _confirmation(holdout_rms, sigma=(3.0, 3.0, 0.3)):
+    """A confirmation of an effect that passed everything but, possibly, the hold-out prediction."""
+    from types import SimpleNamespace
+
+    from rocketid.diagnostics.refit import Confirmation
+    nlp = SimpleNamespace(channel_names=("x", "h", "v"), channel_sigmas=np.array(sigma))
+    fit = SimpleNamespace(nlp=nlp, success=True)
+    return Confirmation(effects=(), fit=fit, base_fit=fit, lr_statistic=7000.0, lr_p_value=1e-300, dof=4,
+                        aic=(9637.0, 2321.0), bic=(9689.0, 2397.0), whiteness={}, rms={}, holdout_rms=holdout_rms,
+                        effect_estimates={}, chi2_per_dof=(4.02, 0.96), discretization={}, holdout=(0.0, 54.5454),
+                        level=0.05, lags=20)
+
+
+def test_a_refit_that_predicts_the_held_out_flight_worse_than_the_base_is_not_confirmed():
+    """An explanation must predict. The blind misalignment-from-20-s case: the catalogue's wind
+    reached the noise, fitted on 0-54.5 s it predicted the rest with RMS x 111 m against the base
+    model's 13.3 m (mean squared error 559 against 25.5 sigma^2)."""
+    bad = _confirmation({"x": (13.3, 111.0), "h": (10.6, 39.9), "v": (2.0, 3.28)})
+    assert bad.holdout_error(1) == pytest.approx(559, rel=0.01) and bad.holdout_error(0) == pytest.approx(25.5, rel=0.01)
+    assert not bad.predicts and not bad.confirmed
+    assert "0-54.55 s" in bad.prediction_note and "x 111 against 13.3" in bad.prediction_note
+    # the right effect predicts better than the base model
+    good = _confirmation({"x": (40.0, 3.1), "h": (30.0, 3.0), "v": (2.0, 0.31)})
+    assert good.predicts and good.confirmed and good.prediction_note == ""
+    # worse by a factor of 9 but within 25 sigma^2: both predict about as well as the data allow
+    close = _confirmation({"x": (3.0, 9.0), "h": (3.0, 9.0), "v": (0.3, 0.9)})
+    assert close.holdout_error(1) == pytest.approx(9.0) and close.predicts
+    # worse, but not decisively (a factor below 4)
+    assert _confirmation({"x": (30.0, 50.0), "h": (30.0, 50.0), "v": (3.0, 5.0)}).predicts
+    assert _confirmation(None).predicts                      # no hold-out check: nothing to say

@@ -118,28 +118,6 @@ def test_diagnose_confirms_the_leader(report):
     assert rep.after.fits_to_noise
 
 
-def test_the_best_refit_breaks_bic_ties_by_the_hold_out():
-    """Refits within BIC_TIE of each other are told apart by plausibility, then the hold-out
-    prediction (on the tutorial's data back-pressure and a thrust-level error both reach chi2/dof
-    0.992, BIC 19715.2 and 19714.2; the hold-out predictions are 4.2/2.8/1.6 against 10.8/7.1/3.4)."""
-    from types import SimpleNamespace as NS
-    from rocketid.diagnostics.api import BIC_TIE, _choose
-
-    nlp = NS(channel_names=("x", "h"), channel_sigmas=np.array([1.0, 2.0]))
-
-    def conf(bic, hold, ok=True):
-        return NS(fit=NS(success=ok, nlp=nlp), bic=(1e5, bic), holdout_rms=hold)
-
-    bp = conf(19715.2, {"x": (90, 4.2), "h": (91, 2.8)})
-    eps = conf(19714.2, {"x": (90, 10.8), "h": (91, 7.1)})
-    assert _choose([eps, bp]) == (1, f"BIC within {BIC_TIE:g} of each other; the best hold-out prediction")
-    assert _choose([eps, bp], [False, True]) == (1, f"BIC within {BIC_TIE:g} of the lowest, plausible coefficients")
-    far = conf(19714.2 - 2 * BIC_TIE, {"x": (90, 50.0), "h": (91, 50.0)})
-    assert _choose([far, bp]) == (0, "the lowest BIC")
-    assert _choose([conf(1.0, None, ok=False)]) == (None, "no refit converged")
-    assert _choose([conf(5.0, None), conf(4.0, None)]) == (1, "the lowest BIC")
-
-
 def test_the_report_files(report):
     rep, out = report
     for name in ("report.html", "candidates.json", "diagnosis.json", "summary.txt"):

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import math
 import time
-import warnings
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Mapping, Sequence
@@ -323,46 +322,16 @@ def _effect_name(conf) -> str:
     return ", ".join(est) if est else "the effect"
 
 
-#: Refits whose BIC lie within this of the lowest are not told apart by BIC (Kass and Raftery's
-#: "very strong" evidence starts at 10); the hold-out prediction decides between them.
-BIC_TIE = 10.0
-
-
-def _holdout_score(c) -> float:
-    """Mean over channels of (hold-out prediction RMS of the new model / sigma)^2; inf without one."""
-    if not c.holdout_rms:
-        return math.inf
-    sig = dict(zip(c.fit.nlp.channel_names, (float(s) for s in c.fit.nlp.channel_sigmas)))
-    return float(np.mean([(b / sig.get(k, 1.0)) ** 2 for k, (_, b) in c.holdout_rms.items()]))
-
-
-def _choose(confirmations, plausible=None) -> tuple:
-    """The index of the best refit and why: among converged refits, those within :data:`BIC_TIE`
-    of the lowest BIC, preferring plausible coefficients, then the best hold-out prediction."""
-    ok = [i for i, c in enumerate(confirmations) if c.fit.success]
-    if not ok:
-        return None, "no refit converged"
-    lo = min(confirmations[i].bic[1] for i in ok)
-    near = [i for i in ok if confirmations[i].bic[1] <= lo + BIC_TIE]
-    why = []
-    if plausible is not None and len(near) > 1:
-        good = [i for i in near if plausible[i]]
-        if good and len(good) < len(near):
-            why.append("plausible coefficients")
-            near = good
-    if len(near) == 1:
-        why.insert(0, "the lowest BIC" if confirmations[near[0]].bic[1] == lo else f"BIC within {BIC_TIE:g} of the lowest")
-        return near[0], ", ".join(why)
-    score = {i: _holdout_score(confirmations[i]) for i in near}
-    if all(math.isfinite(v) for v in score.values()):
-        best = min(near, key=lambda i: score[i])
-        why.insert(0, f"BIC within {BIC_TIE:g} of each other; the best hold-out prediction")
-        return best, ", ".join(why)
-    best = min(near, key=lambda i: confirmations[i].bic[1])
-    why.insert(0, "the lowest BIC")
-    return best, ", ".join(why)
-
-
+def _prediction_check(disc, confs, notes: list):
+    """The discovery, downgraded from "explained" to "partly explained" when the final model, fitted
+    on the hold-out window, predicts the rest of the flight decisively worse than the base model
+    (:attr:`rocketid.diagnostics.refit.Confirmation.predicts`): it reaches the noise by following
+    the fitted data, not the physics."""
+    if disc is None or disc.verdict != "explained" or not confs or confs[0].predicts:
+        return disc
+    why = confs[0].prediction_note
+    notes.append(f"the final model ({' + '.join(disc.effect_names)}) reaches the noise but is not an explanation: {why}")
+    return replace(disc, verdict="partly explained", not_an_explanation=why, notes=disc.notes + (notes[-1],))
 
 
 def _confirmation_dict(c, name: str | None = None) -> dict:
@@ -706,6 +675,7 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
     if failed:
         notes.append(f"the candidate ranking failed: {failed}")
     confs, names, pls = timed("confirm_s", _confirm_final, fit, disc, holdout, level, refit_timeout, options, notes)
+    disc = _prediction_check(disc, confs, notes)
     history = _history(spec, fit, disc, notes)
     after = compare(disc.fit, level=level) if disc is not None and disc.effects else None
     final = _final(disc, ranking, level, window)

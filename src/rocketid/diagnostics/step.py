@@ -231,8 +231,7 @@ def _tie_break(accs, i, fit, chosen_effects, contenders_effects, holdout, level,
         except RocketidError:
             continue
         if c.holdout_rms:
-            sig = dict(zip(c.fit.nlp.channel_names, (float(x) for x in c.fit.nlp.channel_sigmas)))
-            score[j] = float(np.mean([(b / sig.get(k, 1.0)) ** 2 for k, (_, b) in c.holdout_rms.items()]))
+            score[j] = c.holdout_error(1)
     if len(score) < 2:
         return None, (f"{names} reach the noise with BIC within {BIC_TIE:g} of each other: the data cannot tell "
                       "them apart")
