@@ -351,6 +351,25 @@ def test_negative_drag_is_the_wrong_sign():
     assert "cannot be" in wrong[0].message
 
 
+def test_parameters_of_added_effects_are_never_taken_for_coefficients(ra66_noisy_fit):
+    """A parameter named in ``realistic`` (an effect's) is an effect parameter whatever roles it
+    enters. A wind's surface value W_0 enters the drag coefficient through the airspeed's Mach
+    number, and was once flagged as "outside the plausible range of a launch vehicle's drag
+    coefficient" (2.8 m/s), downgrading a right wind + speed-sensor answer on a blind test."""
+    from rocketid.cases import ra66m
+    from rocketid.diagnostics import with_effects
+    from rocketid.diagnostics.effects import wind_profile_effect
+    from rocketid.diagnostics.plausibility import coefficient_kinds
+
+    kinds, _ = coefficient_kinds(with_effects(ra66m(), [wind_profile_effect([0, 3, 8, 13])]))
+    assert kinds["W_0"] == "drag" and kinds["W_1"] == "other"     # by role alone: what misled the check
+    plain = check_plausibility(ra66_noisy_fit, drag_range=(0.6, 1.5))
+    assert any(f.parameters == ("CD3",) for f in plain.flagged("implausible"))
+    marked = check_plausibility(ra66_noisy_fit, drag_range=(0.6, 1.5), realistic={"CD3": 0.0})
+    assert dict(zip(marked.names, marked.kinds))["CD3"] == "effect"
+    assert not any(f.parameters == ("CD3",) for f in marked.flagged("implausible"))
+
+
 def test_implausible_sizes_and_undetermined_parameters(ra66_noisy_fit):
     pl = check_plausibility(ra66_noisy_fit, realistic={"CL": 0.001}, drag_range=(0.6, 1.5))
     big = pl.flagged("implausible")

@@ -443,7 +443,10 @@ def check_plausibility(fit: EstimationResult, *, uncertainty=None, level: float 
     effect_factor : float
         An effect parameter larger than this many times its realistic size is implausible.
     realistic : dict, optional
-        ``{parameter name: realistic magnitude}`` (default: from the effects catalogue).
+        ``{parameter name: realistic magnitude}`` of the effects added to the model (default:
+        from the effects catalogue). When given, its parameters are effect parameters whatever
+        roles they enter: a wind's surface value enters the drag coefficient through the Mach
+        number of the airspeed, yet it is a speed, not a drag coefficient.
     supersonic_tolerance : float
         Largest rise of the drag coefficient with the Mach number above :data:`SUPERSONIC_MACH`
         (drag-coefficient units) beyond two standard errors that is not flagged.
@@ -463,7 +466,8 @@ def check_plausibility(fit: EstimationResult, *, uncertainty=None, level: float 
     p = np.asarray(fit.p, float)
     se, cov, notes = _standard_errors(fit, uncertainty)
     by_role, kind_notes = coefficient_kinds(spec)
-    kinds = tuple(by_role[n] for n in names)
+    effect_names = set(realistic) if realistic is not None else set()
+    kinds = tuple("effect" if n in effect_names else by_role[n] for n in names)
     notes += kind_notes
     real = _realistic_sizes() if realistic is None else dict(realistic)
     flags = _coefficient_flags(fit, se, kinds, real, drag_range, effect_factor)

@@ -834,9 +834,13 @@ def summarize_refit(new: EstimationResult, base_objective: float, base_n_estimat
                     added: Sequence[str], sizes: Mapping[str, float], *, level: float = 0.05,
                     base_parameters: Sequence[str] = (), seconds: float = 0.0, notes: Sequence[str] = (),
                     least: Mapping[str, float] | None = None, base_values: Mapping[str, float] | None = None,
-                    base_chi2_per_dof: float = float("nan")) -> Refit:
+                    base_chi2_per_dof: float = float("nan"), effect_parameters: Sequence[str] | None = None) -> Refit:
     """The :class:`Refit` of a fitted model with ``effects``: whiteness per channel, standard
-    errors, the base coefficients' plausibility, the added parameters' identifiability."""
+    errors, the base coefficients' plausibility, the added parameters' identifiability.
+
+    ``effect_parameters`` names every parameter the effects declared (the ones judged and those of
+    earlier steps; default: those not in ``base_parameters``): the plausibility check takes them
+    as effect parameters whatever roles they enter, never as drag or lift coefficients."""
     from .plausibility import check_plausibility
 
     names = tuple(new.spec.parameter_names)
@@ -855,7 +859,10 @@ def summarize_refit(new: EstimationResult, base_objective: float, base_n_estimat
         ident = identifiability(list(names), np.asarray(unc.parameter_covariance), eff_params, sizes,
                                 values=np.asarray(new.p, float))
         try:
-            pl = check_plausibility(new, uncertainty=unc, level=level, realistic=dict(sizes))
+            real = {n: 0.0 for n in (declared if effect_parameters is None else effect_parameters)}
+            real.update({k: v for e in effects for k, v in e.realistic.items() if k in real})
+            real.update(sizes)
+            pl = check_plausibility(new, uncertainty=unc, level=level, realistic=real)
             base_flags = [f for f in pl.flagged(severity="fail") if not set(f.parameters) & set(declared)]
             plaus = not base_flags
             failing = tuple(f"{f.code}: {f.message}" for f in base_flags)
@@ -991,7 +998,9 @@ def run_refit(task: RefitTask) -> tuple[Refit, EstimationResult | None]:
                            base_parameters=task.base_parameters, seconds=time.perf_counter() - t0,
                            notes=notes, least={k: v for e in task.effects if e.name in task.added
                                                for k, v in e.least.items()},
-                           base_values=task.base_values, base_chi2_per_dof=task.base_chi2_per_dof), new
+                           base_values=task.base_values, base_chi2_per_dof=task.base_chi2_per_dof,
+                           effect_parameters=[n for n in new.spec.parameter_names
+                                              if n not in set(task.base_spec.parameter_names)]), new
 
 
 def _failed(task: RefitTask, message: str, seconds: float, gave_up: bool = False) -> Refit:
