@@ -112,6 +112,9 @@ class Confirmation:
     acceptance : Acceptance or None
         The acceptance test of the refit (:mod:`rocketid.diagnostics.accept`): does it
         reach the noise with a plausible size and plausible coefficients.
+    holdout_undetermined : tuple of str
+        Effect parameters whose standard error in the hold-out window's fit exceeds one realistic
+        size: the window's data do not determine them.
     """
 
     effects: tuple
@@ -136,6 +139,7 @@ class Confirmation:
     holdout_fits: tuple | None = field(default=None, repr=False)
     effect_covariance: np.ndarray | None = field(default=None, repr=False)
     acceptance: Any = field(default=None, repr=False)
+    holdout_undetermined: tuple = ()
 
     @property
     def confirmed(self) -> bool:
@@ -160,7 +164,10 @@ class Confirmation:
         of the flight decisively worse than the base model: a mean squared error (sigma^2) above
         :data:`HOLDOUT_WORSE` times the base model's and above :data:`HOLDOUT_CLOSE`. Such a
         refit reaches the noise by following the fitted data, not the physics. True without a
-        hold-out check."""
+        hold-out check, and when the window's data do not determine the effect
+        (:attr:`holdout_undetermined`: its extrapolation judges nothing)."""
+        if self.holdout_undetermined:
+            return True
         base, new = self.holdout_error(0), self.holdout_error(1)
         if not (math.isfinite(base) and math.isfinite(new)):
             return True
@@ -204,6 +211,7 @@ class Confirmation:
             "rms": {k: pair(v) for k, v in self.rms.items()},
             "holdout": list(self.holdout) if self.holdout else None,
             "holdout_rms": {k: pair(v) for k, v in self.holdout_rms.items()} if self.holdout_rms else None,
+            "holdout_undetermined": list(self.holdout_undetermined), "predicts": self.predicts,
             "effect_estimates": {k: {"estimate": float(v), "std_err": float(s), "interval_95": [float(a), float(b)]}
                                  for k, (v, s, (a, b)) in self.effect_estimates.items()},
             "discretization": {k: float(v) for k, v in self.discretization.items()},
@@ -386,7 +394,13 @@ def confirm(fit: EstimationResult, effect: Effect | str | Sequence[Effect | str]
     est = _effect_estimates(fit.spec, new, effects)
     disc = _discretization_check(new, data, timeout)
     t2 = time.perf_counter()
-    hold = _holdout(fit, new, window, options, timeout)
+    if window is not None:
+        from .screen import vehicle_of
+        vehicle = vehicle_of(fit)
+        sizes = {k: v for e in effects for k, v in e.sizes(vehicle).items()}
+    else:
+        sizes = {}
+    hold = _holdout(fit, new, window, options, timeout, sizes)
     t3 = time.perf_counter()
     return Confirmation(
         effects=tuple(e.name for e in effects), fit=new, base_fit=fit, lr_statistic=test.lr, lr_p_value=test.lr_p,
@@ -396,7 +410,7 @@ def confirm(fit: EstimationResult, effect: Effect | str | Sequence[Effect | str]
         notes=test.notes + est.notes + disc.notes + hold.notes,
         timings={"refit_s": t1 - t0, "checks_s": t2 - t1, "holdout_s": t3 - t2, "total_s": t3 - t0},
         holdout_fits=hold.fits, effect_covariance=est.covariance,
-        acceptance=_acceptance(fit, new, effects, fit.spec, disc.total, level))
+        acceptance=_acceptance(fit, new, effects, fit.spec, disc.total, level), holdout_undetermined=hold.undetermined)
 
 
 class _Test(NamedTuple):
@@ -520,17 +534,35 @@ def _discretization_check(new: EstimationResult, data: Measurements, timeout: fl
 
 
 class _Holdout(NamedTuple):
-    """Both models fitted on the window, predicting the rest: ``{channel: (base RMS, new RMS)}``."""
+    """Both models fitted on the window, predicting the rest: ``{channel: (base RMS, new RMS)}``, and
+    the effect parameters the window's data do not determine."""
 
     rms: dict | None
     fits: tuple | None
     notes: tuple
+    undetermined: tuple = ()
+
+
+def _undetermined(window_fit: EstimationResult, sizes: Mapping[str, float]) -> tuple:
+    """The effect parameters (``sizes``: their realistic magnitudes) whose standard error in the
+    hold-out window's fit exceeds one realistic size, or that have none: the window's data do not
+    determine them, so their extrapolation judges nothing."""
+    sizes = {k: abs(float(v)) for k, v in sizes.items() if k in window_fit.spec.parameter_names
+             and math.isfinite(float(v)) and float(v) != 0}
+    if not sizes:
+        return ()
+    try:
+        se = dict(zip(window_fit.spec.parameter_names, uncertainty(window_fit).standard_errors))
+    except (RocketidError, np.linalg.LinAlgError):
+        return tuple(sizes)
+    return tuple(k for k, v in sizes.items() if not (math.isfinite(se[k]) and se[k] <= v))
 
 
 def _holdout(fit: EstimationResult, new: EstimationResult, window: tuple[float, float] | None,
-             options: Mapping[str, Any], timeout: float) -> _Holdout:
+             options: Mapping[str, Any], timeout: float, sizes: Mapping[str, float] | None = None) -> _Holdout:
     """Fit the base model and the model with the effect on ``window`` (None: no check) from their
-    own guesses, and predict the samples after it."""
+    own guesses, and predict the samples after it; ``sizes`` (the effect parameters' realistic
+    magnitudes) to find those the window does not determine."""
     if window is None:
         return _Holdout(None, None, ())
     data, mesh = fit.prepared.measurements, fit.prepared.transcription.mesh
@@ -556,7 +588,11 @@ def _holdout(fit: EstimationResult, new: EstimationResult, window: tuple[float, 
             if blind:
                 notes.append(f"the data of the hold-out window do not reach {', '.join(blind)} of the {label} "
                              "model: held at their guesses in its hold-out fit and prediction")
-        return _Holdout(rms, fits, tuple(notes))
+        loose = _undetermined(fn, sizes or {}) if fn.success else ()
+        if loose:
+            notes.append(f"the hold-out window's data do not determine {', '.join(loose)} (standard error above a "
+                         "realistic size in its fit): the hold-out prediction does not judge the effect")
+        return _Holdout(rms, fits, tuple(notes), loose)
     except RocketidError as exc:
         return _Holdout(None, fits, tuple(notes) + (f"the hold-out check failed: {exc}",))
 
