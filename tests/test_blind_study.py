@@ -1,0 +1,93 @@
+"""``rocketid diagnose`` on a second unseen vehicle, written blind (issue 8).
+
+Halcyon-8 (``tests/vehicles/halcyon.py``) is an 8 t liquid first stage declared from the user
+documentation alone: a sea-level thrust from a static firing, a linear mass history, an 8-knot
+CD(Mach) table, ``CL_alpha alpha`` with a sampled pitch program and an excitation, a rail exit at
+20 m/s, x, h, v at 10 Hz. Its truth (``tests/blind_study/truth.py``) was written by a team member
+who did not read the diagnostics or the other studies' truth models: Earth-centred Cartesian
+position and velocity, vector forces, its own 1976 atmosphere, SciPy's DOP853. The right
+catalogue families of every case were written down before any diagnosis ran
+(``tests/blind_study/cases.py``).
+
+The normal suite checks the instruments: the truth without effects reproduces the estimation
+model, and the vehicle fits clean data to the noise. The diagnoses (``rocketid diagnose`` from the
+command line, 6 s to 7 minutes each) are ``slow``: ``pytest -m slow tests/test_blind_study.py``.
+The table is in docs/effects.md ("Evaluation on a blind vehicle").
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+HERE = Path(__file__).resolve().parent
+for extra in (HERE / "blind_study", HERE / "vehicles"):
+    if str(extra) not in sys.path:
+        sys.path.insert(0, str(extra))
+
+import halcyon  # noqa: E402
+
+import rocketid as ri  # noqa: E402
+from rocketid.estimability import uncertainty  # noqa: E402
+
+run = pytest.importorskip("run")           # tests/blind_study/run.py (its folder is on sys.path)
+truth = pytest.importorskip("truth")
+C = pytest.importorskip("cases")
+
+#: Cases measured not to meet the bar, with the measured reason.
+KNOWN_FAILURES: dict[str, str] = {
+    "x-misalign_late-s2": "3087b51: a 0.2 deg misalignment switched on at 20 s is fitted to the noise by wind_pl_6 "
+                          "(W_5 -17.8 m/s, CL_alpha moved), verdict explained; the constant misalignment stops just "
+                          "above the noise band and no catalogue shape has an onset time; the hold-out does not "
+                          "tell (x 13.0 -> 9.8 m, h 12.5 -> 18.6 m)",
+    "x-misalign_late-neg": "3087b51: the same with -0.2 deg: the catalogue's wind (about 0.6 m/s) with CL_alpha "
+                           "3.76 for 3.0, verdict explained",
+    "dropped_mass": "3087b51: 150 kg released at 55 s (no catalogue shape): a 9-knot thrust profile reaches the "
+                    "noise with CD_0 at its lower bound: partly explained, a wrong family",
+    "throttle_bucket": "3087b51: thrust and mass flow 20 % down at 30-45 s are absorbed into the CD(M) knots near "
+                       "Mach 1 (CD_3 1.28 for 0.53); wind_pl_6 + drag_mach_7 + earth_rotation end at chi2/dof 1.5, "
+                       "partly explained, no thrust term",
+}
+
+
+def test_truth_reproduces_the_vehicle_model():
+    """Cartesian position and velocity with vector forces (truth) against speed and path angle
+    (the model, simulated by rocketid): below a millimetre."""
+    spec = halcyon.build_model()
+    exact = truth.simulate(run.TIMES)
+    model = ri.simulate(spec, halcyon.truth(spec), run.TIMES).outputs()
+    for name in ("x", "h", "v"):
+        assert np.max(np.abs(exact[name] - model[name])) < 1e-3, name
+
+
+def test_vehicle_fits_clean_truth_data_to_the_noise():
+    spec = halcyon.build_model()
+    data = _measurements(truth.measurements(run.TIMES, {}, seed=11), spec)
+    fit = ri.estimate(spec, data)
+    assert fit.success, fit.message
+    assert 0.9 < fit.chi2_per_dof < 1.1
+    se = uncertainty(fit).standard_errors
+    true = halcyon.truth(spec)
+    for name, value, s in zip(spec.parameter_names, fit.p, se):
+        assert abs(value - true[name]) < 4 * s, (name, value, true[name], s)
+
+
+def _measurements(table, spec) -> "ri.Measurements":
+    """The truth's samples as rocketid measurements (the model's sigmas)."""
+    return ri.Measurements(tuple(ri.Channel(c, np.asarray(table["t"], float), np.asarray(table[c], float))
+                                 for c in ("x", "h", "v")))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", list(C.CASES))
+def test_blind_case(name):
+    rec = run.collect(name, run.run_case(name))
+    if name in KNOWN_FAILURES:
+        if run.acceptable(rec):
+            pytest.fail(f"{name} now meets the bar ({rec['outcome']}): remove it from KNOWN_FAILURES")
+        pytest.xfail(KNOWN_FAILURES[name])
+    assert run.acceptable(rec), rec
+    assert not rec["outcome"].startswith("WRONG"), rec
