@@ -12,7 +12,6 @@ same discovery on it and reports what it finds.
 from __future__ import annotations
 
 import numpy as np
-import sympy as sp
 
 from ..errors import ModelError
 from ..model import ModelSpec
