@@ -16,6 +16,7 @@ ran), without reading rocketid's diagnostics or the other studies' truth models.
 from __future__ import annotations
 
 import json
+import math
 import os
 import subprocess
 import sys
@@ -89,21 +90,19 @@ def classify(effects, verdict, right):
     return "wrong, not called explained"
 
 
-#: Outcomes that meet the bar: the right answer, an honest partial one, or nothing found for an
-#: effect the base model absorbs; never a wrong effect reported as the explanation. For a visible
-#: effect (a base fit above the noise) "nothing found" does not meet it.
-ACCEPTABLE = ("right: nothing missing", "right & explained", "right but partly", "nothing found")
+#: Outcomes that meet the bar (as for the unseen study): the right answer, clean data left alone,
+#: or nothing found for an effect the base fit does not show (its chi2/dof at most 1.1). A partial
+#: or wrong answer that is not called explained is honest but does not meet it; a wrong effect
+#: called explained is the worst outcome.
+ACCEPTABLE = ("right: nothing missing", "right & explained")
 
 
 def acceptable(rec) -> bool:
-    """Whether a case's outcome meets the bar (:data:`ACCEPTABLE`; a hidden effect that leaves the
-    base fit above 1.1 in chi2/dof must be found)."""
+    """Whether a case's outcome meets the bar (:data:`ACCEPTABLE`)."""
     out = rec.get("outcome", "")
-    if out.startswith("WRONG") or out.startswith("no diagnosis") or out.startswith("false alarm"):
-        return False
-    if out == "nothing found" and (rec.get("chi2_base") or 0.0) > 1.1:
-        return False
-    return out.split(" (")[0] in ACCEPTABLE or out.startswith("right but partly")
+    if out == "nothing found":
+        return (rec.get("chi2_base") or math.inf) <= 1.1
+    return out in ACCEPTABLE
 
 
 def _sizes(final):
