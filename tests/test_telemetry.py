@@ -71,6 +71,34 @@ def test_cli_reads_multirate_csv(tmp_path, multirate):
     assert "8852 values in 3 channels" in r.output
 
 
+def test_cli_reads_one_file_per_channel_as_one_flight(tmp_path, multirate):
+    """NAME=FILE[,NAME=FILE...] is one flight measured in one file per channel: the same fit as
+    the multi-rate CSV; two such arguments are two flights; a bad one is named."""
+    import json
+
+    files = {c.name: ri.Measurements((c,)).to_csv(tmp_path / f"{c.name}_ch.csv") for c in multirate.channels}
+    arg = ",".join(f"{k}={v}" for k, v in files.items())
+    one, many = tmp_path / "one.json", tmp_path / "many.json"
+    r = CliRunner().invoke(main, ["estimate", arg, "--out", str(one)])
+    assert r.exit_code == 0, r.output
+    assert "8852 values in 3 channels" in r.output
+    r = CliRunner().invoke(main, ["estimate", str(multirate.to_csv(tmp_path / "m.csv")), "--out", str(many)])
+    assert r.exit_code == 0, r.output
+    a, b = json.loads(one.read_text()), json.loads(many.read_text())
+    for name, value in b["parameters"].items():
+        assert a["parameters"][name] == pytest.approx(value, rel=1e-10, abs=1e-12), name
+    # an output without a file is predicted, not fitted
+    r = CliRunner().invoke(main, ["estimate", f"x={files['x']},h={files['h']}"])
+    assert r.exit_code == 0, r.output
+    assert "8201 values in 2 channels" in r.output
+    for bad, fragment in ((f"q={files['x']}", "no output 'q'; its outputs are x, h, v"),
+                          (f"x={files['x']},x={files['h']}", "output 'x' is given two files"),
+                          (f"x={files['x']},h", "'h' is not NAME=FILE"),
+                          (f"x={tmp_path / 'nope.csv'}", "does not exist")):
+        r = CliRunner().invoke(main, ["estimate", bad])
+        assert r.exit_code == 2 and fragment in r.output, (bad, r.output)
+
+
 def test_read_channels_bad_input(tmp_path):
     with pytest.raises(DataError, match="non-empty mapping"):
         ri.read_channels({})

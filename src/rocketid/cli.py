@@ -239,13 +239,37 @@ def ipopt_options(pairs: Iterable[tuple[str, str]]) -> dict[str, Any]:
 # ---------------------------------------------------------------------------
 
 
+def channel_files(path: str | os.PathLike, outputs: Sequence[str]) -> dict[str, str] | None:
+    """``{output: CSV}`` when a data argument is one flight given as one file per channel,
+    ``NAME=FILE[,NAME=FILE...]`` (``h=alt.csv,v=speed.csv``); None for an ordinary CSV path."""
+    text = str(path)
+    if "=" not in text or Path(text).exists():
+        return None
+    files: dict[str, str] = {}
+    for part in text.split(","):
+        name, sep, file = part.partition("=")
+        name, file = name.strip(), file.strip()
+        if not sep or not name or not file:
+            raise SettingsError(f"data argument {text!r}: one file per channel is written NAME=FILE[,NAME=FILE...] "
+                                f"(e.g. {outputs[0]}=channel.csv); {part!r} is not NAME=FILE")
+        if name not in outputs:
+            raise SettingsError(f"data argument {text!r}: the model has no output {name!r}; its outputs are "
+                                f"{', '.join(outputs)}")
+        if name in files:
+            raise SettingsError(f"data argument {text!r}: output {name!r} is given two files; give each once")
+        files[name] = file
+    return files
+
+
 def read_data(path: str | os.PathLike, spec: ModelSpec, *, time_column: str = "t",
               columns: Mapping[str, str] | None = None, sigma: Mapping[str, float] | None = None,
               unmeasured: Sequence[str] = (), window: tuple[float, float] | None = None,
               sigma_columns: Mapping[str, str] | None = None) -> Measurements:
-    """Read a CSV with one column per model output (see :func:`rocketid.data.read_csv`);
-    ``columns``, ``sigma`` and ``sigma_columns`` (per-sample sigma columns, ``--sigma-column``)
-    are keyed by output name, checked against the model.
+    """Read a CSV with one column per model output (see :func:`rocketid.data.read_csv`), or one
+    file per channel (``NAME=FILE[,NAME=FILE...]``, :func:`channel_files`, read by
+    :func:`rocketid.data.read_channels`: each with its own sample times; an output without a
+    file is predicted, not fitted); ``columns``, ``sigma`` and ``sigma_columns`` (per-sample
+    sigma columns, ``--sigma-column``) are keyed by output name, checked against the model.
 
     An output without a column is left out (predicted, not fitted) when it is named in
     ``unmeasured`` or when the file has no column that goes unread; an empty cell means
@@ -265,9 +289,22 @@ def read_data(path: str | os.PathLike, spec: ModelSpec, *, time_column: str = "t
     if skipped:
         raise SettingsError(f"--sigma-column {skipped[0]}={sigma_columns[skipped[0]]}: {skipped[0]!r} is named by "
                             "--unmeasured (not fitted); drop one of the two")
-    data = read_csv(path, wanted, time_column=time_column, column_map=columns,
-                    sigma={k: v for k, v in (sigma or {}).items() if k in wanted}, missing="auto",
-                    sigma_columns=sigma_columns)
+    files = channel_files(path, outputs)
+    if files is not None:
+        from .data import read_channels
+
+        given = {k: v for k, v in files.items() if k in wanted}
+        if not given:
+            raise SettingsError(f"data argument {str(path)!r}: every output it gives a file is named by --unmeasured: "
+                                "nothing is left to fit")
+        data = read_channels(given, time_column=time_column,
+                             column_map={k: v for k, v in (columns or {}).items() if k in given},
+                             sigma={k: v for k, v in (sigma or {}).items() if k in given},
+                             sigma_columns=sigma_columns)
+    else:
+        data = read_csv(path, wanted, time_column=time_column, column_map=columns,
+                        sigma={k: v for k, v in (sigma or {}).items() if k in wanted}, missing="auto",
+                        sigma_columns=sigma_columns)
     if window is not None:
         data = data.window(*window)
     return data
@@ -439,9 +476,8 @@ def mesh_size_warning(spec: ModelSpec, mesh, data: Measurements) -> str | None:
 def prepare_verbosely(spec: ModelSpec, data: Measurements, mesh):
     """:func:`rocketid.solve.prepare` with progress lines (code generation, NLP size) and
     :func:`mesh_size_warning` (always shown) before the work."""
-    from .solve import prepare
-
     from .codegen import cache_path, generate
+    from .solve import prepare
 
     warning = mesh_size_warning(spec, mesh, data)
     if warning:
@@ -825,8 +861,10 @@ def simulate_command(out, model, seed, no_noise, params):
 
 
 def flight_labels(paths: Sequence[str]) -> list[str]:
-    """Labels of several data files: their names without the extension (made unique)."""
-    stems = [Path(p).stem or "flight" for p in paths]
+    """Labels of several data files: their names without the extension (made unique; a flight
+    given one file per channel, ``NAME=FILE,...``, by its first file)."""
+    stems = [Path(str(p).split(",")[0].partition("=")[2] if "=" in str(p) and not Path(str(p)).exists()
+                  else p).stem or "flight" for p in paths]
     return [s if stems.count(s) == 1 else f"{s}_{i + 1}" for i, s in enumerate(stems)]
 
 
@@ -865,6 +903,10 @@ def read_flights(paths: Sequence[str], spec: ModelSpec, *, columns, time_column,
 def estimate_command(data_files, model, columns, time_column, sigmas, sigma_columns, unmeasured, window_text,
                      n_elements, K, guesses, per_flight, ipopt, out):
     """Estimate the model's parameters from measurements in DATA.csv.
+
+    DATA.csv has a time column and one column per measured output (an empty cell: not
+    measured then). A flight measured in one file per channel is one argument
+    NAME=FILE[,NAME=FILE...], e.g. h=altimeter.csv,v=speed.csv.
 
     Prints the summary; with --out writes FIT.json (success, parameters,
     objective, iterations, timings, ...). Exit code 1 when IPOPT did not

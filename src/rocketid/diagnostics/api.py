@@ -389,7 +389,7 @@ def _candidate_effects(candidates) -> list:
 def _confirm_final(fit, disc, holdout, level, timeout, options, notes: list) -> tuple:
     """The final model's effects confirmed against the base model (LR, BIC, hold-out), started
     from the final estimate; and the plausibility of its coefficients."""
-    from .refit import confirm
+    from .refit import confirm, effect_sizes
     if disc is None or not disc.effects:
         return (), (), ()
     spec_f = disc.fit.spec
@@ -402,12 +402,7 @@ def _confirm_final(fit, disc, holdout, level, timeout, options, notes: list) -> 
     except RocketidError as exc:
         notes.append(f"the final model could not be confirmed: {exc}")
         return (), (), ()
-    # every parameter the effects declared is an effect parameter (a wind's surface value enters the
-    # drag coefficient through the airspeed's Mach number, yet it is a speed, not a drag coefficient)
-    base_names = set(fit.spec.parameter_names)
-    sizes = {n: 0.0 for n in conf.fit.spec.parameter_names if n not in base_names}
-    for e in disc.effects:
-        sizes.update({k: v for k, v in e.sizes(disc.vehicle).items() if k in sizes})
+    sizes = effect_sizes(conf.fit.spec.parameter_names, fit.spec.parameter_names, disc.effects, disc.vehicle)
     try:
         pl = (check_plausibility(conf.fit, level=level, realistic=sizes),)
     except RocketidError as exc:

@@ -304,6 +304,7 @@ def _fit_window(spec, window: Measurements, mesh, guess, options, reference: np.
 
 
 HOLDOUT_SHARE = 45.0 / 66.0
+"""``holdout="auto"`` fits the first this share of the model's horizon (RA-66: 0-45 s of 66 s)."""
 
 #: An explanation must predict: fitted on the hold-out window, the model with the effect may predict
 #: the rest of the flight no worse than this factor times the base model's mean squared error...
@@ -313,7 +314,6 @@ HOLDOUT_WORSE = 4.0
 #: the catalogue's wind with the lift slope 20 % low; fitted on 0-54.5 s that model predicted the
 #: rest with RMS x 111 m against the base model's 13 m, a mean squared error 22 times the base's.)
 HOLDOUT_CLOSE = 25.0
-"""``holdout="auto"`` fits the first this share of the model's horizon (RA-66: 0-45 s of 66 s)."""
 
 
 def holdout_window(spec, holdout) -> tuple[float, float] | None:
@@ -866,17 +866,32 @@ def identifiability(names: Sequence[str], cov: np.ndarray, effect_parameters: Se
     return "; ".join(parts)
 
 
+def effect_sizes(names: Sequence[str], base_names: Sequence[str], effects: Sequence[Effect], vehicle=None,
+                 sizes: Mapping[str, float] | None = None) -> dict[str, float]:
+    """Every parameter of ``names`` not in ``base_names`` -- what the effects declared -- with its
+    realistic size: ``sizes`` where given, else the effect's for ``vehicle``, else 0 (unknown).
+    :func:`~rocketid.diagnostics.plausibility.check_plausibility` takes these as effect parameters
+    whatever roles they enter (a wind's surface value enters the drag coefficient through the
+    airspeed's Mach number, yet it is a speed, not a drag coefficient)."""
+    base = set(base_names)
+    out = {n: 0.0 for n in names if n not in base}
+    for e in effects:
+        out.update({k: v for k, v in e.sizes(vehicle).items() if k in out})
+    out.update({k: v for k, v in (sizes or {}).items() if k in out})
+    return out
+
+
 def summarize_refit(new: EstimationResult, base_objective: float, base_n_estimated: int, effects: Sequence[Effect],
                     added: Sequence[str], sizes: Mapping[str, float], *, level: float = 0.05,
                     base_parameters: Sequence[str] = (), seconds: float = 0.0, notes: Sequence[str] = (),
                     least: Mapping[str, float] | None = None, base_values: Mapping[str, float] | None = None,
-                    base_chi2_per_dof: float = float("nan"), effect_parameters: Sequence[str] | None = None) -> Refit:
+                    base_chi2_per_dof: float = float("nan"), model_parameters: Sequence[str] | None = None) -> Refit:
     """The :class:`Refit` of a fitted model with ``effects``: whiteness per channel, standard
     errors, the base coefficients' plausibility, the added parameters' identifiability.
 
-    ``effect_parameters`` names every parameter the effects declared (the ones judged and those of
-    earlier steps; default: those not in ``base_parameters``): the plausibility check takes them
-    as effect parameters whatever roles they enter, never as drag or lift coefficients."""
+    ``model_parameters`` are the user's model's own (default ``base_parameters``): every other
+    parameter -- the effects judged and those of earlier steps -- is an effect parameter for the
+    plausibility check (:func:`effect_sizes`), never a drag or lift coefficient."""
     from .plausibility import check_plausibility
 
     names = tuple(new.spec.parameter_names)
@@ -895,10 +910,9 @@ def summarize_refit(new: EstimationResult, base_objective: float, base_n_estimat
         ident = identifiability(list(names), np.asarray(unc.parameter_covariance), eff_params, sizes,
                                 values=np.asarray(new.p, float))
         try:
-            real = {n: 0.0 for n in (declared if effect_parameters is None else effect_parameters)}
-            real.update({k: v for e in effects for k, v in e.realistic.items() if k in real})
-            real.update(sizes)
-            pl = check_plausibility(new, uncertainty=unc, level=level, realistic=real)
+            own = base_parameters if model_parameters is None else model_parameters
+            pl = check_plausibility(new, uncertainty=unc, level=level,
+                                    realistic=effect_sizes(names, own, effects, sizes=sizes))
             base_flags = [f for f in pl.flagged(severity="fail") if not set(f.parameters) & set(declared)]
             plaus = not base_flags
             failing = tuple(f"{f.code}: {f.message}" for f in base_flags)
@@ -1035,8 +1049,7 @@ def run_refit(task: RefitTask) -> tuple[Refit, EstimationResult | None]:
                            notes=notes, least={k: v for e in task.effects if e.name in task.added
                                                for k, v in e.least.items()},
                            base_values=task.base_values, base_chi2_per_dof=task.base_chi2_per_dof,
-                           effect_parameters=[n for n in new.spec.parameter_names
-                                              if n not in set(task.base_spec.parameter_names)]), new
+                           model_parameters=task.base_spec.parameter_names), new
 
 
 def _failed(task: RefitTask, message: str, seconds: float, gave_up: bool = False) -> Refit:
