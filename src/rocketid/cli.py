@@ -239,11 +239,16 @@ def ipopt_options(pairs: Iterable[tuple[str, str]]) -> dict[str, Any]:
 # ---------------------------------------------------------------------------
 
 
+def _names_channel_files(text: str) -> bool:
+    """Whether a data argument is ``NAME=FILE[,NAME=FILE...]`` rather than a CSV path."""
+    return "=" in text and not Path(text).exists()
+
+
 def channel_files(path: str | os.PathLike, outputs: Sequence[str]) -> dict[str, str] | None:
     """``{output: CSV}`` when a data argument is one flight given as one file per channel,
     ``NAME=FILE[,NAME=FILE...]`` (``h=alt.csv,v=speed.csv``); None for an ordinary CSV path."""
     text = str(path)
-    if "=" not in text or Path(text).exists():
+    if not _names_channel_files(text):
         return None
     files: dict[str, str] = {}
     for part in text.split(","):
@@ -863,8 +868,8 @@ def simulate_command(out, model, seed, no_noise, params):
 def flight_labels(paths: Sequence[str]) -> list[str]:
     """Labels of several data files: their names without the extension (made unique; a flight
     given one file per channel, ``NAME=FILE,...``, by its first file)."""
-    stems = [Path(str(p).split(",")[0].partition("=")[2] if "=" in str(p) and not Path(str(p)).exists()
-                  else p).stem or "flight" for p in paths]
+    stems = [Path(str(p).split(",")[0].partition("=")[2] if _names_channel_files(str(p)) else p).stem or "flight"
+             for p in paths]
     return [s if stems.count(s) == 1 else f"{s}_{i + 1}" for i, s in enumerate(stems)]
 
 
