@@ -59,7 +59,8 @@ from ..physics.gravity import EARTH_RADIUS
 __all__ = ["Effect", "Vehicle", "back_pressure_effect", "thrust_profile_effect", "throttle_effect", "wind_profile_effect",
            "density_profile_effect", "drag_mach_effect", "piecewise_linear", "CATALOGUE", "KINDS", "custom_effect", "with_effects", "apply_effect", "resolve_effects",
            "is_present", "check_effect_parameters", "effect_parameter_problems", "wind_effect", "density_effect", "earth_rotation_effect",
-           "liftoff_fade", "EARTH_RATE", "LIFTOFF_FADE_TIME"]
+           "liftoff_fade", "EARTH_RATE", "LIFTOFF_FADE_TIME", "misalignment_onset_effect", "onset_step",
+           "ONSET_STARTS"]
 
 #: The kinds of effect (``"custom"`` for the user's own).
 KINDS = ("propulsion", "mass", "aero", "environment", "kinematics", "sensor", "custom")
@@ -103,6 +104,10 @@ class Effect:
     least : mapping of str to float
         The smallest plausible magnitude of a parameter whose size physics fixes
         (Earth's rotation rate factor ``k_rot``); empty for most effects.
+    starts : tuple of mapping
+        Starting values to refit the effect from, each a ``{parameter: value}``; the refit
+        with the lowest objective is kept. Empty (one refit, from the guesses) for most
+        effects; an onset time needs several (:data:`ONSET_STARTS`).
     """
 
     name: str
@@ -114,6 +119,7 @@ class Effect:
     relative: Callable | None = field(default=None, compare=False, repr=False)
     refine: Callable | None = field(default=None, compare=False, repr=False)
     least: Mapping[str, float] = field(default_factory=dict, compare=False)
+    starts: tuple = field(default=(), compare=False)
 
     def __post_init__(self):
         if not isinstance(self.name, str) or not self.name.isidentifier():
@@ -124,6 +130,8 @@ class Effect:
             raise ModelError(f"effect {self.name!r}: apply must be a function apply(model) -> parameters")
         object.__setattr__(self, "realistic", MappingProxyType({str(k): float(v) for k, v in self.realistic.items()}))
         object.__setattr__(self, "least", MappingProxyType({str(k): float(v) for k, v in self.least.items()}))
+        object.__setattr__(self, "starts", tuple(MappingProxyType({str(k): float(v) for k, v in st.items()})
+                                                 for st in self.starts))
 
     @property
     def parameter_names(self) -> tuple[str, ...]:
@@ -425,15 +433,70 @@ def _misalignment_fade(m: Model) -> tuple:
     return (delta, s)
 
 
+ONSET_STARTS = (0.1, 0.3, 0.5, 0.7)
+"""Starting onset times of an onset effect, as shares of the horizon: its refit is started from each and
+the best kept (the objective is not convex in an onset time, and at ``delta = 0`` it does not depend on it)."""
+
+
+def onset_step(t: sp.Expr, t_on: sp.Expr, width: float) -> sp.Expr:
+    """``(1 + tanh((t - t_on) / width)) / 2``: a switch from 0 to 1 at ``t_on``, smoothed over ``width`` s
+    (an event inside the flight -- a gimbal bias appearing, a valve opening -- at a time the data fix)."""
+    return (1 + sp.tanh((t - t_on) / float(width))) / 2
+
+
+def misalignment_onset_effect(t0: float, tf: float, width: float, *, from_rest: bool = False) -> Effect:
+    """A thrust misalignment that appears at an estimated time inside the flight.
+
+    ``alpha_thrust = alpha + delta_thrust s(t)``, ``s`` the switch :func:`onset_step` at
+    ``t0 + t_misalign`` (``t_misalign``, s after the start, bounded to ``[-3 width, tf - t0]``: at 0 or
+    below the misalignment acts from the start, the catalogue's constant shape). From rest it is also
+    phased in by the lift-off fade. The refit starts ``t_misalign`` at each of :data:`ONSET_STARTS`.
+
+    Parameters
+    ----------
+    t0, tf : float
+        The flight's horizon, s.
+    width : float
+        Time over which the misalignment switches on, s (at least the length of a collocation
+        element, so that the mesh resolves it).
+    from_rest : bool
+        The vehicle starts at zero speed.
+    """
+    horizon = max(1e-9, float(tf) - float(t0))
+    w = float(width)
+
+    def apply(m: Model) -> tuple:
+        sym, at = _role_definition(m, "thrust_direction", "misalignment_onset")
+        delta = m.parameter("delta_thrust", 0.0, nominal=math.radians(0.25))
+        t_on = m.parameter("t_misalign", 0.0, bounds=(-3.0 * w, horizon), nominal=horizon / 4)
+        switch = onset_step(m.t - m.t0, t_on, w)
+        if from_rest:
+            switch = switch * liftoff_fade(m.t - m.t0)
+        m.redefine(sym, at + delta * switch)
+        return (delta, t_on)
+
+    return Effect("misalignment_onset", "thrust misalignment from an estimated onset time", "propulsion", apply,
+                  f"thrust direction alpha_thrust = alpha + delta_thrust (1 + tanh((t - t0 - t_misalign) / {w:.3g} s)) "
+                  "/ 2: a misalignment that appears t_misalign s after the start (a gimbal or nozzle bias after an "
+                  "event)" + (", phased in by the lift-off fade f_lo(t)" if from_rest else ""),
+                  {"delta_thrust": math.radians(0.25), "t_misalign": horizon},
+                  starts=tuple({"t_misalign": f * horizon, "delta_thrust": 0.0} for f in ONSET_STARTS))
+
+
 def _refine_misalignment(vehicle: "Vehicle | None") -> list[Effect]:
-    """From rest the misalignment is phased in at lift-off; its fade time is then estimated (a moving
-    start takes the misalignment from t0 and needs no fade)."""
-    if vehicle is not None and math.isfinite(vehicle.start_speed) and vehicle.start_speed > 0:
-        return []
-    return [Effect("misalignment_fade", "thrust misalignment, fade time estimated", "propulsion", _misalignment_fade,
-                   "thrust direction alpha_thrust = alpha + delta_thrust t^4 / (t^4 + (t_r exp(s_fade))^4), "
-                   f"t_r = {LIFTOFF_FADE_TIME:g} s: the time the launcher holds the path vertical, estimated",
-                   {"delta_thrust": math.radians(0.25), "s_fade": 1.0})]
+    """From rest the misalignment is phased in at lift-off, and its fade time is estimated; on every vehicle
+    it may also appear at an estimated time inside the flight (:func:`misalignment_onset_effect`)."""
+    moving = vehicle is not None and math.isfinite(vehicle.start_speed) and vehicle.start_speed > 0
+    out = [] if moving else [
+        Effect("misalignment_fade", "thrust misalignment, fade time estimated", "propulsion", _misalignment_fade,
+               "thrust direction alpha_thrust = alpha + delta_thrust t^4 / (t^4 + (t_r exp(s_fade))^4), "
+               f"t_r = {LIFTOFF_FADE_TIME:g} s: the time the launcher holds the path vertical, estimated",
+               {"delta_thrust": math.radians(0.25), "s_fade": 1.0})]
+    if vehicle is not None and len(vehicle.knot_times) >= 2:
+        knots = np.asarray(vehicle.knot_times, float)
+        width = max(1.0, float(np.median(np.diff(knots))))
+        out.append(misalignment_onset_effect(knots[0], knots[-1], width, from_rest=not moving))
+    return out
 
 
 _CHANNEL_ROLE = {"x": "downrange", "h": "altitude", "v": "speed"}
