@@ -316,3 +316,91 @@ def test_a_hold_out_that_does_not_determine_the_effect_judges_nothing():
     assert not _confirmation(bad, sigma=(1.0, 1.0, 1.0)).predicts
     loose = _confirmation(bad, sigma=(1.0, 1.0, 1.0), undetermined=("drho_3", "drho_4"))
     assert loose.predicts and loose.confirmed and loose.prediction_note == ""
+
+
+def test_a_snug_choice_still_tries_the_shapes_of_a_near_rival():
+    """Halcyon-8 with a 0.2 deg misalignment switched on at 20 s: a 0.6 m/s wind reached chi2/dof 0.984 (snug)
+    and the constant misalignment, 95 % of the wind's fall, stopped at 1.14. The misalignment is a near rival
+    (its onset-time shape is then tried); a refit that falls much less, or one of the chosen family, is not."""
+    from rocketid.diagnostics import step as S
+    from rocketid.diagnostics.effects import CATALOGUE, Vehicle
+    from rocketid.diagnostics.screen import Contender, Screen
+
+    veh = Vehicle(thrust=1.5e5, mass=8e3, mass_flow=69.0, speed=1310.0, start_speed=20.0, duration=80.0,
+                  altitude=(0.0, 35000.0), mach=(0.0, 4.4), sigma={"x": 3.0, "h": 3.0, "v": 0.3},
+                  sample_interval=0.1, knot_times=tuple(np.linspace(0.0, 80.0, 41)))
+    names = ("wind", "misalignment", "density", "earth_rotation")
+    scr = Screen(None, tuple(Contender(CATALOGUE[n], "") for n in names), ())
+    accs = [accept(refit(n, c, base_chi2=3.84), BAND) for n, c in zip(names, (0.984, 1.141, 1.90, 1.15))]
+    base = 3.84 * (N_DATA - 8) / 2
+    assert S._near_rivals(accs, scr, veh, 0, base) == [1]       # earth_rotation has no other shape
+    assert [e.name for e in CATALOGUE["misalignment"].refinements(veh)] == ["misalignment_onset"]
+    # a refit that does not lower the objective leaves no rival
+    assert S._near_rivals(accs, scr, veh, 0, accs[0].refit.objective) == []
+
+
+def test_a_shape_with_several_starts_is_represented_by_its_best_refit(monkeypatch):
+    """An onset time is refitted from every start (Effect.starts); the converged refit with the lowest
+    objective stands for the shape, and the level's other families are refitted in the same batch."""
+    from rocketid.diagnostics import step as S
+    from rocketid.diagnostics.effects import misalignment_onset_effect, CATALOGUE
+
+    onset = misalignment_onset_effect(0.0, 80.0, 2.0)
+    assert [st["t_misalign"] for st in onset.starts] == pytest.approx([8.0, 24.0, 40.0, 56.0])
+    chi2_of_start = {8.0: 1.20, 24.0: 0.99, 40.0: 1.05, 56.0: 1.40}
+    made = []
+
+    def fake_refits(tasks, workers=None):
+        out = []
+        for effect, start in tasks:
+            t = start.get("t_misalign")
+            out.append(refit(effect.name, chi2_of_start[t] if t is not None else 1.3, success=t != 56.0))
+        return tuple(out)
+
+    monkeypatch.setattr(S, "refit_all", fake_refits)
+    wind = CATALOGUE["wind"]
+    found = S._refine_families([[onset], [wind]], lambda v, start=None: made.append((v.name, start)) or (v, start),
+                               lambda r: accept(r, BAND), workers=1)
+    assert [v.name for v, _ in found] == ["misalignment_onset", "wind"]
+    assert found[0][1].refit.chi2_per_dof == pytest.approx(0.99)
+    assert len(made) == 5 and made[-1] == ("wind", {})
+    assert S._best_start([refit("a", 2.0, success=False), refit("a", 3.0, success=False)]).chi2_per_dof == 2.0
+
+
+def test_two_shapes_of_one_family_are_not_rivals_but_another_family_is():
+    """A wind and its 6-knot shape both reaching the noise within BIC_TIE are one explanation; a misalignment
+    from an onset time within BIC_TIE of the wind is a rival the data must decide (no hold-out: a tie)."""
+    from rocketid.diagnostics import step as S
+    from rocketid.diagnostics.effects import CATALOGUE, misalignment_onset_effect
+
+    effects = [CATALOGUE["wind"], replace_name(CATALOGUE["wind"], "wind_pl_6")]
+    accs = [accept(refit("wind", 0.990), BAND), accept(refit("wind_pl_6", 0.9902), BAND)]
+    assert S._tie_break(accs, 0, None, [], effects, None, 0.05, None, 60.0) == (0, "")
+    effects.append(misalignment_onset_effect(0.0, 80.0, 2.0))
+    accs.append(accept(refit("misalignment_onset", 0.9901), BAND))
+    i, note = S._tie_break(accs, 0, None, [], effects, None, 0.05, None, 60.0, rivals=[2])
+    assert i is None and "wind, misalignment_onset" in note and "cannot tell them apart" in note
+    # restricted to the refits new at this point, an earlier rival is not compared again
+    assert S._tie_break(accs, 0, None, [], effects[:2] + effects[2:], None, 0.05, None, 60.0, rivals=[1]) == (0, "")
+
+
+def replace_name(effect, name):
+    from dataclasses import replace
+    return replace(effect, name=name)
+
+
+def test_an_event_shape_is_a_ladder_of_its_own():
+    """The knot ladder of a family is climbed while BIC falls; a shape with an estimated event time is no
+    more flexible than the knots and is tried beside the ladder, not as its next rung."""
+    from rocketid.diagnostics import step as S
+    from rocketid.diagnostics.effects import CATALOGUE, Vehicle
+
+    veh = Vehicle(thrust=1.5e5, mass=8e3, mass_flow=69.0, speed=1310.0, start_speed=0.0, duration=80.0,
+                  altitude=(0.0, 35000.0), mach=(0.0, 4.4), sigma={"x": 3.0}, sample_interval=0.1,
+                  knot_times=tuple(np.linspace(0.0, 80.0, 41)))
+    ladders = S._ladders([CATALOGUE["misalignment"].refinements(veh), CATALOGUE["thrust_level"].refinements(veh),
+                          CATALOGUE["start_mass"].refinements(veh)])
+    assert [[v.name for v in f] for f in ladders] == [["misalignment_fade"], ["misalignment_onset"],
+                                                       ["thrust_profile_3", "thrust_profile_5", "thrust_profile_9"],
+                                                       ["mass_jettison"]]
+    assert S._family("mass_jettison") == "start_mass" and S._family("misalignment_onset") == "misalignment"

@@ -349,6 +349,61 @@ def test_drag_correction_is_pinned_at_the_tables_knots(ra66m_spec):
     assert float(f(mid)) - float(g(mid)) == pytest.approx(0.3, abs=1e-12)
 
 
+def _zero_is_the_base_model(base: ri.ModelSpec, effect, size: str) -> ri.ModelSpec:
+    """``base`` with an event-time effect: with its size parameter at zero the equations are the base
+    model's at a random point, whatever the event time. Returns the augmented spec."""
+    spec = with_effects(base, [effect])
+    point = _random_point(spec, np.random.default_rng(3))
+    point[spec.symbol(size)] = 0.0
+    np.testing.assert_allclose(_values(spec, spec.equations[:len(base.states)], point),
+                               _values(base, base.equations, point), rtol=1e-12, atol=1e-9)
+    return spec
+
+
+def test_misalignment_onset_switches_on_at_its_estimated_time(ra66m_spec):
+    """The onset shape: zero delta gives the base model whatever the onset; with delta the thrust direction
+    moves by delta (1 + tanh((t - t0 - t_misalign) / width)) / 2, written out here by hand; every vehicle
+    with a mesh gets it, and from rest it is also phased in by the lift-off fade."""
+    from rocketid.diagnostics.effects import Vehicle, misalignment_onset_effect
+    veh = Vehicle(thrust=9e5, mass=3e4, mass_flow=300.0, speed=1400.0, start_speed=5.0, duration=66.0,
+                  altitude=(0.0, 16000.0), mach=(0.0, 4.5), sigma={"x": 1.0}, sample_interval=0.01,
+                  knot_times=tuple(np.linspace(0.0, 66.0, 34)))
+    (onset,) = CATALOGUE["misalignment"].refinements(veh)
+    assert onset.name == "misalignment_onset" and set(onset.realistic) == {"delta_thrust", "t_misalign"}
+    assert "2 s" in onset.description                       # the width: one element (66 / 33 s), at least 1 s
+    rest = Vehicle(**{**veh.__dict__, "start_speed": 0.0})
+    assert [e.name for e in CATALOGUE["misalignment"].refinements(rest)] == ["misalignment_fade", "misalignment_onset"]
+    spec = _zero_is_the_base_model(ra66m_spec, misalignment_onset_effect(ra66m_spec.t0, ra66m_spec.tf, 2.0),
+                                   "delta_thrust")
+    at = dict(spec.definitions)[spec.role("thrust_direction")]
+    at0 = dict(ra66m_spec.definitions)[ra66m_spec.role("thrust_direction")]
+    for t, want in ((30.0, 0.5), (32.0, (1 + math.tanh(1.0)) / 2), (20.0, (1 + math.tanh(-5.0)) / 2)):
+        d = (at - at0).xreplace({spec.symbol("delta_thrust"): 0.01, spec.symbol("t_misalign"): 30.0,
+                                 spec.t: spec.t0 + t})
+        assert float(d) == pytest.approx(0.01 * want, rel=1e-12)
+    lo, hi = spec.parameter("t_misalign").lower, spec.parameter("t_misalign").upper
+    assert (lo, hi) == (-6.0, pytest.approx(ra66m_spec.tf - ra66m_spec.t0))
+
+
+def test_mass_jettison_releases_its_mass_at_the_estimated_time(ra66m_spec):
+    """start_mass's event shape: zero dm gives the base model; the mass falls by dm around t0 + t_jettison,
+    (1 + tanh((t - t0 - t_j) / w)) / 2 of it, written out by hand here; its size is 1 % of the start mass."""
+    from rocketid.diagnostics.effects import Vehicle, mass_jettison_effect
+    veh = Vehicle(thrust=9e5, mass=3e4, mass_flow=300.0, speed=1400.0, start_speed=5.0, duration=66.0,
+                  altitude=(0.0, 16000.0), mach=(0.0, 4.5), sigma={"x": 1.0}, sample_interval=0.01,
+                  knot_times=tuple(np.linspace(0.0, 66.0, 67)))
+    (jet,) = CATALOGUE["start_mass"].refinements(veh)
+    assert jet.name == "mass_jettison" and jet.sizes(veh) == {"dm_jettison": 300.0, "t_jettison": 66.0}
+    assert len(jet.starts) == 4 and "1 s" in jet.description
+    spec = _zero_is_the_base_model(ra66m_spec, mass_jettison_effect(ra66m_spec.t0, ra66m_spec.tf, 1.0), "dm_jettison")
+    mass = dict(spec.definitions)[spec.role("mass")]
+    mass0 = dict(ra66m_spec.definitions)[ra66m_spec.role("mass")]
+    for t, share in ((40.0, 0.5), (41.0, (1 + math.tanh(1.0)) / 2), (30.0, (1 + math.tanh(-10.0)) / 2)):
+        d = (mass - mass0).xreplace({spec.symbol("dm_jettison"): 150.0, spec.symbol("t_jettison"): 40.0,
+                                     spec.t: spec.t0 + t})
+        assert float(d) == pytest.approx(-150.0 * share, rel=1e-12)
+
+
 def test_misalignment_fade_time_is_estimated_only_from_rest(ra66m_spec):
     """From rest (RA-66M) the misalignment's refined shape estimates its fade time t_r e^s (zero gives
     the base model; s = 0 is the catalogue's 3 s fade); a vehicle released at speed has no such shape."""

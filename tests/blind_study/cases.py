@@ -34,7 +34,8 @@ Decisions (written before running):
 from __future__ import annotations
 
 THRUST = {"thrust_level", "thrust_profile_"}
-MASS = {"mass_flow", "start_mass"}
+# mass_jettison, the start-mass family's event shape, was added after the study was written (2026-11-25)
+MASS = {"mass_flow", "start_mass", "mass_jettison"}
 DRAG = {"transonic_drag", "drag_mach_"}
 HSENS = {"bias_h", "bias_h_drift"}
 VSENS = {"bias_v", "bias_v_drift", "scale_v"}

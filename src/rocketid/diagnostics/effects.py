@@ -59,7 +59,7 @@ from ..physics.gravity import EARTH_RADIUS
 __all__ = ["Effect", "Vehicle", "back_pressure_effect", "thrust_profile_effect", "throttle_effect", "wind_profile_effect",
            "density_profile_effect", "drag_mach_effect", "piecewise_linear", "CATALOGUE", "KINDS", "custom_effect", "with_effects", "apply_effect", "resolve_effects",
            "is_present", "check_effect_parameters", "effect_parameter_problems", "wind_effect", "density_effect", "earth_rotation_effect",
-           "liftoff_fade", "EARTH_RATE", "LIFTOFF_FADE_TIME", "misalignment_onset_effect", "onset_step",
+           "liftoff_fade", "EARTH_RATE", "LIFTOFF_FADE_TIME", "misalignment_onset_effect", "mass_jettison_effect", "onset_step",
            "ONSET_STARTS"]
 
 #: The kinds of effect (``"custom"`` for the user's own).
@@ -483,6 +483,44 @@ def misalignment_onset_effect(t0: float, tf: float, width: float, *, from_rest: 
                   starts=tuple({"t_misalign": f * horizon, "delta_thrust": 0.0} for f in ONSET_STARTS))
 
 
+def mass_jettison_effect(t0: float, tf: float, width: float) -> Effect:
+    """A mass released at an estimated time inside the flight (a fairing, an adapter, ballast, propellant
+    dumped): ``m(t) - dm_jettison s(t)``, ``s`` the switch :func:`onset_step` at ``t0 + t_jettison``.
+
+    ``dm_jettison`` > 0 is mass lost (realistic size 1 % of the start mass); ``t_jettison``, s after the
+    start, is bounded to ``[-3 width, tf - t0]`` (at 0 or below, a lighter vehicle from the start, the
+    ``start_mass`` shape). The refit starts ``t_jettison`` at each of :data:`ONSET_STARTS`.
+    """
+    horizon = max(1e-9, float(tf) - float(t0))
+    w = float(width)
+
+    def apply(m: Model) -> tuple:
+        sym, mass = _role_definition(m, "mass", "mass_jettison")
+        dm = m.parameter("dm_jettison", 0.0, nominal=100.0)
+        t_j = m.parameter("t_jettison", 0.0, bounds=(-3.0 * w, horizon), nominal=horizon / 4)
+        m.redefine(sym, mass - dm * onset_step(m.t - m.t0, t_j, w))
+        return (dm, t_j)
+
+    return Effect("mass_jettison", "mass released at an estimated time", "mass", apply,
+                  f"mass m(t) - dm_jettison (1 + tanh((t - t0 - t_jettison) / {w:.3g} s)) / 2, kg: a mass released "
+                  "t_jettison s after the start (a fairing, an adapter, ballast)",
+                  {"dm_jettison": 200.0, "t_jettison": horizon},
+                  relative=lambda veh: {"dm_jettison": 0.01 * veh.mass},
+                  starts=tuple({"t_jettison": f * horizon, "dm_jettison": 0.0} for f in ONSET_STARTS))
+
+
+def _onset_width(vehicle: "Vehicle") -> float:
+    """Time over which an onset effect switches on: one element of the fit's mesh, at least 1 s."""
+    return max(1.0, float(np.median(np.diff(np.asarray(vehicle.knot_times, float)))))
+
+
+def _refine_start_mass(vehicle: "Vehicle | None") -> list[Effect]:
+    """A mass change at an estimated time (:func:`mass_jettison_effect`) on a vehicle with a mesh."""
+    if vehicle is None or len(vehicle.knot_times) < 2:
+        return []
+    return [mass_jettison_effect(vehicle.knot_times[0], vehicle.knot_times[-1], _onset_width(vehicle))]
+
+
 def _refine_misalignment(vehicle: "Vehicle | None") -> list[Effect]:
     """From rest the misalignment is phased in at lift-off, and its fade time is estimated; on every vehicle
     it may also appear at an estimated time inside the flight (:func:`misalignment_onset_effect`)."""
@@ -493,9 +531,8 @@ def _refine_misalignment(vehicle: "Vehicle | None") -> list[Effect]:
                f"t_r = {LIFTOFF_FADE_TIME:g} s: the time the launcher holds the path vertical, estimated",
                {"delta_thrust": math.radians(0.25), "s_fade": 1.0})]
     if vehicle is not None and len(vehicle.knot_times) >= 2:
-        knots = np.asarray(vehicle.knot_times, float)
-        width = max(1.0, float(np.median(np.diff(knots))))
-        out.append(misalignment_onset_effect(knots[0], knots[-1], width, from_rest=not moving))
+        out.append(misalignment_onset_effect(vehicle.knot_times[0], vehicle.knot_times[-1], _onset_width(vehicle),
+                                             from_rest=not moving))
     return out
 
 
@@ -1064,7 +1101,7 @@ def _build_catalogue() -> dict[str, Effect]:
                {"eps_mdot": 0.02}),
         Effect("start_mass", "start-mass error", "mass", _start_mass,
                "mass m(t) + dm_start, kg: the vehicle heavier (or lighter) than stated by a constant amount",
-               {"dm_start": 200.0}, relative=lambda veh: {"dm_start": 0.01 * veh.mass}),
+               {"dm_start": 200.0}, relative=lambda veh: {"dm_start": 0.01 * veh.mass}, refine=_refine_start_mass),
         Effect("transonic_drag", "transonic drag rise", "aero", _transonic_drag,
                f"cd + dCD_transonic exp(-((M - {TRANSONIC_MACH:g})/{TRANSONIC_WIDTH:g})^2/2)", {"dCD_transonic": 0.2},
                refine=_refine_drag),

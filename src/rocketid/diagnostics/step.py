@@ -373,6 +373,18 @@ def _near_rivals(accs: Sequence[Acceptance], scr: Screen, vehicle: Vehicle, chos
     return near[:REFINE_FAMILIES]
 
 
+def _ladders(refinements: Sequence[Sequence[Effect]]) -> list[list[Effect]]:
+    """Each family's refined shapes as the ladders :func:`_refine_families` climbs: the smooth shapes in
+    order of flexibility (more knots) form one ladder; a shape with an estimated event time
+    (:attr:`Effect.starts`) is not one more rung of it -- it is no more flexible than the knots -- and is
+    a ladder of its own, tried beside them."""
+    out = []
+    for shapes in refinements:
+        smooth = [v for v in shapes if not v.starts]
+        out += ([smooth] if smooth else []) + [[v] for v in shapes if v.starts]
+    return out
+
+
 def _refine_families(families: Sequence[Sequence[Effect]], make_task, judge, workers) -> list[tuple]:
     """Refit each family's shapes, fewest parameters first, level by level (the families of a level in
     parallel); a family stops at the first shape that does not lower BIC below its best so far -- the
@@ -458,7 +470,8 @@ def _exchange(steps: Sequence[Step], chosen: Sequence[Effect], last: Acceptance 
 def _family(name: str) -> str:
     """The family of an effect name: a refined shape's base (``wind_pl_10`` -> ``wind``)."""
     from .effects import CATALOGUE
-    parents = {"thrust_profile": "thrust_level", "drag_mach": "transonic_drag", "back_pressure": "back_pressure"}
+    parents = {"thrust_profile": "thrust_level", "drag_mach": "transonic_drag", "back_pressure": "back_pressure",
+               "mass_jettison": "start_mass"}
     for stem, parent in parents.items():
         if name.startswith(stem):
             return parent
@@ -611,7 +624,7 @@ def _refit_contenders(ctx: _Search, current: EstimationResult, chosen: list, scr
     if i is None and ctx.refine:
         fam = _families_to_refine(accs, scr, ctx.vehicle, None)
         if fam:
-            found = _refine_families([scr.contenders[j].effect.refinements(ctx.vehicle) for j in fam],
+            found = _refine_families(_ladders([scr.contenders[j].effect.refinements(ctx.vehicle) for j in fam]),
                                      _variant_task(ctx, current, chosen), _judge(ctx, n_tests), ctx.workers)
             va = [a for _, a in found]
             j, why_v = _choose(va)
@@ -633,8 +646,9 @@ def _judge(ctx: _Search, n_tests: int):
 def _refine_choice(ctx: _Search, current: EstimationResult, chosen: list, scr: Screen, accs: list, i: int,
                    why: str, n_tests: int) -> tuple:
     """Shape refinement: when the chosen effect leaves a residual, the more flexible shapes of its family and
-    of the other significant families (a wind with a surface value, a drag table on more knots); a refined
-    shape replaces the choice when its BIC is lower (by :data:`BIC_TIE` when the choice was accepted).
+    of the other significant families (a wind with a surface value, a drag table on more knots, an event
+    time); when it is snug, those of its near rivals (:func:`_near_rivals`). A refined shape replaces the
+    choice when its BIC is lower (by :data:`BIC_TIE` when the choice was accepted).
     Returns ``(screen, acceptances, effect, acceptance, why)``."""
     effect, pick = scr.contenders[i].effect, accs[i]
     snug = pick.accepted and pick.refit.chi2_per_dof <= 1.0 + math.sqrt(2.0 / max(1, ctx.band.dof)) and \
@@ -643,7 +657,7 @@ def _refine_choice(ctx: _Search, current: EstimationResult, chosen: list, scr: S
         return scr, accs, effect, pick, why
     fam = _near_rivals(accs, scr, ctx.vehicle, i, float(current.objective)) if snug else \
         _families_to_refine(accs, scr, ctx.vehicle, i)
-    families = [scr.contenders[j].effect.refinements(ctx.vehicle) for j in fam]
+    families = _ladders([scr.contenders[j].effect.refinements(ctx.vehicle) for j in fam])
     families = [f for f in families if f and f[0].name not in {a.refit.name for a in accs}]
     if not families:
         return scr, accs, effect, pick, why
