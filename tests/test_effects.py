@@ -16,7 +16,8 @@ from rocketid.diagnostics import (CATALOGUE, KINDS, Effect, custom_effect, is_pr
 from rocketid.errors import ModelError
 
 REQUIRED = {"back_pressure", "thrust_level", "mass_flow", "transonic_drag", "wind", "earth_rotation", "misalignment",
-            "density", "bias_x", "bias_h", "bias_v", "scale_v", "time_offset"}
+            "density", "bias_x", "bias_h", "bias_v", "scale_v", "scale_h", "scale_x",
+            "time_offset"}
 
 
 @pytest.fixture(scope="module")
