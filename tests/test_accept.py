@@ -365,6 +365,12 @@ def test_a_shape_with_several_starts_is_represented_by_its_best_refit(monkeypatc
     assert found[0][1].refit.chi2_per_dof == pytest.approx(0.99)
     assert len(made) == 5 and made[-1] == ("wind", {})
     assert S._best_start([refit("a", 2.0, success=False), refit("a", 3.0, success=False)]).chi2_per_dof == 2.0
+    # a contender with starts (a user's onset effect passed as a candidate) keeps its score-test start beside each
+    made.clear()
+    (r,) = S._refit_from_starts([(onset, {"delta_thrust": 0.003})], lambda v, start=None: made.append(start) or
+                                (v, start), workers=1)
+    assert made == [{"delta_thrust": 0.003, "t_misalign": t} for t in (8.0, 24.0, 40.0, 56.0)]
+    assert r.chi2_per_dof == pytest.approx(0.99)
 
 
 def test_two_shapes_of_one_family_are_not_rivals_but_another_family_is():

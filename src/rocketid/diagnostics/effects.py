@@ -480,7 +480,7 @@ def misalignment_onset_effect(t0: float, tf: float, width: float, *, from_rest: 
                   "/ 2: a misalignment that appears t_misalign s after the start (a gimbal or nozzle bias after an "
                   "event)" + (", phased in by the lift-off fade f_lo(t)" if from_rest else ""),
                   {"delta_thrust": math.radians(0.25), "t_misalign": horizon},
-                  starts=tuple({"t_misalign": f * horizon, "delta_thrust": 0.0} for f in ONSET_STARTS))
+                  starts=tuple({"t_misalign": f * horizon} for f in ONSET_STARTS))
 
 
 def mass_jettison_effect(t0: float, tf: float, width: float) -> Effect:
@@ -506,7 +506,7 @@ def mass_jettison_effect(t0: float, tf: float, width: float) -> Effect:
                   "t_jettison s after the start (a fairing, an adapter, ballast)",
                   {"dm_jettison": 200.0, "t_jettison": horizon},
                   relative=lambda veh: {"dm_jettison": 0.01 * veh.mass},
-                  starts=tuple({"t_jettison": f * horizon, "dm_jettison": 0.0} for f in ONSET_STARTS))
+                  starts=tuple({"t_jettison": f * horizon} for f in ONSET_STARTS))
 
 
 def _onset_width(vehicle: "Vehicle") -> float:

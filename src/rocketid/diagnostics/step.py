@@ -398,10 +398,7 @@ def _refine_families(families: Sequence[Sequence[Effect]], make_task, judge, wor
         batch = [(k, f[level]) for k, f in enumerate(families) if alive[k] and level < len(f)]
         if not batch:
             break
-        runs = [(b, dict(st)) for b, (_, v) in enumerate(batch) for st in (v.starts or ({},))]
-        results = refit_all([make_task(batch[b][1], st) for b, st in runs], workers=workers)
-        for b, (k, v) in enumerate(batch):
-            r = _best_start([res for (bb, _), res in zip(runs, results) if bb == b])
+        for (k, v), r in zip(batch, _refit_from_starts([(v, {}) for _, v in batch], make_task, workers)):
             out.append((v, judge(r)))
             bic = r.bic[1] if r.success else math.inf
             if bic < best[k]:
@@ -416,6 +413,15 @@ def _best_start(refits: Sequence[Refit]) -> Refit:
     first when none converged)."""
     ok = [r for r in refits if r.success]
     return min(ok, key=lambda r: r.objective) if ok else refits[0]
+
+
+def _refit_from_starts(items: Sequence[tuple], make_task, workers) -> list[Refit]:
+    """Refit each ``(effect, start)`` in one parallel batch, an effect with several starting points
+    (:attr:`Effect.starts`) once from each of them (laid over ``start``); returns one refit per item, the best
+    of its starts (:func:`_best_start`)."""
+    runs = [(b, {**start, **st}) for b, (v, start) in enumerate(items) for st in (v.starts or ({},))]
+    results = refit_all([make_task(items[b][0], st) for b, st in runs], workers=workers)
+    return [_best_start([r for (bb, _), r in zip(runs, results) if bb == b]) for b in range(len(items))]
 
 
 def _exchange(steps: Sequence[Step], chosen: Sequence[Effect], last: Acceptance | None, base: EstimationResult,
@@ -617,7 +623,8 @@ def _refit_contenders(ctx: _Search, current: EstimationResult, chosen: list, scr
     admissible, refine the families of the refits that lowered J most (the right family may need another
     shape: a surface wind, a jet off the basis). Returns ``(screen, acceptances, index or None, why, n_tests)``,
     ``n_tests`` the contenders and their refined shapes (the Bonferroni count of the refined shapes' LR tests)."""
-    refits = ctx.refit([ctx.task(current, chosen + [c.effect], (c.effect.name,), c.start) for c in scr.contenders])
+    refits = _refit_from_starts([(c.effect, c.start) for c in scr.contenders], _variant_task(ctx, current, chosen),
+                                ctx.workers)
     n_tests = len(refits) + sum(len(c.effect.refinements(ctx.vehicle)) for c in scr.contenders)
     accs = [accept(r, ctx.band, level=ctx.level, n_tests=len(refits)) for r in refits]
     i, why = _choose(accs)
