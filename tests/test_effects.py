@@ -16,7 +16,7 @@ from rocketid.diagnostics import (CATALOGUE, KINDS, Effect, custom_effect, is_pr
 from rocketid.errors import ModelError
 
 REQUIRED = {"back_pressure", "thrust_level", "mass_flow", "transonic_drag", "wind", "earth_rotation", "misalignment",
-            "density", "bias_x", "bias_h", "bias_v", "scale_v", "scale_h", "scale_x",
+            "density", "bias_x", "bias_h", "bias_v", "scale_v", "scale_h",
             "time_offset"}
 
 

@@ -37,7 +37,8 @@ THRUST = {"thrust_level", "thrust_profile_"}
 # mass_jettison, the start-mass family's event shape, was added after the study was written (2026-11-25)
 MASS = {"mass_flow", "start_mass", "mass_jettison"}
 DRAG = {"transonic_drag", "drag_mach_"}
-HSENS = {"bias_h", "bias_h_drift"}
+# scale_h, the altimeter's scale factor, was added to the catalogue after the study was written (2026-11-25)
+HSENS = {"bias_h", "bias_h_drift", "scale_h"}
 VSENS = {"bias_v", "bias_v_drift", "scale_v"}
 WIND = {"wind", "wind_pl_"}
 DENS = {"density", "density_pl_"}

@@ -1122,7 +1122,6 @@ def _build_catalogue() -> dict[str, Effect]:
         Effect("scale_h", "altitude scale factor", "sensor", _scale("h"),
                "z_h = (1 + k_h) h: an altimeter reading proportionally high or low (a barometric altitude on a "
                "non-standard day, a radar altimeter's scale)", {"k_h": 2e-3}),
-        Effect("scale_x", "downrange scale factor", "sensor", _scale("x"), "z_x = (1 + k_x) x", {"k_x": 1e-3}),
         Effect("time_offset", "time-tag offset", "sensor", _time_offset,
                "every output z(t) = y(t - tau) ~ y - tau dy/dt, tau in s", {"tau": 0.01},
                relative=lambda veh: {"tau": max(0.01, float(veh.sample_interval))}),
