@@ -493,11 +493,17 @@ def _final(disc, ranking, level, window) -> FinalModel | None:
     elif disc.verdict == "explained":
         r = disc.refit
         base_names = set(disc.base_fit.spec.parameter_names)
-        sizes = {}
+        sizes, times = {}, set()
         for e in disc.effects:
             sizes.update(e.sizes(disc.vehicle))
-        est = "; ".join(f"{n} = {v:.4g} +- {s:.2g}" + (f" (realistic {sizes[n]:.3g})" if n in sizes else "")
-                        for n, (v, s) in params.items() if n not in base_names)
+            times.update(k for st in e.starts for k in st)     # event times: s after the start, not a size
+
+        def size_note(n):
+            if n in times:
+                return " s after the start"
+            return f" (realistic {sizes[n]:.3g})" if n in sizes else ""
+        est = "; ".join(f"{n} = {v:.4g} +- {s:.2g}{size_note(n)}" for n, (v, s) in params.items()
+                        if n not in base_names)
         text = f"the model with {names} reaches the noise (chi2/dof {fit.chi2_per_dof:.4g}): {est}."
         if r is not None and r.identifiability:
             text += f" Caution: {r.identifiability}."
