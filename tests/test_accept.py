@@ -373,28 +373,6 @@ def test_a_shape_with_several_starts_is_represented_by_its_best_refit(monkeypatc
     assert r.chi2_per_dof == pytest.approx(0.99)
 
 
-def test_two_shapes_of_one_family_are_not_rivals_but_another_family_is():
-    """A wind and its 6-knot shape both reaching the noise within BIC_TIE are one explanation; a misalignment
-    from an onset time within BIC_TIE of the wind is a rival the data must decide (no hold-out: a tie)."""
-    from rocketid.diagnostics import step as S
-    from rocketid.diagnostics.effects import CATALOGUE, misalignment_onset_effect
-
-    effects = [CATALOGUE["wind"], replace_name(CATALOGUE["wind"], "wind_pl_6")]
-    accs = [accept(refit("wind", 0.990), BAND), accept(refit("wind_pl_6", 0.9902), BAND)]
-    assert S._tie_break(accs, 0, None, [], effects, None, 0.05, None, 60.0) == (0, "")
-    effects.append(misalignment_onset_effect(0.0, 80.0, 2.0))
-    accs.append(accept(refit("misalignment_onset", 0.9901), BAND))
-    i, note = S._tie_break(accs, 0, None, [], effects, None, 0.05, None, 60.0, rivals=[2])
-    assert i is None and "wind, misalignment_onset" in note and "cannot tell them apart" in note
-    # restricted to the refits new at this point, an earlier rival is not compared again
-    assert S._tie_break(accs, 0, None, [], effects[:2] + effects[2:], None, 0.05, None, 60.0, rivals=[1]) == (0, "")
-
-
-def replace_name(effect, name):
-    from dataclasses import replace
-    return replace(effect, name=name)
-
-
 def test_an_event_shape_is_a_ladder_of_its_own():
     """The knot ladder of a family is climbed while BIC falls; a shape with an estimated event time is no
     more flexible than the knots and is tried beside the ladder, not as its next rung."""
