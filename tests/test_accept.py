@@ -386,5 +386,23 @@ def test_an_event_shape_is_a_ladder_of_its_own():
                           CATALOGUE["start_mass"].refinements(veh)])
     assert [[v.name for v in f] for f in ladders] == [["misalignment_fade"], ["misalignment_onset"],
                                                        ["thrust_profile_3", "thrust_profile_5", "thrust_profile_9"],
-                                                       ["mass_jettison"]]
+                                                       ["throttle_step"], ["mass_jettison"]]
     assert S._family("mass_jettison") == "start_mass" and S._family("misalignment_onset") == "misalignment"
+    assert S._family("throttle_step") == "thrust_level"
+
+
+def test_event_shapes_of_two_families_within_bic_tie_are_rivals():
+    """Kestrel-S's sliver tail-off (thrust and mass flow down 6 % at 33 s) reached the noise as throttle_step
+    (BIC 3053.9) and as mass_jettison (3056.5): with no decisive hold-out the data cannot tell them apart, and
+    the note says what each rival estimates. Restricted to the event shapes (``among``), a contender of
+    another family within BIC_TIE is not weighed."""
+    from rocketid.diagnostics import step as S
+    from rocketid.diagnostics.effects import CATALOGUE, mass_jettison_effect, throttle_step_effect
+
+    effects = [CATALOGUE["start_mass"], throttle_step_effect(0.0, 40.0, 1.0), mass_jettison_effect(0.0, 40.0, 1.0)]
+    accs = [accept(refit("start_mass", 0.9949), BAND), accept(refit("throttle_step", 0.9946, value=0.0565), BAND),
+            accept(refit("mass_jettison", 0.99465, value=41.0, size=300.0), BAND)]
+    i, note = S._tie_break(accs, 1, None, [], effects, None, 0.05, None, 60.0, among=[2])
+    assert i is None and "cannot tell them apart" in note
+    assert "throttle_step (p_throttle_step 0.0565)" in note and "mass_jettison (p_mass_jettison 41)" in note
+    assert "start_mass" not in note

@@ -33,7 +33,8 @@ Decisions (written before running):
 
 from __future__ import annotations
 
-THRUST = {"thrust_level", "thrust_profile_"}
+# throttle_step, the thrust family's event shape, was added after the study was written (2026-11-25)
+THRUST = {"thrust_level", "thrust_profile_", "throttle_step"}
 # mass_jettison, the start-mass family's event shape, was added after the study was written (2026-11-25)
 MASS = {"mass_flow", "start_mass", "mass_jettison"}
 DRAG = {"transonic_drag", "drag_mach_"}

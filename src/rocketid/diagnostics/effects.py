@@ -59,7 +59,7 @@ from ..physics.gravity import EARTH_RADIUS
 __all__ = ["Effect", "Vehicle", "back_pressure_effect", "thrust_profile_effect", "throttle_effect", "wind_profile_effect",
            "density_profile_effect", "drag_mach_effect", "piecewise_linear", "CATALOGUE", "KINDS", "custom_effect", "with_effects", "apply_effect", "resolve_effects",
            "is_present", "check_effect_parameters", "effect_parameter_problems", "wind_effect", "density_effect", "earth_rotation_effect",
-           "liftoff_fade", "EARTH_RATE", "LIFTOFF_FADE_TIME", "misalignment_onset_effect", "mass_jettison_effect", "onset_step",
+           "liftoff_fade", "EARTH_RATE", "LIFTOFF_FADE_TIME", "misalignment_onset_effect", "mass_jettison_effect", "throttle_step_effect", "onset_step",
            "ONSET_STARTS"]
 
 #: The kinds of effect (``"custom"`` for the user's own).
@@ -108,6 +108,9 @@ class Effect:
         Starting values to refit the effect from, each a ``{parameter: value}``; the refit
         with the lowest objective is kept. Empty (one refit, from the guesses) for most
         effects; an onset time needs several (:data:`ONSET_STARTS`).
+    scan : OnsetScan, optional
+        For an event shape: the bank that scores its onset at many times at once, where its
+        refits start (the starts above when the scan cannot be made).
     """
 
     name: str
@@ -120,6 +123,7 @@ class Effect:
     refine: Callable | None = field(default=None, compare=False, repr=False)
     least: Mapping[str, float] = field(default_factory=dict, compare=False)
     starts: tuple = field(default=(), compare=False)
+    scan: "OnsetScan | None" = field(default=None, compare=False, repr=False)
 
     def __post_init__(self):
         if not isinstance(self.name, str) or not self.name.isidentifier():
@@ -434,8 +438,13 @@ def _misalignment_fade(m: Model) -> tuple:
 
 
 ONSET_STARTS = (0.1, 0.3, 0.5, 0.7)
-"""Starting onset times of an onset effect, as shares of the horizon: its refit is started from each and
-the best kept (the objective is not convex in an onset time, and at ``delta = 0`` it does not depend on it)."""
+"""Starting onset times of an event shape, as shares of the horizon, when its scan cannot be made: its refit is
+started from each and the best kept (the objective is not convex in an event time, and at zero size it does
+not depend on it)."""
+
+SCAN_TIMES = 32
+"""Onset times on which the scan of an event shape scores the effect (:class:`OnsetScan`), evenly over the
+horizon."""
 
 
 def onset_step(t: sp.Expr, t_on: sp.Expr, width: float) -> sp.Expr:
@@ -444,13 +453,66 @@ def onset_step(t: sp.Expr, t_on: sp.Expr, width: float) -> sp.Expr:
     return (1 + sp.tanh((t - t_on) / float(width))) / 2
 
 
+@dataclass(frozen=True)
+class OnsetScan:
+    """Where an event shape's refits start: its size scored at many fixed onset times at once.
+
+    ``bank`` is the effect's change repeated at each of ``times`` (s after the start), each copy with its own
+    size ``<size>_<k>``: at the current fit, with every size at zero, one sensitivity solve gives the score
+    statistic and the one-step size of each onset time (:func:`rocketid.diagnostics.score.onset_starts`). The
+    refits start at the best local maxima of that profile, with their one-step sizes.
+
+    Attributes
+    ----------
+    bank : Effect
+    times : tuple of float
+    size, time : str
+        The event shape's size and onset-time parameters.
+    """
+
+    bank: "Effect"
+    times: tuple
+    size: str
+    time: str
+
+
+def _event_shape(name: str, title: str, kind: str, edit: Callable, size: tuple, t0: float, tf: float,
+                 width: float, description: str, relative: Callable | None = None) -> Effect:
+    """An effect that sets in ``t_name`` s after the start: ``edit(m, size_symbol, t_on_expr)`` makes the model
+    change, ``size = (name, realistic, bounds)``; the onset time is bounded to ``[-3 width, tf - t0]`` (at 0 or
+    below, the change acts from the start). It carries the :class:`OnsetScan` bank and the fallback starts."""
+    horizon = max(1e-9, float(tf) - float(t0))
+    w = float(width)
+    size_name, realistic, bounds = size
+    time_name = {"misalignment_onset": "t_misalign", "mass_jettison": "t_jettison", "throttle_step": "t_step"}[name]
+
+    def apply(m: Model) -> tuple:
+        a = m.parameter(size_name, 0.0, bounds=bounds, nominal=realistic)
+        t_on = m.parameter(time_name, 0.0, bounds=(-3.0 * w, horizon), nominal=horizon / 4)
+        edit(m, a, t_on)
+        return (a, t_on)
+
+    times = tuple(horizon * (k + 0.5) / SCAN_TIMES for k in range(SCAN_TIMES))
+
+    def bank(m: Model) -> tuple:
+        sizes = tuple(m.parameter(f"{size_name}_{k}", 0.0, bounds=bounds, nominal=realistic)
+                      for k in range(len(times)))
+        for a, t in zip(sizes, times):
+            edit(m, a, sp.Float(t))
+        return sizes
+
+    scan = OnsetScan(Effect(f"{name}_scan", f"{title} (scan)", kind, bank, "", {}), times, size_name, time_name)
+    return Effect(name, title, kind, apply, description, {size_name: realistic, time_name: horizon},
+                  relative=relative, starts=tuple({time_name: f * horizon} for f in ONSET_STARTS), scan=scan)
+
+
 def misalignment_onset_effect(t0: float, tf: float, width: float, *, from_rest: bool = False) -> Effect:
     """A thrust misalignment that appears at an estimated time inside the flight.
 
     ``alpha_thrust = alpha + delta_thrust s(t)``, ``s`` the switch :func:`onset_step` at
     ``t0 + t_misalign`` (``t_misalign``, s after the start, bounded to ``[-3 width, tf - t0]``: at 0 or
     below the misalignment acts from the start, the catalogue's constant shape). From rest it is also
-    phased in by the lift-off fade. The refit starts ``t_misalign`` at each of :data:`ONSET_STARTS`.
+    phased in by the lift-off fade. The refits start where its scan (:class:`OnsetScan`) puts them.
 
     Parameters
     ----------
@@ -462,25 +524,20 @@ def misalignment_onset_effect(t0: float, tf: float, width: float, *, from_rest: 
     from_rest : bool
         The vehicle starts at zero speed.
     """
-    horizon = max(1e-9, float(tf) - float(t0))
     w = float(width)
 
-    def apply(m: Model) -> tuple:
+    def edit(m: Model, delta, t_on) -> None:
         sym, at = _role_definition(m, "thrust_direction", "misalignment_onset")
-        delta = m.parameter("delta_thrust", 0.0, nominal=math.radians(0.25))
-        t_on = m.parameter("t_misalign", 0.0, bounds=(-3.0 * w, horizon), nominal=horizon / 4)
         switch = onset_step(m.t - m.t0, t_on, w)
         if from_rest:
             switch = switch * liftoff_fade(m.t - m.t0)
         m.redefine(sym, at + delta * switch)
-        return (delta, t_on)
 
-    return Effect("misalignment_onset", "thrust misalignment from an estimated onset time", "propulsion", apply,
-                  f"thrust direction alpha_thrust = alpha + delta_thrust (1 + tanh((t - t0 - t_misalign) / {w:.3g} s)) "
-                  "/ 2: a misalignment that appears t_misalign s after the start (a gimbal or nozzle bias after an "
-                  "event)" + (", phased in by the lift-off fade f_lo(t)" if from_rest else ""),
-                  {"delta_thrust": math.radians(0.25), "t_misalign": horizon},
-                  starts=tuple({"t_misalign": f * horizon} for f in ONSET_STARTS))
+    return _event_shape("misalignment_onset", "thrust misalignment from an estimated onset time", "propulsion", edit,
+                        ("delta_thrust", math.radians(0.25), (-math.inf, math.inf)), t0, tf, w,
+                        f"thrust direction alpha_thrust = alpha + delta_thrust (1 + tanh((t - t0 - t_misalign) / {w:.3g} s)) "
+                        "/ 2: a misalignment that appears t_misalign s after the start (a gimbal or nozzle bias after an "
+                        "event)" + (", phased in by the lift-off fade f_lo(t)" if from_rest else ""))
 
 
 def mass_jettison_effect(t0: float, tf: float, width: float) -> Effect:
@@ -489,24 +546,51 @@ def mass_jettison_effect(t0: float, tf: float, width: float) -> Effect:
 
     ``dm_jettison`` > 0 is mass lost (realistic size 1 % of the start mass); ``t_jettison``, s after the
     start, is bounded to ``[-3 width, tf - t0]`` (at 0 or below, a lighter vehicle from the start, the
-    ``start_mass`` shape). The refit starts ``t_jettison`` at each of :data:`ONSET_STARTS`.
+    ``start_mass`` shape). The refits start where its scan (:class:`OnsetScan`) puts them.
     """
-    horizon = max(1e-9, float(tf) - float(t0))
     w = float(width)
 
-    def apply(m: Model) -> tuple:
+    def edit(m: Model, dm, t_on) -> None:
         sym, mass = _role_definition(m, "mass", "mass_jettison")
-        dm = m.parameter("dm_jettison", 0.0, nominal=100.0)
-        t_j = m.parameter("t_jettison", 0.0, bounds=(-3.0 * w, horizon), nominal=horizon / 4)
-        m.redefine(sym, mass - dm * onset_step(m.t - m.t0, t_j, w))
-        return (dm, t_j)
+        m.redefine(sym, mass - dm * onset_step(m.t - m.t0, t_on, w))
 
-    return Effect("mass_jettison", "mass released at an estimated time", "mass", apply,
-                  f"mass m(t) - dm_jettison (1 + tanh((t - t0 - t_jettison) / {w:.3g} s)) / 2, kg: a mass released "
-                  "t_jettison s after the start (a fairing, an adapter, ballast)",
-                  {"dm_jettison": 200.0, "t_jettison": horizon},
-                  relative=lambda veh: {"dm_jettison": 0.01 * veh.mass},
-                  starts=tuple({"t_jettison": f * horizon} for f in ONSET_STARTS))
+    return _event_shape("mass_jettison", "mass released at an estimated time", "mass", edit,
+                        ("dm_jettison", 200.0, (-math.inf, math.inf)), t0, tf, w,
+                        f"mass m(t) - dm_jettison (1 + tanh((t - t0 - t_jettison) / {w:.3g} s)) / 2, kg: a mass released "
+                        "t_jettison s after the start (a fairing, an adapter, ballast)",
+                        relative=lambda veh: {"dm_jettison": 0.01 * veh.mass})
+
+
+def throttle_step_effect(t0: float, tf: float, width: float) -> Effect:
+    """A throttle change at an estimated time: thrust **and** mass flow scaled by ``1 - d s(t)`` from then on.
+
+    ``s`` is the switch :func:`onset_step` at ``t0 + t_step`` (``t_step``, s after the start, bounded to
+    ``[-3 width, tf - t0]``): an early tail-off of a solid motor's last sliver, a throttle-down that lasts
+    to the end of the data, an engine running at another setting from an event on. Thrust becomes
+    ``P (1 - d s)`` and mass ``m + mdot d S``, ``S(t) = (tau + w (L((tau - t_step)/w) - L(t_step/w))) / 2``
+    the integral of ``s`` from t0 (``tau = t - t0``, ``L = log cosh``), ``mdot = -dm/dt`` of the base model,
+    which must be constant. ``d_step`` > 0 is a throttle-down (realistic 0.05, bounded to (-1, 1)). The
+    refits start where its scan (:class:`OnsetScan`) puts them.
+    """
+    horizon = max(1e-9, float(tf) - float(t0))
+    w = max(float(width), horizon / 300.0)       # |t - t_step| / w stays far below cosh's overflow
+
+    def edit(m: Model, d, t_on) -> None:
+        t_sym, thrust = _role_definition(m, "thrust", "throttle_step")
+        m_sym, mass = _role_definition(m, "mass", "throttle_step")
+        mdot = -sp.diff(_expanded(m, mass), m.t)
+        if mdot.free_symbols - {c for c, _ in m._constants} - {p.symbol for p in m._parameters}:
+            raise ModelError(f"effect 'throttle_step' needs a mass that falls linearly in time (a constant mass "
+                             f"flow); the mass of model {m.name!r} has mass flow {mdot}")
+        tau = m.t - m.t0
+        S = (tau + w * (sp.log(sp.cosh((tau - t_on) / w)) - sp.log(sp.cosh(t_on / w)))) / 2
+        m.redefine(t_sym, thrust * (1 - d * onset_step(tau, t_on, w)))
+        m.redefine(m_sym, mass + mdot * d * S)
+
+    return _event_shape("throttle_step", "throttle change at an estimated time", "propulsion", edit,
+                        ("d_step", 0.05, (-1.0, 1.0)), t0, tf, w,
+                        f"thrust and mass flow scaled by 1 - d_step (1 + tanh((t - t0 - t_step) / {w:.3g} s)) / 2 (a "
+                        "tail-off or a throttle-down from an event on); mass m + mdot d_step integral of the switch")
 
 
 def _onset_width(vehicle: "Vehicle") -> float:
@@ -1082,7 +1166,7 @@ def _refine_thrust(vehicle: "Vehicle | None") -> list[Effect]:
         knots = sorted({float(bounds[np.argmin(np.abs(bounds - w))]) for w in want})
         if len(knots) >= 2:
             out.append(thrust_profile_effect(knots))
-    return out
+    return out + [throttle_step_effect(bounds[0], bounds[-1], _onset_width(vehicle))]
 
 
 def _build_catalogue() -> dict[str, Effect]:

@@ -208,8 +208,11 @@ def _choose(accs: Sequence[Acceptance]) -> tuple[int | None, str]:
     return None, "no refit is significant with a plausible size"
 
 
-def _tie_break(accs, i, fit, chosen_effects, contenders_effects, holdout, level, options, timeout) -> tuple:
+def _tie_break(accs, i, fit, chosen_effects, contenders_effects, holdout, level, options, timeout,
+               among: Sequence[int] | None = None) -> tuple:
     """Among accepted refits within :data:`BIC_TIE` of the chosen one, the best hold-out prediction.
+
+    ``among`` restricts the rivals to these indices (default: every contender).
 
     Returns ``(index, note)``; the note names the rivals (empty when there are none). The index is
     None when the rivals cannot be told apart (no hold-out, or a hold-out that is not decisive)."""
@@ -217,10 +220,12 @@ def _tie_break(accs, i, fit, chosen_effects, contenders_effects, holdout, level,
     if i is None or not accs[i].accepted:
         return i, ""
     lo = accs[i].refit.bic[1]
-    tied = [j for j, a in enumerate(accs) if a.accepted and j < len(contenders_effects) and a.refit.bic[1] <= lo + BIC_TIE]
+    pool = set(range(len(contenders_effects))) if among is None else set(among) | {i}
+    tied = [j for j, a in enumerate(accs) if a.accepted and j < len(contenders_effects) and j in pool
+            and a.refit.bic[1] <= lo + BIC_TIE]
     if len(tied) < 2:
         return i, ""
-    names = ", ".join(accs[j].refit.name for j in tied)
+    names = ", ".join(_with_sizes(accs[j].refit) for j in tied)
     if holdout is None:
         return None, f"{names} reach the noise with BIC within {BIC_TIE:g} of each other: the data cannot tell them apart"
     score = {}
@@ -245,6 +250,38 @@ def _tie_break(accs, i, fit, chosen_effects, contenders_effects, holdout, level,
     best = order[0]
     return best, (f"{names} reach the noise with BIC within {BIC_TIE:g} of each other; the hold-out prediction "
                   f"(mean squared prediction error / sigma^2: {txt}) prefers {accs[best].refit.name}")
+
+
+def _settle(number: int, tie: str, index: int | None, scr: Screen, accs, keep: tuple, why: str, notes: list,
+            steps: list) -> tuple:
+    """Record a tie of step ``number`` (its note; the step without a choice when ``index`` is None).
+    Returns ``(why, stop, ambiguous, rivals)``: stop the search when the rivals cannot be told apart."""
+    if not tie:
+        return why, False, "", ""
+    why = f"{why}; {tie}"
+    notes.append(f"step {number}: {tie}")
+    if index is None:
+        steps.append(Step(number, scr, tuple(accs), None, why, (), keep, None))
+        return why, True, tie, ""
+    return why, False, "", tie
+
+
+def _event_rivals(accs, scr: Screen, effect: Effect, pick: Acceptance, fit, chosen, holdout, level, options,
+                  timeout) -> tuple:
+    """:func:`_tie_break` of the chosen event shape against the event shapes of other families."""
+    k = next(j for j, a in enumerate(accs) if a is pick)
+    events = [j for j, c in enumerate(scr.contenders) if c.effect.scan is not None
+              and _family(c.effect.name) != _family(effect.name)]
+    return _tie_break(accs, k, fit, chosen, [c.effect for c in scr.contenders], holdout, level, options, timeout,
+                      among=events)
+
+
+def _with_sizes(r: Refit) -> str:
+    """``name (parameter value, ...)`` of a refit's effect parameters (at most four): what each rival says."""
+    vals = dict(zip(r.parameter_names, (float(v) for v in r.p)))
+    shown = [f"{n} {vals[n]:.3g}" for n in r.effect_parameters[:4] if n in vals]
+    more = ", ..." if len(r.effect_parameters) > 4 else ""
+    return f"{r.name} ({', '.join(shown)}{more})" if shown else r.name
 
 
 def _holm(white: Mapping[str, float]) -> float:
@@ -372,11 +409,12 @@ def _ladders(refinements: Sequence[Sequence[Effect]]) -> list[list[Effect]]:
     return out
 
 
-def _refine_families(families: Sequence[Sequence[Effect]], make_task, judge, workers) -> list[tuple]:
+def _refine_families(families: Sequence[Sequence[Effect]], make_task, judge, workers,
+                     fit: EstimationResult | None = None, vehicle: Vehicle | None = None) -> list[tuple]:
     """Refit each family's shapes, fewest parameters first, level by level (the families of a level in
     parallel); a family stops at the first shape that does not lower BIC below its best so far -- the
-    knot count is chosen by BIC. A shape with several starting points (:attr:`Effect.starts`, an onset
-    time) is refitted from each, and the refit with the lowest objective stands for it.
+    knot count is chosen by BIC. A shape with several starting points (an event time:
+    :func:`_refit_from_starts`) is refitted from each, and the refit with the lowest objective stands for it.
     ``make_task(effect, start)`` builds a refit. Returns ``[(effect, acceptance)]`` of every shape refitted."""
     out = []
     best = [math.inf] * len(families)
@@ -385,7 +423,7 @@ def _refine_families(families: Sequence[Sequence[Effect]], make_task, judge, wor
         batch = [(k, f[level]) for k, f in enumerate(families) if alive[k] and level < len(f)]
         if not batch:
             break
-        for (k, v), r in zip(batch, _refit_from_starts([(v, {}) for _, v in batch], make_task, workers)):
+        for (k, v), r in zip(batch, _refit_from_starts([(v, {}) for _, v in batch], make_task, workers, fit, vehicle)):
             out.append((v, judge(r)))
             bic = r.bic[1] if r.success else math.inf
             if bic < best[k]:
@@ -402,13 +440,28 @@ def _best_start(refits: Sequence[Refit]) -> Refit:
     return min(ok, key=lambda r: r.objective) if ok else refits[0]
 
 
-def _refit_from_starts(items: Sequence[tuple], make_task, workers) -> list[Refit]:
-    """Refit each ``(effect, start)`` in one parallel batch, an effect with several starting points
-    (:attr:`Effect.starts`) once from each of them (laid over ``start``); returns one refit per item, the best
-    of its starts (:func:`_best_start`)."""
-    runs = [(b, {**start, **st}) for b, (v, start) in enumerate(items) for st in (v.starts or ({},))]
+def _refit_from_starts(items: Sequence[tuple], make_task, workers, fit: EstimationResult | None = None,
+                       vehicle: Vehicle | None = None) -> list[Refit]:
+    """Refit each ``(effect, start)`` in one parallel batch, an effect with several starting points once from
+    each of them (laid over ``start``); returns one refit per item, the best of its starts (:func:`_best_start`).
+
+    An event shape's starts are where its scan at ``fit`` puts them (:func:`~rocketid.diagnostics.score.
+    onset_starts`: the best local maxima of its score profile over the onset time, with their one-step sizes
+    held within 5 realistic sizes); without a fit, or when the scan cannot be made, :attr:`Effect.starts`."""
+    runs = [(b, {**start, **st}) for b, (v, start) in enumerate(items) for st in (_starts(v, fit, vehicle) or ({},))]
     results = refit_all([make_task(items[b][0], st) for b, st in runs], workers=workers)
     return [_best_start([r for (bb, _), r in zip(runs, results) if bb == b]) for b in range(len(items))]
+
+
+def _starts(effect: Effect, fit: EstimationResult | None, vehicle: Vehicle | None) -> tuple:
+    """The starting points of ``effect``'s refits (module :func:`_refit_from_starts`)."""
+    if effect.scan is not None and fit is not None:
+        from .score import onset_starts
+        size = effect.sizes(vehicle).get(effect.scan.size, math.inf) if vehicle is not None else math.inf
+        found = onset_starts(fit, effect.scan, cap=5.0 * size if math.isfinite(size) and size > 0 else None)
+        if found:
+            return tuple(found)
+    return tuple(effect.starts)
 
 
 def _exchange(steps: Sequence[Step], chosen: Sequence[Effect], last: Acceptance | None, base: EstimationResult,
@@ -464,7 +517,7 @@ def _family(name: str) -> str:
     """The family of an effect name: a refined shape's base (``wind_pl_10`` -> ``wind``)."""
     from .effects import CATALOGUE
     parents = {"thrust_profile": "thrust_level", "drag_mach": "transonic_drag", "back_pressure": "back_pressure",
-               "mass_jettison": "start_mass"}
+               "mass_jettison": "start_mass", "throttle_step": "thrust_level"}
     for stem, parent in parents.items():
         if name.startswith(stem):
             return parent
@@ -530,15 +583,20 @@ def discover(fit: EstimationResult, candidates: Sequence[Effect], *, level: floa
             break
         i, tie = _tie_break(accs, i, current, chosen, [c.effect for c in scr.contenders], holdout, level, options,
                             timeout)
-        if tie:
-            why = f"{why}; {tie}"
-            notes.append(f"step {number}: {tie}")
-            if i is None:
-                ambiguous = tie
-                steps.append(Step(number, scr, tuple(accs), None, why, (), keep, None))
-                break
-            rivals = tie
+        why, stop, amb, riv = _settle(number, tie, i, scr, accs, keep, why, notes, steps)
+        ambiguous, rivals = amb or ambiguous, riv or rivals
+        if stop:
+            break
         scr, accs, effect, pick, why = _refine_choice(ctx, current, chosen, scr, accs, i, why, n_tests)
+        if effect.scan is not None:
+            # event shapes of other families explain an event alike (a mass released, a throttle-down from the
+            # same time: Kestrel-S's sliver tail-off as throttle_step at BIC 3053.9, mass_jettison 3056.5)
+            k, tie = _event_rivals(accs, scr, effect, pick, current, chosen, holdout, level, options, timeout)
+            why, stop, amb, riv = _settle(number, tie, k, scr, accs, keep, why, notes, steps)
+            ambiguous, rivals = amb or ambiguous, riv or rivals
+            if stop:
+                break
+            effect, pick = scr.contenders[k].effect, accs[k]
         new_effects, dropped = _backward(ctx, current, chosen + [effect], pick)
         if dropped:
             notes.append(f"step {number}: the backward check dropped {', '.join(dropped)} (BIC lower without it)")
@@ -597,7 +655,7 @@ def _refit_contenders(ctx: _Search, current: EstimationResult, chosen: list, scr
     shape: a surface wind, a jet off the basis). Returns ``(screen, acceptances, index or None, why, n_tests)``,
     ``n_tests`` the contenders and their refined shapes (the Bonferroni count of the refined shapes' LR tests)."""
     refits = _refit_from_starts([(c.effect, c.start) for c in scr.contenders], _variant_task(ctx, current, chosen),
-                                ctx.workers)
+                                ctx.workers, current, ctx.vehicle)
     n_tests = len(refits) + sum(len(c.effect.refinements(ctx.vehicle)) for c in scr.contenders)
     accs = [accept(r, ctx.band, level=ctx.level, n_tests=len(refits)) for r in refits]
     i, why = _choose(accs)
@@ -605,7 +663,8 @@ def _refit_contenders(ctx: _Search, current: EstimationResult, chosen: list, scr
         fam = _families_to_refine(accs, scr, ctx.vehicle, None)
         if fam:
             found = _refine_families(_ladders([scr.contenders[j].effect.refinements(ctx.vehicle) for j in fam]),
-                                     _variant_task(ctx, current, chosen), _judge(ctx, n_tests), ctx.workers)
+                                     _variant_task(ctx, current, chosen), _judge(ctx, n_tests), ctx.workers,
+                                     current, ctx.vehicle)
             va = [a for _, a in found]
             j, why_v = _choose(va)
             accs += va
@@ -646,7 +705,8 @@ def _refine_choice(ctx: _Search, current: EstimationResult, chosen: list, scr: S
     families = [f for f in families if f and f[0].name not in {a.refit.name for a in accs}]
     if not families:
         return scr, accs, effect, pick, why
-    found = _refine_families(families, _variant_task(ctx, current, chosen), _judge(ctx, n_tests), ctx.workers)
+    found = _refine_families(families, _variant_task(ctx, current, chosen), _judge(ctx, n_tests), ctx.workers,
+                             current, ctx.vehicle)
     va = [a for _, a in found]
     accs = accs + va
     scr = replace(scr, contenders=scr.contenders + tuple(Contender(v, "a refined shape") for v, _ in found))
