@@ -17,6 +17,7 @@ The table is in docs/effects.md ("Evaluation on a blind vehicle").
 
 from __future__ import annotations
 
+import math
 import sys
 from pathlib import Path
 
@@ -66,6 +67,28 @@ def test_vehicle_fits_clean_truth_data_to_the_noise():
     true = halcyon.truth(spec)
     for name, value, s in zip(spec.parameter_names, fit.p, se):
         assert abs(value - true[name]) < 4 * s, (name, value, true[name], s)
+
+
+@pytest.mark.parametrize("hidden, shape, time_name, when", [
+    ({"drop": {"t": 55.0, "dm": 150.0}}, "mass_jettison", "t_jettison", 55.0),
+    ({"misalign": {"delta": math.radians(0.2), "t_on": 20.0}}, "misalignment_onset", "t_misalign", 20.0),
+    ({"throttle": {"depth": 0.06, "t_on": 40.0, "t_off": 200.0, "ramp": 2.0}}, "throttle_step", "t_step", 41.0),
+])
+def test_the_onset_scan_starts_a_refit_near_the_event(hidden, shape, time_name, when):
+    """The truth's events (its own vector dynamics, not the catalogue's expressions): the onset scan of the
+    event shape, at the base fit, puts one of its starts within 2.5 s (one scan interval) of the event --
+    for the dropped mass although the fit has absorbed it and the profile peaks elsewhere."""
+    from rocketid.diagnostics import CATALOGUE
+    from rocketid.diagnostics.score import onset_starts
+    from rocketid.diagnostics.screen import vehicle_of
+
+    spec = halcyon.build_model()
+    fit = ri.estimate(spec, _measurements(truth.measurements(run.TIMES, hidden, seed=5), spec))
+    family = {"mass_jettison": "start_mass", "misalignment_onset": "misalignment", "throttle_step": "thrust_level"}
+    (effect,) = [e for e in CATALOGUE[family[shape]].refinements(vehicle_of(fit)) if e.name == shape]
+    starts = onset_starts(fit, effect.scan)
+    assert 1 <= len(starts) <= 4
+    assert min(abs(st[time_name] - when) for st in starts) <= 2.5, starts
 
 
 def _measurements(table, spec) -> "ri.Measurements":

@@ -579,6 +579,8 @@ def throttle_step_effect(t0: float, tf: float, width: float) -> Effect:
         t_sym, thrust = _role_definition(m, "thrust", "throttle_step")
         m_sym, mass = _role_definition(m, "mass", "throttle_step")
         mdot = -sp.diff(_expanded(m, mass), m.t)
+        # the base model's mass flow: a scan's earlier copies of this change vanish at zero size
+        mdot = mdot.subs({q: 0 for q in mdot.free_symbols if str(q).startswith("d_step")})
         if mdot.free_symbols - {c for c, _ in m._constants} - {p.symbol for p in m._parameters}:
             raise ModelError(f"effect 'throttle_step' needs a mass that falls linearly in time (a constant mass "
                              f"flow); the mass of model {m.name!r} has mass flow {mdot}")
