@@ -468,12 +468,15 @@ class OnsetScan:
     times : tuple of float
     size, time : str
         The event shape's size and onset-time parameters.
+    bounds : (float, float)
+        The size's bounds (a start is held within them).
     """
 
     bank: "Effect"
     times: tuple
     size: str
     time: str
+    bounds: tuple = (-math.inf, math.inf)
 
 
 def _event_shape(name: str, title: str, kind: str, edit: Callable, size: tuple, t0: float, tf: float,
@@ -501,7 +504,8 @@ def _event_shape(name: str, title: str, kind: str, edit: Callable, size: tuple, 
             edit(m, a, sp.Float(t))
         return sizes
 
-    scan = OnsetScan(Effect(f"{name}_scan", f"{title} (scan)", kind, bank, "", {}), times, size_name, time_name)
+    scan = OnsetScan(Effect(f"{name}_scan", f"{title} (scan)", kind, bank, "", {}), times, size_name, time_name,
+                     tuple(float(b) for b in bounds))
     return Effect(name, title, kind, apply, description, {size_name: realistic, time_name: horizon},
                   relative=relative, starts=tuple({time_name: f * horizon} for f in ONSET_STARTS), scan=scan)
 
@@ -544,7 +548,8 @@ def mass_jettison_effect(t0: float, tf: float, width: float) -> Effect:
     """A mass released at an estimated time inside the flight (a fairing, an adapter, ballast, propellant
     dumped): ``m(t) - dm_jettison s(t)``, ``s`` the switch :func:`onset_step` at ``t0 + t_jettison``.
 
-    ``dm_jettison`` > 0 is mass lost (realistic size 1 % of the start mass); ``t_jettison``, s after the
+    ``dm_jettison`` >= 0 is the mass lost (realistic size 1 % of the start mass; a vehicle does not gain mass
+    in flight, and a mass gained would act like a throttle-down); ``t_jettison``, s after the
     start, is bounded to ``[-3 width, tf - t0]`` (at 0 or below, a lighter vehicle from the start, the
     ``start_mass`` shape). The refits start where its scan (:class:`OnsetScan`) puts them.
     """
@@ -555,7 +560,7 @@ def mass_jettison_effect(t0: float, tf: float, width: float) -> Effect:
         m.redefine(sym, mass - dm * onset_step(m.t - m.t0, t_on, w))
 
     return _event_shape("mass_jettison", "mass released at an estimated time", "mass", edit,
-                        ("dm_jettison", 200.0, (-math.inf, math.inf)), t0, tf, w,
+                        ("dm_jettison", 200.0, (0.0, math.inf)), t0, tf, w,
                         f"mass m(t) - dm_jettison (1 + tanh((t - t0 - t_jettison) / {w:.3g} s)) / 2, kg: a mass released "
                         "t_jettison s after the start (a fairing, an adapter, ballast)",
                         relative=lambda veh: {"dm_jettison": 0.01 * veh.mass})

@@ -774,7 +774,7 @@ def onset_starts(fit: EstimationResult, scan, *, n: int = 4, cap: float | None =
     objective is not convex in its time, and a fit that absorbed the event into its coefficients puts its
     highest peak elsewhere: Halcyon-8's 150 kg released at 55 s peaks at 74 s, with a local maximum at
     54 s). The ``n`` highest local maxima are returned as ``{time: t_k, size: one-step size}``, best first,
-    the size held within ``cap`` in magnitude when given.
+    the size held within ``cap`` in magnitude when given and within the size's bounds.
 
     Returns
     -------
@@ -804,5 +804,6 @@ def onset_starts(fit: EstimationResult, scan, *, n: int = 4, cap: float | None =
         a = float(size[j])
         if cap is not None and np.isfinite(cap):
             a = float(np.clip(a, -cap, cap))
-        out.append({scan.time: float(scan.times[j]), scan.size: a})
+        lo, hi = scan.bounds
+        out.append({scan.time: float(scan.times[j]), scan.size: float(np.clip(a, lo, hi))})
     return out
