@@ -392,9 +392,9 @@ def test_an_event_shape_is_a_ladder_of_its_own():
 
 
 def test_event_shapes_of_two_families_within_bic_tie_are_rivals():
-    """Kestrel-S's sliver tail-off (thrust and mass flow down 6 % at 33 s) reached the noise as throttle_step
-    (BIC 3053.9) and as mass_jettison (3056.5): with no decisive hold-out the data cannot tell them apart, and
-    the note says what each rival estimates. Restricted to the event shapes (``among``), a contender of
+    """Halcyon-8's 150 kg dropped at 55 s reached the noise as mass_jettison (BIC 2398.8) and as a throttle-up
+    (throttle_step, 2407.9): with no decisive hold-out the data cannot tell them apart, and the note says what
+    each rival estimates. Restricted to the event shapes (``among``), a contender of
     another family within BIC_TIE is not weighed."""
     from rocketid.diagnostics import step as S
     from rocketid.diagnostics.effects import CATALOGUE, mass_jettison_effect, throttle_step_effect

@@ -589,8 +589,8 @@ def discover(fit: EstimationResult, candidates: Sequence[Effect], *, level: floa
             break
         scr, accs, effect, pick, why = _refine_choice(ctx, current, chosen, scr, accs, i, why, n_tests)
         if effect.scan is not None:
-            # event shapes of other families explain an event alike (a mass released, a throttle-down from the
-            # same time: Kestrel-S's sliver tail-off as throttle_step at BIC 3053.9, mass_jettison 3056.5)
+            # event shapes of other families explain an event alike (a mass released, a throttle-up from the
+            # same time: Halcyon-8's 150 kg dropped at 55 s as mass_jettison at BIC 2398.8, throttle_step 2407.9)
             k, tie = _event_rivals(accs, scr, effect, pick, current, chosen, holdout, level, options, timeout)
             why, stop, amb, riv = _settle(number, tie, k, scr, accs, keep, why, notes, steps)
             ambiguous, rivals = amb or ambiguous, riv or rivals
