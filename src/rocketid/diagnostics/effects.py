@@ -479,15 +479,15 @@ class OnsetScan:
     bounds: tuple = (-math.inf, math.inf)
 
 
-def _event_shape(name: str, title: str, kind: str, edit: Callable, size: tuple, t0: float, tf: float,
-                 width: float, description: str, relative: Callable | None = None) -> Effect:
-    """An effect that sets in ``t_name`` s after the start: ``edit(m, size_symbol, t_on_expr)`` makes the model
-    change, ``size = (name, realistic, bounds)``; the onset time is bounded to ``[-3 width, tf - t0]`` (at 0 or
-    below, the change acts from the start). It carries the :class:`OnsetScan` bank and the fallback starts."""
+def _event_shape(name: str, time_name: str, title: str, kind: str, edit: Callable, size: tuple, t0: float,
+                 tf: float, width: float, description: str, relative: Callable | None = None) -> Effect:
+    """An effect that sets in ``time_name`` s after the start: ``edit(m, size_symbol, t_on_expr)`` makes the
+    model change, ``size = (name, realistic, bounds)``; the onset time is bounded to ``[-3 width, tf - t0]``
+    (at 0 or below, the change acts from the start). It carries the :class:`OnsetScan` bank and the fallback
+    starts."""
     horizon = max(1e-9, float(tf) - float(t0))
     w = float(width)
     size_name, realistic, bounds = size
-    time_name = {"misalignment_onset": "t_misalign", "mass_jettison": "t_jettison", "throttle_step": "t_step"}[name]
 
     def apply(m: Model) -> tuple:
         a = m.parameter(size_name, 0.0, bounds=bounds, nominal=realistic)
@@ -537,7 +537,7 @@ def misalignment_onset_effect(t0: float, tf: float, width: float, *, from_rest: 
             switch = switch * liftoff_fade(m.t - m.t0)
         m.redefine(sym, at + delta * switch)
 
-    return _event_shape("misalignment_onset", "thrust misalignment from an estimated onset time", "propulsion", edit,
+    return _event_shape("misalignment_onset", "t_misalign", "thrust misalignment from an estimated onset time", "propulsion", edit,
                         ("delta_thrust", math.radians(0.25), (-math.inf, math.inf)), t0, tf, w,
                         f"thrust direction alpha_thrust = alpha + delta_thrust (1 + tanh((t - t0 - t_misalign) / {w:.3g} s)) "
                         "/ 2: a misalignment that appears t_misalign s after the start (a gimbal or nozzle bias after an "
@@ -559,7 +559,7 @@ def mass_jettison_effect(t0: float, tf: float, width: float) -> Effect:
         sym, mass = _role_definition(m, "mass", "mass_jettison")
         m.redefine(sym, mass - dm * onset_step(m.t - m.t0, t_on, w))
 
-    return _event_shape("mass_jettison", "mass released at an estimated time", "mass", edit,
+    return _event_shape("mass_jettison", "t_jettison", "mass released at an estimated time", "mass", edit,
                         ("dm_jettison", 200.0, (0.0, math.inf)), t0, tf, w,
                         f"mass m(t) - dm_jettison (1 + tanh((t - t0 - t_jettison) / {w:.3g} s)) / 2, kg: a mass released "
                         "t_jettison s after the start (a fairing, an adapter, ballast)",
@@ -594,7 +594,7 @@ def throttle_step_effect(t0: float, tf: float, width: float) -> Effect:
         m.redefine(t_sym, thrust * (1 - d * onset_step(tau, t_on, w)))
         m.redefine(m_sym, mass + mdot * d * S)
 
-    return _event_shape("throttle_step", "throttle change at an estimated time", "propulsion", edit,
+    return _event_shape("throttle_step", "t_step", "throttle change at an estimated time", "propulsion", edit,
                         ("d_step", 0.05, (-1.0, 1.0)), t0, tf, w,
                         f"thrust and mass flow scaled by 1 - d_step (1 + tanh((t - t0 - t_step) / {w:.3g} s)) / 2 (a "
                         "tail-off or a throttle-down from an event on); mass m + mdot d_step integral of the switch")
