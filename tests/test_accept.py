@@ -406,3 +406,22 @@ def test_event_shapes_of_two_families_within_bic_tie_are_rivals():
     assert i is None and "cannot tell them apart" in note
     assert "throttle_step (p_throttle_step 0.0565)" in note and "mass_jettison (p_mass_jettison 41)" in note
     assert "start_mass" not in note
+
+
+def test_an_event_shape_is_chosen_only_when_it_explains_and_not_at_the_start():
+    """An event time soaks up part of other effects, so an event shape is never a step toward an explanation
+    (only an accepted one may be chosen); an onset at or before the start is the constant shape, not offered."""
+    from rocketid.diagnostics import step as S
+    from rocketid.diagnostics.effects import CATALOGUE, misalignment_onset_effect
+
+    onset = misalignment_onset_effect(0.0, 66.0, 2.0)
+    far = refit("misalignment_onset", 1.8)                       # below the base, far from the noise
+    near = refit("misalignment_onset", 0.995)
+    found = [(CATALOGUE["wind"], accept(refit("wind", 1.9), BAND)), (onset, accept(far, BAND)),
+             (onset, accept(near, BAND))]
+    assert S._choosable(found) == [0, 2]
+    at_start = Refit(**{**near.__dict__, "parameter_names": ("CD", "delta_thrust", "t_misalign"),
+                        "p": np.array([0.3, 0.004, -6.0]), "std": np.array([0.01, 1e-4, 1.0])})
+    later = Refit(**{**at_start.__dict__, "p": np.array([0.3, 0.004, 19.4])})
+    assert S._from_the_start(onset, at_start) and not S._from_the_start(onset, later)
+    assert not S._from_the_start(CATALOGUE["misalignment"], at_start)
