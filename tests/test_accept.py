@@ -320,8 +320,8 @@ def test_a_hold_out_that_does_not_determine_the_effect_judges_nothing():
 
 def test_a_snug_choice_still_tries_the_shapes_of_a_near_rival():
     """Halcyon-8 with a 0.2 deg misalignment switched on at 20 s: a 0.6 m/s wind reached chi2/dof 0.984 (snug)
-    and the constant misalignment, 95 % of the wind's fall, stopped at 1.14. The misalignment is a near rival
-    (its onset-time shape is then tried); a refit that falls much less, or one of the chosen family, is not."""
+    and the constant misalignment stopped at 1.14 against a band of 1.092. The misalignment is a near rival
+    (its onset-time shape is then tried); a refit further from the band, or one of the chosen family, is not."""
     from rocketid.diagnostics import step as S
     from rocketid.diagnostics.effects import CATALOGUE, Vehicle
     from rocketid.diagnostics.screen import Contender, Screen
@@ -331,12 +331,13 @@ def test_a_snug_choice_still_tries_the_shapes_of_a_near_rival():
                   sample_interval=0.1, knot_times=tuple(np.linspace(0.0, 80.0, 41)))
     names = ("wind", "misalignment", "density", "earth_rotation")
     scr = Screen(None, tuple(Contender(CATALOGUE[n], "") for n in names), ())
-    accs = [accept(refit(n, c, base_chi2=3.84), BAND) for n, c in zip(names, (0.984, 1.141, 1.90, 1.15))]
-    base = 3.84 * (N_DATA - 8) / 2
-    assert S._near_rivals(accs, scr, veh, 0, base) == [1]       # earth_rotation has no other shape
+    band = NoiseBand(upper=1.092, dof=2391, discretization=0.0)
+    accs = [accept(refit(n, c, base_chi2=3.84), band) for n, c in zip(names, (0.984, 1.141, 1.90, 1.15))]
+    assert S._near_rivals(accs, scr, veh, 0, band) == [1]       # earth_rotation has no other shape
     assert [e.name for e in CATALOGUE["misalignment"].refinements(veh)] == ["misalignment_onset"]
-    # a refit that does not lower the objective leaves no rival
-    assert S._near_rivals(accs, scr, veh, 0, accs[0].refit.objective) == []
+    # far above the band (Stage-30's density at chi2/dof 56 after a base of 23 209) is no near rival
+    accs[1] = accept(refit("misalignment", 1.19, base_chi2=3.84), band)
+    assert S._near_rivals(accs, scr, veh, 0, band) == []
 
 
 def test_a_shape_with_several_starts_is_represented_by_its_best_refit(monkeypatch):

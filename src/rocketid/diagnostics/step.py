@@ -17,7 +17,7 @@ Forward selection with a backward check, capped at ``max_effects``:
    surface value and more basis functions, a density profile on more knots, a thrust
    error in time, a misalignment from an onset time), refit those and keep the shape with
    the lowest BIC (the knot count chosen by BIC); when the choice is snug, the shapes of
-   its near rivals (other families nearly as good, :data:`NEAR_RIVAL`) are still tried,
+   its near rivals (other families whose refit is near the noise band, :data:`NEAR_RIVAL`) are still tried,
    and one replaces the choice when its BIC is lower by :data:`BIC_TIE`;
 5. backward check: from the second step on, refit without each earlier effect; an effect
    whose removal lowers BIC no longer helps and is dropped;
@@ -373,25 +373,24 @@ def _families_to_refine(accs: Sequence[Acceptance], scr: Screen, vehicle: Vehicl
     return out[:REFINE_FAMILIES]
 
 
-NEAR_RIVAL = 0.9
-"""A refit of another family whose fall of the objective is at least this share of the chosen one's is a near
-rival: when the choice is snug its refined shapes are still tried. (Measured: a 0.2 deg misalignment switched on
-at 20 s was explained by a 0.6 m/s wind at chi2/dof 0.984; the constant misalignment, 95 % of the wind's fall,
-was never given its onset-time shape.)"""
+NEAR_RIVAL = 2.0
+"""A refit of another family whose chi2/dof exceeds 1 by at most this many times the noise band's excess
+(``1 + NEAR_RIVAL (band.upper - 1)``) is a near rival: when the choice is snug its refined shapes are still
+tried. (Measured: a 0.2 deg misalignment switched on at 20 s was explained by a 0.6 m/s wind at chi2/dof 0.984;
+the constant misalignment, at 1.14 against a band of 1.092, was never given its onset-time shape. A share of
+the choice's fall of the objective, 90 %, was tried first: on Stage-30 with a +2 % thrust error, from chi2/dof
+23 209, a density at 56 and a wind at 558 were "near" too, and their profiles took 25 s of a 29 s diagnosis.)"""
 
 
-def _near_rivals(accs: Sequence[Acceptance], scr: Screen, vehicle: Vehicle, chosen: int, objective: float) -> list[int]:
-    """Indices of the significant refits of other families, with refined shapes, whose fall of the objective
-    from ``objective`` is at least :data:`NEAR_RIVAL` of the chosen refit's (best objective first;
-    :data:`REFINE_FAMILIES` at most)."""
+def _near_rivals(accs: Sequence[Acceptance], scr: Screen, vehicle: Vehicle, chosen: int, band: NoiseBand) -> list[int]:
+    """Indices of the significant refits of other families, with refined shapes, whose chi2/dof is within
+    :data:`NEAR_RIVAL` band excesses of 1 (best objective first; :data:`REFINE_FAMILIES` at most)."""
     n = min(len(scr.contenders), len(accs))
-    fall = objective - accs[chosen].refit.objective
-    if not fall > 0:
-        return []
+    limit = 1.0 + NEAR_RIVAL * max(0.0, band.upper - 1.0)
     own = _family(scr.contenders[chosen].effect.name)
     near = sorted((j for j in range(n) if j != chosen and accs[j].refit.success and accs[j].check("significant").passed
                    and _family(scr.contenders[j].effect.name) != own
-                   and objective - accs[j].refit.objective >= NEAR_RIVAL * fall
+                   and accs[j].refit.chi2_per_dof <= limit
                    and scr.contenders[j].effect.refinements(vehicle)),
                   key=lambda j: accs[j].refit.objective)
     return near[:REFINE_FAMILIES]
@@ -721,7 +720,7 @@ def _refine_choice(ctx: _Search, current: EstimationResult, chosen: list, scr: S
         _holm(pick.refit.whiteness) >= 0.05
     if not ctx.refine:
         return scr, accs, effect, pick, why
-    fam = _near_rivals(accs, scr, ctx.vehicle, i, float(current.objective)) if snug else \
+    fam = _near_rivals(accs, scr, ctx.vehicle, i, ctx.band) if snug else \
         _families_to_refine(accs, scr, ctx.vehicle, i)
     families = _ladders([scr.contenders[j].effect.refinements(ctx.vehicle) for j in fam])
     families = [f for f in families if f and f[0].name not in {a.refit.name for a in accs}]
