@@ -55,7 +55,7 @@ from typing import Iterable, NamedTuple, Sequence
 import numpy as np
 from scipy import stats
 
-from ..errors import ModelError, SettingsError
+from ..errors import ModelError, RocketidError, SettingsError
 from ..model import ModelSpec
 from ..sensitivity import sensitivity_at
 from ..solve import EstimationResult, Prepared, prepare
@@ -781,7 +781,6 @@ def onset_starts(fit: EstimationResult, scan, *, n: int = 4, cap: float | None =
     list of dict
         Empty when the bank cannot be built or scored (the caller falls back to fixed starts).
     """
-    from ..errors import RocketidError
     try:
         aug = augment(fit, [scan.bank])
         sens = _augmented_sensitivities(fit, aug)
