@@ -496,7 +496,8 @@ def _final(disc, ranking, level, window) -> FinalModel | None:
         sizes, times = {}, set()
         for e in disc.effects:
             sizes.update(e.sizes(disc.vehicle))
-            times.update(k for st in e.starts for k in st)     # event times: s after the start, not a size
+            if e.event_time is not None:                       # s after the start, not a size
+                times.add(e.event_time)
 
         def size_note(n):
             if n in times:

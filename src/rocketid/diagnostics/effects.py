@@ -142,6 +142,11 @@ class Effect:
         """Names of the parameters the effect declares (known for catalogue effects)."""
         return tuple(self.realistic)
 
+    @property
+    def event_time(self) -> str | None:
+        """The event-time parameter of an event shape (s after the start; :attr:`scan`), else None."""
+        return self.scan.time if self.scan is not None else None
+
     def sizes(self, vehicle: "Vehicle | None" = None) -> dict[str, float]:
         """Realistic magnitude of each parameter for ``vehicle`` (RA-66's without one)."""
         out = dict(self.realistic)

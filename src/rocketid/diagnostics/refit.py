@@ -396,8 +396,7 @@ def confirm(fit: EstimationResult, effect: Effect | str | Sequence[Effect | str]
     t2 = time.perf_counter()
     if window is not None:
         from .screen import vehicle_of
-        vehicle = vehicle_of(fit)
-        sizes = {k: v for e in effects for k, v in e.sizes(vehicle).items()}
+        sizes = effect_sizes(new.spec.parameter_names, fit.spec.parameter_names, effects, vehicle_of(fit))
     else:
         sizes = {}
     hold = _holdout(fit, new, window, options, timeout, sizes)

@@ -447,10 +447,10 @@ def _from_the_start(effect: Effect, r: Refit) -> bool:
     """An event shape whose onset came out at or before the start: its family's constant shape with one more
     parameter, and its onset held at a bound -- not an event, so not offered as one (Stage-30 with a
     misalignment from t = 0 ended with ``misalignment_onset`` at its lower bound, "partly explained")."""
-    if effect.scan is None or not r.success:
+    if effect.event_time is None or not r.success:
         return False
     values = dict(zip(r.parameter_names, (float(v) for v in r.p)))
-    return effect.scan.time in values and values[effect.scan.time] <= 0.0
+    return effect.event_time in values and values[effect.event_time] <= 0.0
 
 
 def _best_start(refits: Sequence[Refit]) -> Refit:
