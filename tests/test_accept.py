@@ -387,9 +387,9 @@ def test_an_event_shape_is_a_ladder_of_its_own():
                           CATALOGUE["start_mass"].refinements(veh)])
     assert [[v.name for v in f] for f in ladders] == [["misalignment_fade"], ["misalignment_onset"],
                                                        ["thrust_profile_3", "thrust_profile_5", "thrust_profile_9"],
-                                                       ["throttle_step"], ["mass_jettison"]]
+                                                       ["throttle_step"], ["throttle_window"], ["mass_jettison"]]
     assert S._family("mass_jettison") == "start_mass" and S._family("misalignment_onset") == "misalignment"
-    assert S._family("throttle_step") == "thrust_level"
+    assert S._family("throttle_step") == "thrust_level" and S._family("throttle_window") == "thrust_level"
 
 
 def test_event_shapes_of_two_families_within_bic_tie_are_rivals():

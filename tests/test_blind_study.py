@@ -95,6 +95,24 @@ def test_the_onset_scan_starts_a_refit_near_the_event(hidden, shape, time_name, 
     assert min(abs(st[time_name] - when) for st in starts) <= 2.5, starts
 
 
+def test_the_window_scan_starts_a_refit_at_both_edges_of_a_throttle_bucket():
+    """A throttle bucket from the truth's own dynamics (15 % down over 22-40 s, 2 s linear ramps; another
+    window than the study's case): the window's scan over pairs of onset times puts a start within 2.5 s of
+    both edges (the ramps' midpoints, 23 and 39 s), with a throttle-*down* as its one-step size."""
+    from rocketid.diagnostics import CATALOGUE
+    from rocketid.diagnostics.score import onset_starts
+    from rocketid.diagnostics.screen import vehicle_of
+
+    spec = halcyon.build_model()
+    hidden = {"throttle": {"depth": 0.15, "t_on": 22.0, "t_off": 40.0, "ramp": 2.0}}
+    fit = ri.estimate(spec, _measurements(truth.measurements(run.TIMES, hidden, seed=6), spec))
+    (window,) = [e for e in CATALOGUE["thrust_level"].refinements(vehicle_of(fit)) if e.name == "throttle_window"]
+    starts = onset_starts(fit, window.scan)
+    assert 1 <= len(starts) <= 4
+    near = [st for st in starts if abs(st["t_win_on"] - 23.0) <= 2.5 and abs(st["t_win_off"] - 39.0) <= 2.5]
+    assert near and near[0]["d_window"] > 0, starts
+
+
 def _measurements(table, spec) -> "ri.Measurements":
     """The truth's samples as rocketid measurements (the model's sigmas)."""
     return ri.Measurements(tuple(ri.Channel(c, np.asarray(table["t"], float), np.asarray(table[c], float))

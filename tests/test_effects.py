@@ -405,6 +405,40 @@ def test_mass_jettison_releases_its_mass_at_the_estimated_time(ra66m_spec):
         assert float(d) == pytest.approx(-150.0 * share, rel=1e-12)
 
 
+@pytest.mark.parametrize("shape", ["throttle_step", "throttle_window"])
+def test_a_throttle_shape_scales_thrust_and_mass_flow_together(shape, ra66m_spec):
+    """thrust_level's event shapes: zero size gives the base model; the thrust is scaled by 1 - d w(t), w the
+    step (or the step minus a later one: a window), written out by hand here; the mass starts at the base
+    model's and falls at the base mass flow times the same factor -- checked by differentiating the closed
+    form numerically, not by its own integral."""
+    from rocketid.diagnostics.effects import throttle_step_effect, throttle_window_effect
+    make, size, times = {"throttle_step": (throttle_step_effect, "d_step", {"t_step": 20.0}),
+                         "throttle_window": (throttle_window_effect, "d_window",
+                                             {"t_win_on": 20.0, "t_win_off": 35.0})}[shape]
+    effect = make(ra66m_spec.t0, ra66m_spec.tf, 1.5)
+    assert effect.event_time == next(iter(times)) and effect.event_times == tuple(times)
+    spec = _zero_is_the_base_model(ra66m_spec, effect, size)
+    defs, defs0 = dict(spec.definitions), dict(ra66m_spec.definitions)
+    values = {spec.symbol(size): 0.2, **{spec.symbol(n): v for n, v in times.items()}}
+
+    def switch(t):
+        on = [(1 + math.tanh((t - v) / 1.5)) / 2 for v in times.values()]
+        return on[0] - (on[1] if len(on) > 1 else 0.0)
+
+    def at(expr, t):
+        return float(sp.N(expr.xreplace({**values, spec.t: spec.t0 + t}).subs(dict(spec.constants))))
+
+    thrust, thrust0 = defs[spec.role("thrust")], defs0[ra66m_spec.role("thrust")]
+    mass, mass0 = defs[spec.role("mass")], defs0[ra66m_spec.role("mass")]
+    assert at(mass, 0.0) == pytest.approx(at(mass0, 0.0), rel=1e-12)
+    for t in (10.0, 20.0, 21.0, 30.0, 35.0, 50.0):
+        assert at(thrust, t) == pytest.approx(at(thrust0, t) * (1 - 0.2 * switch(t)), rel=1e-12)
+        h = 1e-3
+        rate = (at(mass, t + h) - at(mass, t - h)) / (2 * h)
+        rate0 = (at(mass0, t + h) - at(mass0, t - h)) / (2 * h)
+        assert rate == pytest.approx(rate0 * (1 - 0.2 * switch(t)), rel=1e-6)
+
+
 def test_misalignment_fade_time_is_estimated_only_from_rest(ra66m_spec):
     """From rest (RA-66M) the misalignment's refined shape estimates its fade time t_r e^s (zero gives
     the base model; s = 0 is the catalogue's 3 s fade); a vehicle released at speed has no such shape."""

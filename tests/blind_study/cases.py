@@ -33,8 +33,9 @@ Decisions (written before running):
 
 from __future__ import annotations
 
-# throttle_step, the thrust family's event shape, was added after the study was written (2026-11-25)
-THRUST = {"thrust_level", "thrust_profile_", "throttle_step"}
+# throttle_step and throttle_window, the thrust family's event shapes, were added after the study was written
+# (2026-11-25 and 2026-11-26)
+THRUST = {"thrust_level", "thrust_profile_", "throttle_step", "throttle_window"}
 # mass_jettison, the start-mass family's event shape, was added after the study was written (2026-11-25)
 MASS = {"mass_flow", "start_mass", "mass_jettison"}
 DRAG = {"transonic_drag", "drag_mach_"}

@@ -496,8 +496,7 @@ def _final(disc, ranking, level, window) -> FinalModel | None:
         sizes, times = {}, set()
         for e in disc.effects:
             sizes.update(e.sizes(disc.vehicle))
-            if e.event_time is not None:                       # s after the start, not a size
-                times.add(e.event_time)
+            times.update(e.event_times)                        # s after the start, not sizes
 
         def size_note(n):
             if n in times:

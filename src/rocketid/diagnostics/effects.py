@@ -144,8 +144,16 @@ class Effect:
 
     @property
     def event_time(self) -> str | None:
-        """The event-time parameter of an event shape (s after the start; :attr:`scan`), else None."""
+        """The event-time parameter of an event shape (s after the start; :attr:`scan`), else None; for a
+        window, the time it opens."""
         return self.scan.time if self.scan is not None else None
+
+    @property
+    def event_times(self) -> tuple[str, ...]:
+        """Every event-time parameter (s after the start): the onset, and a window's end."""
+        if self.scan is None:
+            return ()
+        return (self.scan.time,) + ((self.scan.end,) if self.scan.end else ())
 
     def sizes(self, vehicle: "Vehicle | None" = None) -> dict[str, float]:
         """Realistic magnitude of each parameter for ``vehicle`` (RA-66's without one)."""
@@ -475,6 +483,10 @@ class OnsetScan:
         The event shape's size and onset-time parameters.
     bounds : (float, float)
         The size's bounds (a start is held within them).
+    end : str, optional
+        For a window (a change at ``time`` undone at ``end``): the end-time parameter. The window's score
+        at each pair of onset times ``a < b`` is that of the bank's copy at ``a`` minus its copy at ``b``,
+        from the same sensitivity solve.
     """
 
     bank: "Effect"
@@ -482,14 +494,17 @@ class OnsetScan:
     size: str
     time: str
     bounds: tuple = (-math.inf, math.inf)
+    end: str | None = None
 
 
 def _event_shape(name: str, time_name: str, title: str, kind: str, edit: Callable, size: tuple, t0: float,
-                 tf: float, width: float, description: str, relative: Callable | None = None) -> Effect:
+                 tf: float, width: float, description: str, relative: Callable | None = None,
+                 end_name: str | None = None) -> Effect:
     """An effect that sets in ``time_name`` s after the start: ``edit(m, size_symbol, t_on_expr)`` makes the
     model change, ``size = (name, realistic, bounds)``; the onset time is bounded to ``[-3 width, tf - t0]``
-    (at 0 or below, the change acts from the start). It carries the :class:`OnsetScan` bank and the fallback
-    starts."""
+    (at 0 or below, the change acts from the start). With ``end_name`` it is a window, undone at that time
+    (``edit(m, size_symbol, t_on_expr, t_off_expr)``; the same bounds). It carries the :class:`OnsetScan`
+    bank and the fallback starts."""
     horizon = max(1e-9, float(tf) - float(t0))
     w = float(width)
     size_name, realistic, bounds = size
@@ -497,8 +512,12 @@ def _event_shape(name: str, time_name: str, title: str, kind: str, edit: Callabl
     def apply(m: Model) -> tuple:
         a = m.parameter(size_name, 0.0, bounds=bounds, nominal=realistic)
         t_on = m.parameter(time_name, 0.0, bounds=(-3.0 * w, horizon), nominal=horizon / 4)
-        edit(m, a, t_on)
-        return (a, t_on)
+        if end_name is None:
+            edit(m, a, t_on)
+            return (a, t_on)
+        t_off = m.parameter(end_name, 0.0, bounds=(-3.0 * w, horizon), nominal=horizon / 2)
+        edit(m, a, t_on, t_off)
+        return (a, t_on, t_off)
 
     times = tuple(horizon * (k + 0.5) / SCAN_TIMES for k in range(SCAN_TIMES))
 
@@ -510,9 +529,15 @@ def _event_shape(name: str, time_name: str, title: str, kind: str, edit: Callabl
         return sizes
 
     scan = OnsetScan(Effect(f"{name}_scan", f"{title} (scan)", kind, bank, "", {}), times, size_name, time_name,
-                     tuple(float(b) for b in bounds))
-    return Effect(name, title, kind, apply, description, {size_name: realistic, time_name: horizon},
-                  relative=relative, starts=tuple({time_name: f * horizon} for f in ONSET_STARTS), scan=scan)
+                     tuple(float(b) for b in bounds), end_name)
+    if end_name is None:
+        realistic_all = {size_name: realistic, time_name: horizon}
+        starts = tuple({time_name: f * horizon} for f in ONSET_STARTS)
+    else:
+        realistic_all = {size_name: realistic, time_name: horizon, end_name: horizon}
+        starts = tuple({time_name: a * horizon, end_name: b * horizon}
+                       for i, a in enumerate(ONSET_STARTS) for b in ONSET_STARTS[i + 1:])
+    return Effect(name, title, kind, apply, description, realistic_all, relative=relative, starts=starts, scan=scan)
 
 
 def misalignment_onset_effect(t0: float, tf: float, width: float, *, from_rest: bool = False) -> Effect:
@@ -571,6 +596,39 @@ def mass_jettison_effect(t0: float, tf: float, width: float) -> Effect:
                         relative=lambda veh: {"dm_jettison": 0.01 * veh.mass})
 
 
+def _throttle_edit(name: str, size_name: str, w: float) -> Callable:
+    """``edit(m, d, t_on[, t_off])``: thrust and mass flow scaled by ``1 - d s(t)``, ``s`` the switch
+    :func:`onset_step` at ``t_on`` (minus the switch at ``t_off`` for a window); the mass follows in closed
+    form (the integral of ``s``, with log cosh). The base model's mass flow must be constant."""
+
+    def integral(tau, t_on):
+        return (tau + w * (sp.log(sp.cosh((tau - t_on) / w)) - sp.log(sp.cosh(t_on / w)))) / 2
+
+    def edit(m: Model, d, t_on, t_off=None) -> None:
+        t_sym, thrust = _role_definition(m, "thrust", name)
+        m_sym, mass = _role_definition(m, "mass", name)
+        mdot = -sp.diff(_expanded(m, mass), m.t)
+        # the base model's mass flow: a scan's earlier copies of this change vanish at zero size
+        mdot = mdot.subs({q: 0 for q in mdot.free_symbols if str(q).startswith(size_name)})
+        if mdot.free_symbols - {c for c, _ in m._constants} - {p.symbol for p in m._parameters}:
+            raise ModelError(f"effect {name!r} needs a mass that falls linearly in time (a constant mass "
+                             f"flow); the mass of model {m.name!r} has mass flow {mdot}")
+        tau = m.t - m.t0
+        switch, S = onset_step(tau, t_on, w), integral(tau, t_on)
+        if t_off is not None:
+            switch, S = switch - onset_step(tau, t_off, w), S - integral(tau, t_off)
+        m.redefine(t_sym, thrust * (1 - d * switch))
+        m.redefine(m_sym, mass + mdot * d * S)
+
+    return edit
+
+
+def _throttle_width(t0: float, tf: float, width: float) -> float:
+    """The switch width of a throttle shape: ``width``, at least 1/300 of the horizon (``|t - t_on| / w``
+    stays far below cosh's overflow)."""
+    return max(float(width), max(1e-9, float(tf) - float(t0)) / 300.0)
+
+
 def throttle_step_effect(t0: float, tf: float, width: float) -> Effect:
     """A throttle change at an estimated time: thrust **and** mass flow scaled by ``1 - d s(t)`` from then on.
 
@@ -582,27 +640,30 @@ def throttle_step_effect(t0: float, tf: float, width: float) -> Effect:
     which must be constant. ``d_step`` > 0 is a throttle-down (realistic 0.05, bounded to (-1, 1)). The
     refits start where its scan (:class:`OnsetScan`) puts them.
     """
-    horizon = max(1e-9, float(tf) - float(t0))
-    w = max(float(width), horizon / 300.0)       # |t - t_step| / w stays far below cosh's overflow
-
-    def edit(m: Model, d, t_on) -> None:
-        t_sym, thrust = _role_definition(m, "thrust", "throttle_step")
-        m_sym, mass = _role_definition(m, "mass", "throttle_step")
-        mdot = -sp.diff(_expanded(m, mass), m.t)
-        # the base model's mass flow: a scan's earlier copies of this change vanish at zero size
-        mdot = mdot.subs({q: 0 for q in mdot.free_symbols if str(q).startswith("d_step")})
-        if mdot.free_symbols - {c for c, _ in m._constants} - {p.symbol for p in m._parameters}:
-            raise ModelError(f"effect 'throttle_step' needs a mass that falls linearly in time (a constant mass "
-                             f"flow); the mass of model {m.name!r} has mass flow {mdot}")
-        tau = m.t - m.t0
-        S = (tau + w * (sp.log(sp.cosh((tau - t_on) / w)) - sp.log(sp.cosh(t_on / w)))) / 2
-        m.redefine(t_sym, thrust * (1 - d * onset_step(tau, t_on, w)))
-        m.redefine(m_sym, mass + mdot * d * S)
-
-    return _event_shape("throttle_step", "t_step", "throttle change at an estimated time", "propulsion", edit,
-                        ("d_step", 0.05, (-1.0, 1.0)), t0, tf, w,
+    w = _throttle_width(t0, tf, width)
+    return _event_shape("throttle_step", "t_step", "throttle change at an estimated time", "propulsion",
+                        _throttle_edit("throttle_step", "d_step", w), ("d_step", 0.05, (-1.0, 1.0)), t0, tf, w,
                         f"thrust and mass flow scaled by 1 - d_step (1 + tanh((t - t0 - t_step) / {w:.3g} s)) / 2 (a "
                         "tail-off or a throttle-down from an event on); mass m + mdot d_step integral of the switch")
+
+
+def throttle_window_effect(t0: float, tf: float, width: float) -> Effect:
+    """A throttle window with estimated times: thrust **and** mass flow scaled by ``1 - d (s_on - s_off)``.
+
+    ``s_on``, ``s_off`` are the switches :func:`onset_step` at ``t0 + t_win_on`` and ``t0 + t_win_off``
+    (s after the start, each bounded to ``[-3 width, tf - t0]``): a throttle bucket through max-q, an
+    engine held at another setting for a while. ``d_window`` > 0 is a throttle-down (realistic 0.1,
+    bounded to (-1, 1)); the mass follows in closed form as for :func:`throttle_step_effect`, whose
+    constant mass flow it needs too. The objective is sharply multimodal in the two times, so the refits
+    start at the best local maxima of the window's score over **pairs** of the scan's onset times (a copy
+    at ``t_win_on`` minus a copy at ``t_win_off``; :class:`OnsetScan`, one sensitivity solve).
+    """
+    w = _throttle_width(t0, tf, width)
+    return _event_shape("throttle_window", "t_win_on", "throttle window with estimated times", "propulsion",
+                        _throttle_edit("throttle_window", "d_window", w), ("d_window", 0.1, (-1.0, 1.0)), t0, tf, w,
+                        f"thrust and mass flow scaled by 1 - d_window (s(t - t0 - t_win_on) - s(t - t0 - t_win_off)), "
+                        f"s(u) = (1 + tanh(u / {w:.3g} s)) / 2 (a throttle bucket); mass m + mdot d_window integral "
+                        "of the window", end_name="t_win_off")
 
 
 def _onset_width(vehicle: "Vehicle") -> float:
@@ -1178,7 +1239,8 @@ def _refine_thrust(vehicle: "Vehicle | None") -> list[Effect]:
         knots = sorted({float(bounds[np.argmin(np.abs(bounds - w))]) for w in want})
         if len(knots) >= 2:
             out.append(thrust_profile_effect(knots))
-    return out + [throttle_step_effect(bounds[0], bounds[-1], _onset_width(vehicle))]
+    w = _onset_width(vehicle)
+    return out + [throttle_step_effect(bounds[0], bounds[-1], w), throttle_window_effect(bounds[0], bounds[-1], w)]
 
 
 def _build_catalogue() -> dict[str, Effect]:

@@ -281,26 +281,41 @@ def _after(measurements: Measurements, t_split: float) -> Measurements | None:
     return Measurements(tuple(chans))
 
 
-def _fit_window(spec, window: Measurements, mesh, guess, options, reference: np.ndarray):
-    """Fit ``spec`` to the hold-out window from its nominal guesses, holding at their guesses the
-    parameters the window's data do not reach (zero sensitivity at ``reference``, e.g. a drag
-    knot at a Mach number the vehicle reaches only later)."""
+def _holding(prep, mask: np.ndarray, p0: np.ndarray):
+    """``prep`` with the parameters where ``mask`` is true held at their values in ``p0`` (removed from the
+    NLP's variables, not bounded)."""
+    names = prep.spec.parameter_names
+    tf = ParameterTransform(np.eye(mask.size)[:, ~mask], np.where(mask, p0, 0.0),
+                            tuple(n for n, b in zip(names, mask) if not b))
+    return replace(prep, nlp=prep.nlp.with_transform(tf))
+
+
+def _fit_window(spec, window: Measurements, mesh, guess, options, reference: np.ndarray, held: Sequence[str] = ()):
+    """Fit ``spec`` to the hold-out window from its nominal guesses (over which ``guess``), holding at their
+    guesses the parameters the window's data do not reach (zero sensitivity at ``reference``, e.g. a drag
+    knot at a Mach number the vehicle reaches only later). ``held``: parameters held at their guesses in a
+    first fit whose values start the fit (event times, :func:`_times_held_first`)."""
+    spec = spec.with_guess(guess) if guess else spec
     prep = prepare(spec, window, mesh=mesh)
-    p0 = spec.parameter_vector(guess)
+    p0 = spec.parameter_vector()
     blind: list[str] = []
+    mask = np.zeros(len(p0), bool)
     try:
         sens = sensitivity_at(prep, reference)
         S = sens.S / sens.sigma[:, None] * spec.nominal[None, :]
         cn = np.sqrt(np.einsum("ij,ij->j", S, S))
         mask = cn <= BLIND * cn.max()
         blind = [n for n, b in zip(spec.parameter_names, mask) if b]
-        if mask.any() and not mask.all():
-            tf = ParameterTransform(np.eye(mask.size)[:, ~mask], np.where(mask, p0, 0.0),
-                                    tuple(n for n, b in zip(spec.parameter_names, mask) if not b))
-            prep = replace(prep, nlp=prep.nlp.with_transform(tf))
     except SensitivityError:
         pass
-    return estimate(spec, window, guess=guess, mesh=mesh, options=options, prepared=prep), blind
+    full = prep
+    if mask.any() and not mask.all():
+        prep = _holding(prep, mask, p0)
+    first = np.array([n in set(held) for n in spec.parameter_names]) & ~mask
+    if first.any() and not (mask | first).all():
+        spec = _times_held_first(spec, _holding(full, mask | first, p0), options)
+        prep = replace(prep, spec=spec)
+    return estimate(spec, window, mesh=mesh, options=options, prepared=prep), blind
 
 
 HOLDOUT_SHARE = 45.0 / 66.0
@@ -399,7 +414,8 @@ def confirm(fit: EstimationResult, effect: Effect | str | Sequence[Effect | str]
         sizes = effect_sizes(new.spec.parameter_names, fit.spec.parameter_names, effects, vehicle_of(fit))
     else:
         sizes = {}
-    hold = _holdout(fit, new, window, options, timeout, sizes)
+    times = {n: float(v) for n, v in zip(new.spec.parameter_names, new.p) if n in {t for e in effects for t in e.event_times}}
+    hold = _holdout(fit, new, window, options, timeout, sizes, times)
     t3 = time.perf_counter()
     return Confirmation(
         effects=tuple(e.name for e in effects), fit=new, base_fit=fit, lr_statistic=test.lr, lr_p_value=test.lr_p,
@@ -558,10 +574,14 @@ def _undetermined(window_fit: EstimationResult, sizes: Mapping[str, float]) -> t
 
 
 def _holdout(fit: EstimationResult, new: EstimationResult, window: tuple[float, float] | None,
-             options: Mapping[str, Any], timeout: float, sizes: Mapping[str, float] | None = None) -> _Holdout:
+             options: Mapping[str, Any], timeout: float, sizes: Mapping[str, float] | None = None,
+             times: Mapping[str, float] | None = None) -> _Holdout:
     """Fit the base model and the model with the effect on ``window`` (None: no check) from their
     own guesses, and predict the samples after it; ``sizes`` (the effect parameters' realistic
-    magnitudes) to find those the window does not determine."""
+    magnitudes) to find those the window does not determine. ``times``: the event times of the new
+    model's event shapes, where its window fit starts them (held first, then freed: from the model's
+    guess, 0, an event time is not found -- the sizes still start at zero, so the window's data alone
+    say how large the event is)."""
     if window is None:
         return _Holdout(None, None, ())
     data, mesh = fit.prepared.measurements, fit.prepared.transcription.mesh
@@ -576,7 +596,8 @@ def _holdout(fit: EstimationResult, new: EstimationResult, window: tuple[float, 
         # from the model's own guesses, as the base model: a parameter the window's data do not
         # reach is held at its guess, and a guess taken from the full-data estimate would carry
         # the predicted samples into the prediction
-        fn, blind_n = _fit_window(new.spec, win, mesh, None, options, new.p)
+        fn, blind_n = _fit_window(new.spec, win, mesh, dict(times or {}) or None, options, new.p,
+                                  held=tuple(times or ()))
         fits = (fb, fn)
         pb, pn = _predict(fb, rest, timeout), _predict(fn, rest, timeout)
         rms = {c.name: (float(np.sqrt(np.mean((pb[c.name] - c.values) ** 2))),
@@ -1027,7 +1048,13 @@ def run_refit(task: RefitTask) -> tuple[Refit, EstimationResult | None]:
         spec = refit_spec(task, model=model)
         opts = {"max_wall_time": float(task.timeout)}
         opts.update(task.options or {})
-        new = estimate(spec, task.data, mesh=task.mesh, options=opts)
+        held = _event_times_started(task)
+        prep = prepare(spec, task.data, mesh=task.mesh) if held else None
+        if held:
+            mask = np.array([n in set(held) for n in spec.parameter_names])
+            spec = _times_held_first(spec, _holding(prep, mask, spec.parameter_vector()), opts)
+        new = estimate(spec, task.data, mesh=task.mesh, options=opts,
+                       prepared=None if prep is None else replace(prep, spec=spec))
         if not (new.success and new.chi2_per_dof <= task.band_upper):
             # warm start from a fit the missing effect distorted: also from the model's own guesses (the
             # same model and NLP: only the start differs)
@@ -1049,6 +1076,28 @@ def run_refit(task: RefitTask) -> tuple[Refit, EstimationResult | None]:
                                                for k, v in e.least.items()},
                            base_values=task.base_values, base_chi2_per_dof=task.base_chi2_per_dof,
                            model_parameters=task.base_spec.parameter_names), new
+
+
+def _event_times_started(task: RefitTask) -> tuple[str, ...]:
+    """The event times of the task's added event shapes that its start sets (where a scan put them)."""
+    return tuple(n for e in task.effects if e.name in set(task.added) for n in e.event_times if n in task.start)
+
+
+def _times_held_first(spec, holding, options):
+    """``spec`` started where a fit with some parameters held (``holding``: ``spec`` prepared with them held,
+    :func:`_holding`) leaves the others.
+
+    A refit of an event shape from its scan's start with every parameter free wanders off: the base fit's
+    coefficients still hold the absorbed event, and the times move before the coefficients give it back
+    (Halcyon-8's throttle bucket, 20 % down at 30-45 s: started at the scan's 31.25-43.75 s and 0.188, the
+    free refit ended at a throttle-*up* over 26.7-31.4 s, chi2/dof 1.615; with the times held first, then
+    freed, at 0.196 over 31.43-43.50 s, chi2/dof 1.022). When the held fit fails, ``spec`` is returned
+    unchanged."""
+    first = estimate(spec, holding.measurements, options=options, prepared=holding)
+    if not np.all(np.isfinite(first.p)) or not np.isfinite(first.objective):
+        return spec
+    return spec.with_guess({n: float(np.clip(v, spec.parameter(n).lower, spec.parameter(n).upper))
+                            for n, v in zip(spec.parameter_names, first.p)})
 
 
 def _failed(task: RefitTask, message: str, seconds: float, gave_up: bool = False) -> Refit:

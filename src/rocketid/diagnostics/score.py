@@ -793,16 +793,40 @@ def onset_starts(fit: EstimationResult, scan, *, n: int = 4, cap: float | None =
     g = Ct.T @ proj.rw
     info = np.sum(Ct * Ct, axis=0)
     ok = info > 0
+    if scan.end is not None:
+        return _window_starts(Ct, g, scan, n, cap)
     lm = np.where(ok, g * g / np.where(ok, info, 1.0), 0.0)
     size = np.where(ok, -g / np.where(ok, info, 1.0), 0.0)
     k = len(lm)
     peaks = [j for j in range(k) if ok[j] and (j == 0 or lm[j] >= lm[j - 1]) and (j == k - 1 or lm[j] >= lm[j + 1])]
     peaks.sort(key=lambda j: -lm[j])
-    out = []
-    for j in peaks[:n]:
-        a = float(size[j])
-        if cap is not None and np.isfinite(cap):
-            a = float(np.clip(a, -cap, cap))
-        lo, hi = scan.bounds
-        out.append({scan.time: float(scan.times[j]), scan.size: float(np.clip(a, lo, hi))})
-    return out
+    return [{scan.time: float(scan.times[j]), scan.size: _held(float(size[j]), scan, cap)} for j in peaks[:n]]
+
+
+def _held(a: float, scan, cap: float | None) -> float:
+    """A one-step size held within ``cap`` in magnitude (when given) and within the size's bounds."""
+    if cap is not None and np.isfinite(cap):
+        a = float(np.clip(a, -cap, cap))
+    lo, hi = scan.bounds
+    return float(np.clip(a, lo, hi))
+
+
+def _window_starts(Ct: np.ndarray, g: np.ndarray, scan, n: int, cap: float | None) -> list[dict]:
+    """:func:`onset_starts` of a window: the score of every pair of onset times ``a < b`` (the copy at ``a``
+    minus the copy at ``b``: ``(g_a - g_b)^2 / (I_aa - 2 I_ab + I_bb)``, with the projected information
+    ``I = Ct' Ct``), and the ``n`` highest local maxima over the pairs (each against its up to 8 neighbours),
+    as ``{time: t_a, end: t_b, size: one-step size}``."""
+    info = Ct.T @ Ct
+    d = np.diag(info)
+    den = d[:, None] + d[None, :] - 2.0 * info
+    num = g[:, None] - g[None, :]
+    k = len(g)
+    upper = np.triu(np.ones((k, k), bool), 1) & (den > 1e-12 * max(1.0, float(d.max(initial=0.0))))
+    lm = np.where(upper, num * num / np.where(upper, den, 1.0), -np.inf)
+    padded = np.pad(lm, 1, constant_values=-np.inf)
+    neigh = np.max([padded[1 + di:1 + di + k, 1 + dj:1 + dj + k] for di in (-1, 0, 1) for dj in (-1, 0, 1)
+                    if (di, dj) != (0, 0)], axis=0)
+    peaks = np.argwhere(upper & (lm >= neigh))
+    peaks = sorted(peaks, key=lambda ij: -lm[ij[0], ij[1]])
+    return [{scan.time: float(scan.times[a]), scan.end: float(scan.times[b]),
+             scan.size: _held(float(-num[a, b] / den[a, b]), scan, cap)} for a, b in peaks[:n]]

@@ -537,7 +537,8 @@ def _family(name: str) -> str:
     """The family of an effect name: a refined shape's base (``wind_pl_10`` -> ``wind``)."""
     from .effects import CATALOGUE
     parents = {"thrust_profile": "thrust_level", "drag_mach": "transonic_drag", "back_pressure": "back_pressure",
-               "mass_jettison": "start_mass", "throttle_step": "thrust_level"}
+               "mass_jettison": "start_mass", "throttle_step": "thrust_level",
+               "throttle_window": "thrust_level"}
     for stem, parent in parents.items():
         if name.startswith(stem):
             return parent
