@@ -374,6 +374,38 @@ def test_a_shape_with_several_starts_is_represented_by_its_best_refit(monkeypatc
     assert r.chi2_per_dof == pytest.approx(0.99)
 
 
+def test_a_step_and_a_window_share_one_scan(monkeypatch):
+    """throttle_window's scan is throttle_step's bank scored in pairs: refitting both in one batch makes the
+    bank's profile once, and each shape gets starts of its own form (a window's start has both times)."""
+    from rocketid.diagnostics import score
+    from rocketid.diagnostics import step as S
+    from rocketid.diagnostics.effects import throttle_step_effect, throttle_window_effect
+
+    step, window = throttle_step_effect(0.0, 64.0, 1.0), throttle_window_effect(0.0, 64.0, 1.0)
+    assert window.scan.bank is not step.scan.bank and window.scan.bank.name == step.scan.bank.name
+    k = len(step.scan.times)
+    rng = np.random.default_rng(1)
+    Ct = rng.normal(size=(200, k))
+    made_profiles, made = [], []
+
+    def fake_profile(fit, bank):
+        made_profiles.append(bank.name)
+        return Ct, Ct.T @ (Ct[:, 10] - Ct[:, 20])          # residuals of a window from the 11th to the 21st onset
+
+    monkeypatch.setattr(score, "scan_profile", fake_profile)
+    monkeypatch.setattr(S, "refit_all", lambda tasks, workers=None: tuple(refit(v.name, 1.0) for v, _ in tasks))
+    S._refit_from_starts([(step, {}), (window, {})], lambda v, start=None: made.append((v.name, start)) or (v, start),
+                         workers=1, fit=object())
+    assert made_profiles == ["throttle_step_scan"]
+    steps = [st for n, st in made if n == "throttle_step"]
+    windows = [st for n, st in made if n == "throttle_window"]
+    assert steps and all(set(st) == {"t_step", "d_step"} for st in steps)
+    assert windows and all(set(st) == {"t_win_on", "t_win_off", "d_window"} for st in windows)
+    # the best pair is the window put in the scores, with its one-step depth (-1: a throttle-up of 1)
+    assert (windows[0]["t_win_on"], windows[0]["t_win_off"]) == (step.scan.times[10], step.scan.times[20])
+    assert windows[0]["d_window"] == pytest.approx(-1.0)
+
+
 def test_an_event_shape_is_a_ladder_of_its_own():
     """The knot ladder of a family is climbed while BIC falls; a shape with an estimated event time is no
     more flexible than the knots and is tried beside the ladder, not as its next rung."""

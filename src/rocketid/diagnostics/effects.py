@@ -659,11 +659,14 @@ def throttle_window_effect(t0: float, tf: float, width: float) -> Effect:
     at ``t_win_on`` minus a copy at ``t_win_off``; :class:`OnsetScan`, one sensitivity solve).
     """
     w = _throttle_width(t0, tf, width)
-    return _event_shape("throttle_window", "t_win_on", "throttle window with estimated times", "propulsion",
-                        _throttle_edit("throttle_window", "d_window", w), ("d_window", 0.1, (-1.0, 1.0)), t0, tf, w,
-                        f"thrust and mass flow scaled by 1 - d_window (s(t - t0 - t_win_on) - s(t - t0 - t_win_off)), "
-                        f"s(u) = (1 + tanh(u / {w:.3g} s)) / 2 (a throttle bucket); mass m + mdot d_window integral "
-                        "of the window", end_name="t_win_off")
+    window = _event_shape("throttle_window", "t_win_on", "throttle window with estimated times", "propulsion",
+                          _throttle_edit("throttle_window", "d_window", w), ("d_window", 0.1, (-1.0, 1.0)), t0, tf, w,
+                          f"thrust and mass flow scaled by 1 - d_window (s(t - t0 - t_win_on) - s(t - t0 - t_win_off)), "
+                          f"s(u) = (1 + tanh(u / {w:.3g} s)) / 2 (a throttle bucket); mass m + mdot d_window integral "
+                          "of the window", end_name="t_win_off")
+    # the window's scan is the step's: the same bank of steps, scored in pairs (one build, one solve for both)
+    step = throttle_step_effect(t0, tf, width)
+    return replace(window, scan=replace(window.scan, bank=step.scan.bank))
 
 
 def _onset_width(vehicle: "Vehicle") -> float:

@@ -764,7 +764,24 @@ def _absorption(effect: Effect, a: np.ndarray, absorbed_share: float, lam: float
 # ---------------------------------------------------------------------------
 
 
-def onset_starts(fit: EstimationResult, scan, *, n: int = 4, cap: float | None = None) -> list[dict]:
+def scan_profile(fit: EstimationResult, bank: Effect) -> tuple[np.ndarray, np.ndarray] | None:
+    """The projected columns ``Ct`` and scores ``g`` of a scan's bank at ``fit`` (one sensitivity solve; see
+    :func:`onset_starts`), or None when the bank cannot be built or scored. Event shapes whose scans share a
+    bank (a throttle step and a throttle window) share this."""
+    try:
+        aug = augment(fit, [bank])
+        sens = _augmented_sensitivities(fit, aug)
+    except (ModelError, RocketidError, ValueError, np.linalg.LinAlgError):
+        return None
+    proj = _base_projection(fit, sens)
+    n_p = len(fit.spec.parameters)
+    C = proj.Sw[:, n_p:]
+    Ct = C - proj.U @ (proj.U.T @ C)
+    return Ct, Ct.T @ proj.rw
+
+
+def onset_starts(fit: EstimationResult, scan, *, n: int = 4, cap: float | None = None,
+                 profile: tuple[np.ndarray, np.ndarray] | None = None) -> list[dict]:
     """Starting points of an event shape's refit at ``fit``: the best local maxima of its score profile.
 
     The scan's bank (:class:`~rocketid.diagnostics.effects.OnsetScan`) holds the effect's change at each of
@@ -776,21 +793,17 @@ def onset_starts(fit: EstimationResult, scan, *, n: int = 4, cap: float | None =
     54 s). The ``n`` highest local maxima are returned as ``{time: t_k, size: one-step size}``, best first,
     the size held within ``cap`` in magnitude when given and within the size's bounds.
 
+    ``profile``: the bank's :func:`scan_profile` at ``fit`` when already made.
+
     Returns
     -------
     list of dict
         Empty when the bank cannot be built or scored (the caller falls back to fixed starts).
     """
-    try:
-        aug = augment(fit, [scan.bank])
-        sens = _augmented_sensitivities(fit, aug)
-    except (ModelError, RocketidError, ValueError, np.linalg.LinAlgError):
+    profile = scan_profile(fit, scan.bank) if profile is None else profile
+    if profile is None:
         return []
-    proj = _base_projection(fit, sens)
-    n_p = len(fit.spec.parameters)
-    C = proj.Sw[:, n_p:]
-    Ct = C - proj.U @ (proj.U.T @ C)
-    g = Ct.T @ proj.rw
+    Ct, g = profile
     info = np.sum(Ct * Ct, axis=0)
     ok = info > 0
     if scan.end is not None:

@@ -468,17 +468,27 @@ def _refit_from_starts(items: Sequence[tuple], make_task, workers, fit: Estimati
     An event shape's starts are where its scan at ``fit`` puts them (:func:`~rocketid.diagnostics.score.
     onset_starts`: the best local maxima of its score profile over the onset time, with their one-step sizes
     held within 5 realistic sizes); without a fit, or when the scan cannot be made, :attr:`Effect.starts`."""
-    runs = [(b, {**start, **st}) for b, (v, start) in enumerate(items) for st in (_starts(v, fit, vehicle) or ({},))]
+    profiles: dict = {}
+    runs = [(b, {**start, **st}) for b, (v, start) in enumerate(items)
+            for st in (_starts(v, fit, vehicle, profiles) or ({},))]
     results = refit_all([make_task(items[b][0], st) for b, st in runs], workers=workers)
     return [_best_start([r for (bb, _), r in zip(runs, results) if bb == b]) for b in range(len(items))]
 
 
-def _starts(effect: Effect, fit: EstimationResult | None, vehicle: Vehicle | None) -> tuple:
-    """The starting points of ``effect``'s refits (module :func:`_refit_from_starts`)."""
+def _starts(effect: Effect, fit: EstimationResult | None, vehicle: Vehicle | None, profiles: dict | None = None) -> tuple:
+    """The starting points of ``effect``'s refits (module :func:`_refit_from_starts`); ``profiles``: the scans'
+    profiles at ``fit`` by bank name, filled as they are made (a bank shared by two shapes is solved once)."""
     if effect.scan is not None and fit is not None:
-        from .score import onset_starts
+        from .score import onset_starts, scan_profile
         size = effect.sizes(vehicle).get(effect.scan.size, math.inf) if vehicle is not None else math.inf
-        found = onset_starts(fit, effect.scan, cap=5.0 * size if math.isfinite(size) and size > 0 else None)
+        profiles = {} if profiles is None else profiles
+        bank = effect.scan.bank
+        if bank.name not in profiles:
+            profiles[bank.name] = scan_profile(fit, bank)
+        if profiles[bank.name] is None:
+            return tuple(effect.starts)
+        found = onset_starts(fit, effect.scan, cap=5.0 * size if math.isfinite(size) and size > 0 else None,
+                             profile=profiles[bank.name])
         if found:
             return tuple(found)
     return tuple(effect.starts)
