@@ -38,7 +38,8 @@ from __future__ import annotations
 THRUST = {"thrust_level", "thrust_profile_", "throttle_step", "throttle_window"}
 # mass_jettison, the start-mass family's event shape, was added after the study was written (2026-11-25)
 MASS = {"mass_flow", "start_mass", "mass_jettison"}
-DRAG = {"transonic_drag", "drag_mach_"}
+# drag_bump, the drag family's hump at an estimated Mach number, was added after the study was written (2026-11-26)
+DRAG = {"transonic_drag", "drag_mach_", "drag_bump"}
 # scale_h, the altimeter's scale factor, was added to the catalogue after the study was written (2026-11-25)
 HSENS = {"bias_h", "bias_h_drift", "scale_h"}
 VSENS = {"bias_v", "bias_v_drift", "scale_v"}

@@ -164,7 +164,7 @@ def variant_final_of(report) -> dict | None:
 
 
 #: refined or alternative forms the diagnosis may report for a catalogue effect (same physics)
-ALIASES = {"thrust_level": ("thrust_profile",), "transonic_drag": ("drag_mach",)}
+ALIASES = {"thrust_level": ("thrust_profile",), "transonic_drag": ("drag_mach", "drag_bump")}
 
 
 def _matches(found: str, true: str) -> bool:

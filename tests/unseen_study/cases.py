@@ -50,6 +50,8 @@ def family(effect: str) -> str:
     """The catalogue family of an effect name (``wind_surface_6`` -> ``wind``, ``bias_h_drift`` -> ``bias_h``)."""
     if effect in ("throttle_step", "throttle_window"):   # thrust and mass flow changed at estimated times
         return "thrust_profile"                          # (added 2026-11-25 and 2026-11-26)
+    if effect == "drag_bump":                            # a drag hump at an estimated Mach number (2026-11-26)
+        return "transonic_drag"
     for fam in ("thrust_profile", "wind", "density", "back_pressure", "drag_mach", "bias_x", "bias_h", "bias_v",
                 "misalignment", "earth_rotation", "time_offset", "transonic_drag", "mass_flow", "start_mass",
                 "scale_v"):

@@ -493,14 +493,14 @@ def _final(disc, ranking, level, window) -> FinalModel | None:
     elif disc.verdict == "explained":
         r = disc.refit
         base_names = set(disc.base_fit.spec.parameter_names)
-        sizes, times = {}, set()
+        sizes, places = {}, {}
         for e in disc.effects:
             sizes.update(e.sizes(disc.vehicle))
-            times.update(e.event_times)                        # s after the start, not sizes
+            places.update(e.locations)                         # where, not how large
 
         def size_note(n):
-            if n in times:
-                return " s after the start"
+            if n in places:
+                return " s after the start" if places[n] == "s" else f" ({places[n]})"
             return f" (realistic {sizes[n]:.3g})" if n in sizes else ""
         est = "; ".join(f"{n} = {v:.4g} +- {s:.2g}{size_note(n)}" for n, (v, s) in params.items()
                         if n not in base_names)

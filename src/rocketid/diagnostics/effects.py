@@ -146,14 +146,16 @@ class Effect:
     def event_time(self) -> str | None:
         """The event-time parameter of an event shape (s after the start; :attr:`scan`), else None; for a
         window, the time it opens."""
-        return self.scan.time if self.scan is not None else None
+        return self.scan.time if self.scan is not None and self.scan.unit == "s" else None
 
     @property
-    def event_times(self) -> tuple[str, ...]:
-        """Every event-time parameter (s after the start): the onset, and a window's end."""
+    def locations(self) -> dict[str, str]:
+        """The parameters that place a located shape (its :attr:`scan`'s), with their unit: an event's times
+        (``"s"`` after the start: the onset, and a window's end) or a drag hump's Mach number."""
         if self.scan is None:
-            return ()
-        return (self.scan.time,) + ((self.scan.end,) if self.scan.end else ())
+            return {}
+        names = (self.scan.time,) + ((self.scan.end,) if self.scan.end else ())
+        return {n: self.scan.unit for n in names}
 
     def sizes(self, vehicle: "Vehicle | None" = None) -> dict[str, float]:
         """Realistic magnitude of each parameter for ``vehicle`` (RA-66's without one)."""
@@ -487,6 +489,9 @@ class OnsetScan:
         For a window (a change at ``time`` undone at ``end``): the end-time parameter. The window's score
         at each pair of onset times ``a < b`` is that of the bank's copy at ``a`` minus its copy at ``b``,
         from the same sensitivity solve.
+    unit : str
+        What ``times`` and the location parameters are: ``"s"`` (after the start) for an event in time,
+        ``"Mach"`` for a feature placed in Mach number (:func:`drag_bump_effect`).
     """
 
     bank: "Effect"
@@ -495,6 +500,7 @@ class OnsetScan:
     time: str
     bounds: tuple = (-math.inf, math.inf)
     end: str | None = None
+    unit: str = "s"
 
 
 def _event_shape(name: str, time_name: str, title: str, kind: str, edit: Callable, size: tuple, t0: float,
@@ -1024,6 +1030,59 @@ def drag_mach_effect(knots: Sequence[float], zeros: Sequence[float] = (), *, nam
                   {n: realistic for n in names})
 
 
+DRAG_BUMP_WIDTH = 0.1
+"""The Mach half-width (1/e) of :func:`drag_bump_effect`'s hump in its scan and at its start."""
+
+
+def drag_bump_effect(mach_lo: float, mach_hi: float, width: float = DRAG_BUMP_WIDTH) -> Effect:
+    """A drag hump at an estimated Mach number: ``cd + dCD_bump exp(-((M - M_bump) / (w e^s_bump))^2)``.
+
+    The drag rise of a real vehicle peaks where its shape puts it (a shoulder, a fairing, a shock on a
+    protuberance), not at the catalogue's Mach 1.1: ``M_bump`` is estimated in ``[0, mach_hi]`` (the scan
+    covers the Mach range flown, ``[mach_lo, mach_hi]``), the width by ``s_bump`` (realistic 1, bounded to +-1.5: a half-width of 0.22 to
+    4.5 times ``width``), the height ``dCD_bump`` >= 0 (realistic 0.1: a hump; a table too high somewhere is
+    what the pinned correction :func:`drag_mach_effect` mends -- a free-sign bump with a free place and width
+    is a dip anywhere, and imitated Kestrel-S's throttle tail-off at 33 s as a drag dip of 0.083 around Mach
+    2.4, BIC 3053.3 against the throttle's 3053.9). It is the aerodynamic counterpart of a
+    throttle window -- a force placed in Mach rather than in time -- and a refit is started the same way,
+    where its scan over 32 Mach numbers (:class:`OnsetScan`, unit ``"Mach"``) puts it, the Mach number held
+    in a first solve.
+    """
+    lo, hi = float(mach_lo), float(mach_hi)
+    if not hi > lo:
+        raise ModelError(f"a drag hump needs a Mach range, got [{lo:g}, {hi:g}]")
+    w = float(width)
+
+    def bump(m: Model, a, centre, s=0) -> None:
+        sym, cd = _role_definition(m, "drag_coefficient", "drag_bump")
+        mach = _role(m, "mach", "drag_bump")
+        m.redefine(sym, cd + a * sp.exp(-((mach - centre) / (w * sp.exp(s))) ** 2))
+
+    def apply(m: Model) -> tuple:
+        a = m.parameter("dCD_bump", 0.0, bounds=(0.0, math.inf), nominal=0.1)
+        centre = m.parameter("M_bump", 0.0, bounds=(min(0.0, lo), hi), nominal=1.0)
+        s = m.parameter("s_bump", 0.0, bounds=(-1.5, 1.5), nominal=1.0)
+        bump(m, a, centre, s)
+        return (a, centre, s)
+
+    centres = tuple(lo + (hi - lo) * (k + 0.5) / SCAN_TIMES for k in range(SCAN_TIMES))
+
+    def bank(m: Model) -> tuple:
+        sizes = tuple(m.parameter(f"dCD_bump_{k}", 0.0, bounds=(0.0, math.inf), nominal=0.1)
+                      for k in range(len(centres)))
+        for a, c in zip(sizes, centres):
+            bump(m, a, sp.Float(c))
+        return sizes
+
+    scan = OnsetScan(Effect("drag_bump_scan", "drag hump (scan)", "aero", bank, "", {}), centres, "dCD_bump",
+                     "M_bump", (0.0, math.inf), unit="Mach")
+    return Effect("drag_bump", "drag hump at an estimated Mach number", "aero", apply,
+                  f"drag coefficient cd + dCD_bump exp(-((M - M_bump) / ({w:g} e^s_bump))^2), dCD_bump >= 0: a drag rise that peaks "
+                  f"at an estimated Mach number M_bump in [0, {hi:.3g}]",
+                  {"dCD_bump": 0.1, "M_bump": hi, "s_bump": 1.0},
+                  starts=tuple({"M_bump": lo + f * (hi - lo)} for f in ONSET_STARTS), scan=scan)
+
+
 DENSITY_CENTRES_KM = (0.0, 6.0, 12.0, 18.0)
 DENSITY_WIDTH_KM = 3.0
 
@@ -1229,7 +1288,7 @@ def _refine_drag(vehicle: "Vehicle | None") -> list[Effect]:
         free = sorted({a + (b - a) * i / parts for a, b in segs for i in range(1, parts)})
         if free:
             out.append(drag_mach_effect(free, zeros, name=f"drag_mach_{len(free)}"))
-    return out
+    return out + ([drag_bump_effect(lo, hi)] if hi > lo else [])
 
 
 def _refine_thrust(vehicle: "Vehicle | None") -> list[Effect]:

@@ -414,7 +414,7 @@ def confirm(fit: EstimationResult, effect: Effect | str | Sequence[Effect | str]
         sizes = effect_sizes(new.spec.parameter_names, fit.spec.parameter_names, effects, vehicle_of(fit))
     else:
         sizes = {}
-    times = {n: float(v) for n, v in zip(new.spec.parameter_names, new.p) if n in {t for e in effects for t in e.event_times}}
+    times = {n: float(v) for n, v in zip(new.spec.parameter_names, new.p) if n in {t for e in effects for t in e.locations}}
     hold = _holdout(fit, new, window, options, timeout, sizes, times)
     t3 = time.perf_counter()
     return Confirmation(
@@ -1048,7 +1048,7 @@ def run_refit(task: RefitTask) -> tuple[Refit, EstimationResult | None]:
         spec = refit_spec(task, model=model)
         opts = {"max_wall_time": float(task.timeout)}
         opts.update(task.options or {})
-        held = _event_times_started(task)
+        held = _locations_started(task)
         prep = prepare(spec, task.data, mesh=task.mesh) if held else None
         if held:
             mask = np.array([n in set(held) for n in spec.parameter_names])
@@ -1078,9 +1078,10 @@ def run_refit(task: RefitTask) -> tuple[Refit, EstimationResult | None]:
                            model_parameters=task.base_spec.parameter_names), new
 
 
-def _event_times_started(task: RefitTask) -> tuple[str, ...]:
-    """The event times of the task's added event shapes that its start sets (where a scan put them)."""
-    return tuple(n for e in task.effects if e.name in set(task.added) for n in e.event_times if n in task.start)
+def _locations_started(task: RefitTask) -> tuple[str, ...]:
+    """The locations (event times, a Mach number) of the task's added located shapes that its start sets
+    (where a scan put them)."""
+    return tuple(n for e in task.effects if e.name in set(task.added) for n in e.locations if n in task.start)
 
 
 def _times_held_first(spec, holding, options):

@@ -791,7 +791,8 @@ def onset_starts(fit: EstimationResult, scan, *, n: int = 4, cap: float | None =
     objective is not convex in its time, and a fit that absorbed the event into its coefficients puts its
     highest peak elsewhere: Halcyon-8's 150 kg released at 55 s peaks at 74 s, with a local maximum at
     54 s). The ``n`` highest local maxima are returned as ``{time: t_k, size: one-step size}``, best first,
-    the size held within ``cap`` in magnitude when given and within the size's bounds.
+    the size held within ``cap`` in magnitude when given and within the size's bounds; a time whose one-step
+    size has a sign the bounds exclude (a mass *gained*, a drag dip for a hump) scores 0.
 
     ``profile``: the bank's :func:`scan_profile` at ``fit`` when already made.
 
@@ -808,12 +809,20 @@ def onset_starts(fit: EstimationResult, scan, *, n: int = 4, cap: float | None =
     ok = info > 0
     if scan.end is not None:
         return _window_starts(Ct, g, scan, n, cap)
-    lm = np.where(ok, g * g / np.where(ok, info, 1.0), 0.0)
     size = np.where(ok, -g / np.where(ok, info, 1.0), 0.0)
+    ok &= _signed(size, scan)
+    lm = np.where(ok, g * g / np.where(ok, info, 1.0), 0.0)
     k = len(lm)
     peaks = [j for j in range(k) if ok[j] and (j == 0 or lm[j] >= lm[j - 1]) and (j == k - 1 or lm[j] >= lm[j + 1])]
     peaks.sort(key=lambda j: -lm[j])
     return [{scan.time: float(scan.times[j]), scan.size: _held(float(size[j]), scan, cap)} for j in peaks[:n]]
+
+
+def _signed(size: np.ndarray, scan) -> np.ndarray:
+    """Where a one-step size has a sign the size's bounds allow (a mass released is >= 0, a drag hump >= 0):
+    a peak of the score whose size points out of the bounds is no start for the shape."""
+    lo, hi = scan.bounds
+    return ~((lo >= 0.0) & (size <= 0.0)) & ~((hi <= 0.0) & (size >= 0.0))
 
 
 def _held(a: float, scan, cap: float | None) -> float:
@@ -835,6 +844,7 @@ def _window_starts(Ct: np.ndarray, g: np.ndarray, scan, n: int, cap: float | Non
     num = g[:, None] - g[None, :]
     k = len(g)
     upper = np.triu(np.ones((k, k), bool), 1) & (den > 1e-12 * max(1.0, float(d.max(initial=0.0))))
+    upper &= _signed(-num / np.where(upper, den, 1.0), scan)
     lm = np.where(upper, num * num / np.where(upper, den, 1.0), -np.inf)
     padded = np.pad(lm, 1, constant_values=-np.inf)
     neigh = np.max([padded[1 + di:1 + di + k, 1 + dj:1 + dj + k] for di in (-1, 0, 1) for dj in (-1, 0, 1)
