@@ -441,6 +441,25 @@ def test_a_throttle_shape_scales_thrust_and_mass_flow_together(shape, ra66m_spec
         assert rate == pytest.approx(rate0 * (1 - 0.2 * switch(t)), rel=1e-6)
 
 
+def test_a_drag_bump_is_a_hump_placed_in_mach(ra66m_spec):
+    """transonic_drag's located shape: zero height gives the base model; the drag coefficient gains
+    dCD exp(-((M - M_bump) / (0.1 e^s))^2), written out by hand here; the height is a hump (>= 0), the scan
+    covers the Mach range flown and the verdict's unit for M_bump is Mach, not seconds."""
+    from rocketid.diagnostics.effects import drag_bump_effect
+    bump = drag_bump_effect(0.3, 4.2)
+    assert bump.locations == {"M_bump": "Mach"} and bump.event_time is None
+    assert bump.scan.unit == "Mach" and bump.scan.times[0] > 0.3 and bump.scan.times[-1] < 4.2
+    spec = _zero_is_the_base_model(ra66m_spec, bump, "dCD_bump")
+    assert spec.parameter("dCD_bump").lower == 0.0
+    assert (spec.parameter("M_bump").lower, spec.parameter("M_bump").upper) == (0.0, 4.2)
+    cd, cd0 = dict(spec.definitions)[spec.role("drag_coefficient")], dict(ra66m_spec.definitions)[ra66m_spec.role("drag_coefficient")]
+    mach = spec.role("mach")
+    for M, want in ((1.2, 1.0), (1.3, math.exp(-(0.1 / (0.1 * math.exp(0.5))) ** 2)), (2.2, math.exp(-100 / math.e))):
+        d = (cd - cd0).xreplace({spec.symbol("dCD_bump"): 0.08, spec.symbol("M_bump"): 1.2,
+                                 spec.symbol("s_bump"): 0.5, mach: M})
+        assert float(d) == pytest.approx(0.08 * want, rel=1e-12)
+
+
 def test_misalignment_fade_time_is_estimated_only_from_rest(ra66m_spec):
     """From rest (RA-66M) the misalignment's refined shape estimates its fade time t_r e^s (zero gives
     the base model; s = 0 is the catalogue's 3 s fade); a vehicle released at speed has no such shape."""
