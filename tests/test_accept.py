@@ -441,6 +441,23 @@ def test_event_shapes_of_two_families_within_bic_tie_are_rivals():
     assert "start_mass" not in note
 
 
+def test_a_drag_hump_and_a_throttle_window_are_rivals():
+    """Kestrel-S's drag hump (+0.08 at Mach 1.15) reached the noise as drag_bump (BIC 3094.41) and as a
+    3.8 % throttle window over 12.7-14.2 s (3094.48): two located shapes of different families (a force
+    placed in Mach and one placed in time) are rivals, and without a decisive hold-out neither is taken."""
+    from types import SimpleNamespace
+    from rocketid.diagnostics import step as S
+    from rocketid.diagnostics.effects import drag_bump_effect, throttle_window_effect, CATALOGUE
+
+    effects = [CATALOGUE["transonic_drag"], drag_bump_effect(0.3, 4.2), throttle_window_effect(0.0, 40.0, 1.0)]
+    accs = [accept(refit("transonic_drag", 1.05), BAND), accept(refit("drag_bump", 1.0060, value=0.0835), BAND),
+            accept(refit("throttle_window", 1.0061, value=0.0383), BAND)]
+    scr = SimpleNamespace(contenders=[SimpleNamespace(effect=e) for e in effects])
+    assert S._family("drag_bump") == "transonic_drag"
+    i, note = S._event_rivals(accs, scr, effects[2], accs[2], None, [], None, 0.05, None, 60.0)
+    assert i is None and "drag_bump (p_drag_bump 0.0835)" in note and "throttle_window" in note
+
+
 def test_an_event_shape_is_chosen_only_when_it_explains_and_not_at_the_start():
     """An event time soaks up part of other effects, so an event shape is never a step toward an explanation
     (only an accepted one may be chosen); an onset at or before the start is the constant shape, not offered."""
