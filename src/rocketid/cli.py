@@ -902,11 +902,14 @@ def read_flights(paths: Sequence[str], spec: ModelSpec, *, columns, time_column,
                    "are shared, free initial states are per flight always).")
 @click.option("--ipopt", "ipopt", multiple=True, type=NameValue(str, "value"), metavar="NAME=VALUE",
               help="IPOPT option (repeatable), e.g. --ipopt max_iter=200.")
+@click.option("--errors", "errors", type=click.Choice(["white", "coloured"]), default="white", show_default=True,
+              help="Standard errors for white residuals, or corrected for residuals correlated in time "
+                   "(telemetry whose errors last longer than a sample: a broadcast readout, a filtered sensor).")
 @click.option("--out", "out", type=click.Path(dir_okay=False), default=None, metavar="FIT.json",
               help="Write the result as JSON.")
 @verbose_option
 def estimate_command(data_files, model, columns, time_column, sigmas, sigma_columns, unmeasured, window_text,
-                     n_elements, K, guesses, per_flight, ipopt, out):
+                     n_elements, K, guesses, per_flight, ipopt, errors, out):
     """Estimate the model's parameters from measurements in DATA.csv.
 
     DATA.csv has a time column and one column per measured output (an empty cell: not
@@ -936,6 +939,9 @@ def estimate_command(data_files, model, columns, time_column, sigmas, sigma_colu
     if len(data_files) > 1:
         from .joint import joint_estimate
 
+        if errors != "white":
+            raise SettingsError("--errors coloured is available for one flight: fit each flight alone with it "
+                                "(the joint fit's standard errors assume white residuals)")
         guess = assignments(guesses, "--guess")
         flights = read_flights(data_files, spec, columns=columns, time_column=time_column, sigmas=sigmas,
                                n_elements=n_elements, K=K, unmeasured=unmeasured, window=window,
@@ -965,7 +971,8 @@ def estimate_command(data_files, model, columns, time_column, sigmas, sigma_colu
     click.echo(result.summary().text())
     payload = result.to_dict()
     if result.success:
-        payload["std_err"] = _print_standard_errors(result)
+        payload["std_err"] = _print_standard_errors(result, coloured=errors == "coloured")
+        payload["std_err_residuals"] = errors
     if out is not None:
         path = write_json(out, payload)
         status(f"wrote {path}")
@@ -973,14 +980,14 @@ def estimate_command(data_files, model, columns, time_column, sigmas, sigma_colu
         click.get_current_context().exit(EXIT_NOT_CONVERGED)
 
 
-def _print_standard_errors(result) -> dict:
+def _print_standard_errors(result, coloured: bool = False) -> dict:
     """Print the estimates' standard errors and 95 % intervals (from the reduced Hessian at the
-    estimate, with the sigmas of the fit); ``{name: std err}`` for FIT.json, empty when they
-    cannot be formed (the reason is printed)."""
+    estimate, with the sigmas of the fit; ``coloured``: corrected for residuals correlated in time);
+    ``{name: std err}`` for FIT.json, empty when they cannot be formed (the reason is printed)."""
     from .estimability import uncertainty
 
     try:
-        unc = uncertainty(result)
+        unc = uncertainty(result, coloured=coloured)
     except RocketidError as exc:
         click.echo(f"\nStandard errors: not available ({_one_line(exc)})")
         return {}

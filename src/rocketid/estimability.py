@@ -445,8 +445,51 @@ class Uncertainty:
                                                  f"{self.condition_number:.3g}"))),), self.notes, rule=False)
 
 
+def coloured_score_covariance(fit: EstimationResult, sens: Sensitivity) -> tuple[np.ndarray, dict[str, int]]:
+    """The long-run covariance of the likelihood's score, for residuals correlated in time.
+
+    Per channel, with the weighted sensitivities ``s_i = S_i / sigma_i`` and residuals ``e_i = r_i /
+    sigma_i`` at its samples in time order, the score terms ``g_i = s_i e_i`` are summed with Bartlett
+    weights over lags ``|k| <= L``: ``B_c = sum_k (1 - |k|/(L+1)) sum_i g_i g_{i+k}'`` (Newey and West 1987;
+    positive semi-definite). ``L`` follows Andrews' (1991) AR(1) plug-in for the Bartlett kernel,
+    ``L = 1.1447 (4 rho^2 / (1 - rho^2)^2 n)^(1/3)``, ``rho`` the channel's lag-1 residual autocorrelation,
+    at most ``n / 4``. Channels are taken as independent of each other (they are different sensors); the
+    priors' information is added as it is (a prior is a pseudo-measurement with white noise). With
+    white residuals at the stated sigma, ``B`` estimates ``H_data`` (the information); Morelli and Klein's
+    correction of output-error bounds for coloured residuals is the same sandwich with all lags.
+
+    Returns
+    -------
+    B : ndarray, shape (n_p, n_p)
+    lags : dict
+        ``{channel: L}``.
+    """
+    n_p = sens.S.shape[1]
+    B = np.zeros((n_p, n_p))
+    lags = {}
+    res = fit.residuals
+    for name, rows in sens.channel_slices.items():
+        e = np.asarray(res[name], float) / sens.sigma[rows]      # a channel's samples are in time order
+        s = sens.S[rows] / sens.sigma[rows][:, None]
+        n = e.size
+        g = s * e[:, None]
+        rho = float(np.dot(e[:-1], e[1:]) / np.dot(e, e)) if n > 2 and np.dot(e, e) > 0 else 0.0
+        rho = min(max(rho, 0.0), 0.99)
+        L = int(min(n // 4, np.floor(1.1447 * (4 * rho ** 2 / (1 - rho ** 2) ** 2 * n) ** (1 / 3)))) if rho > 0 else 0
+        Bc = g.T @ g
+        for k in range(1, L + 1):
+            G = g[:-k].T @ g[k:]
+            Bc += (1 - k / (L + 1)) * (G + G.T)
+        B += Bc
+        lags[name] = L
+    H_prior = getattr(sens, "H_prior", None)
+    if H_prior is not None:
+        B += H_prior
+    return 0.5 * (B + B.T), lags
+
+
 def uncertainty(fit: EstimationResult, *, sensitivity: Sensitivity | None = None,
-                ill_conditioned: float = 1e10) -> Uncertainty:
+                ill_conditioned: float = 1e10, coloured: bool = False) -> Uncertainty:
     """Covariance of the estimated quantities and of the physical parameters.
 
     For a full estimation ``Cov(p) = H_r^-1``; for (7.9) ``Cov(q1) =
@@ -454,6 +497,13 @@ def uncertainty(fit: EstimationResult, *, sensitivity: Sensitivity | None = None
     formed at the estimate. A note is added where a bound is active (the
     interval is then not valid on that side) or the restricted H_r is
     ill-conditioned.
+
+    ``coloured=True``: the covariance corrected for residuals correlated in time (a broadcast readout's
+    errors that last a second, turbulence, a sensor's filter), the sandwich ``H^-1 B H^-1`` with ``B`` the
+    long-run covariance of the score (:func:`coloured_score_covariance`) in place of ``H``. With white
+    residuals at the stated sigma it gives the same standard errors to sampling error; with coloured ones
+    the white-noise errors are too small by about the square root of the residuals' correlation time in
+    samples.
     """
     sens = sensitivity if sensitivity is not None else sensitivity_of(fit)
     P = fit.nlp.transform.P
@@ -469,6 +519,13 @@ def uncertainty(fit: EstimationResult, *, sensitivity: Sensitivity | None = None
                      "standard errors of the weakest directions are unreliable")
     Cq = np.linalg.inv(Hq)
     Cq = 0.5 * (Cq + Cq.T)
+    if coloured:
+        B, lags = coloured_score_covariance(fit, sens)
+        Cq = Cq @ (P.T @ B @ P) @ Cq
+        Cq = 0.5 * (Cq + Cq.T)
+        notes.append("standard errors corrected for coloured residuals (sandwich H^-1 B H^-1, B the long-run "
+                     "covariance of the score with Bartlett weights over " +
+                     ", ".join(f"{lag} lags of {c}" for c, lag in lags.items()) + ")")
     Cp = P @ Cq @ P.T
     se = np.sqrt(np.clip(np.diag(Cp), 0, None))
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -484,7 +541,7 @@ def uncertainty(fit: EstimationResult, *, sensitivity: Sensitivity | None = None
                 note = f"{name} is at a bound in (7.9): its linear bound constraint is active"
                 if note not in notes:
                     notes.append(note)
-    if fit.chi2_per_dof > 1.5 or fit.chi2_per_dof < 0.67:
+    if not coloured and (fit.chi2_per_dof > 1.5 or fit.chi2_per_dof < 0.67):
         notes.append(f"chi2/dof = {fit.chi2_per_dof:.3g}: the stated noise sigma does not match the residuals, "
                      "so these standard errors (which assume the stated sigma) are off by about "
                      f"sqrt({fit.chi2_per_dof:.3g})")
