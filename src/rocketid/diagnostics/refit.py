@@ -294,7 +294,7 @@ def _fit_window(spec, window: Measurements, mesh, guess, options, reference: np.
     """Fit ``spec`` to the hold-out window from its nominal guesses (over which ``guess``), holding at their
     guesses the parameters the window's data do not reach (zero sensitivity at ``reference``, e.g. a drag
     knot at a Mach number the vehicle reaches only later). ``held``: parameters held at their guesses in a
-    first fit whose values start the fit (event times, :func:`_times_held_first`)."""
+    first fit whose values start the fit (the locations of located shapes, :func:`_times_held_first`)."""
     spec = spec.with_guess(guess) if guess else spec
     prep = prepare(spec, window, mesh=mesh)
     p0 = spec.parameter_vector()
@@ -578,10 +578,9 @@ def _holdout(fit: EstimationResult, new: EstimationResult, window: tuple[float, 
              times: Mapping[str, float] | None = None) -> _Holdout:
     """Fit the base model and the model with the effect on ``window`` (None: no check) from their
     own guesses, and predict the samples after it; ``sizes`` (the effect parameters' realistic
-    magnitudes) to find those the window does not determine. ``times``: the event times of the new
-    model's event shapes, where its window fit starts them (held first, then freed: from the model's
-    guess, 0, an event time is not found -- the sizes still start at zero, so the window's data alone
-    say how large the event is)."""
+    magnitudes) to find those the window does not determine. ``times``: the locations of the new
+    model's located shapes (event times, a hump's Mach number), where its window fit starts them (held
+    first, then freed: from the model's guess, 0, an event time is not found)."""
     if window is None:
         return _Holdout(None, None, ())
     data, mesh = fit.prepared.measurements, fit.prepared.transcription.mesh
@@ -595,7 +594,8 @@ def _holdout(fit: EstimationResult, new: EstimationResult, window: tuple[float, 
         fb, blind_b = _fit_window(fit.spec, win, mesh, None, options, fit.p)
         # from the model's own guesses, as the base model: a parameter the window's data do not
         # reach is held at its guess, and a guess taken from the full-data estimate would carry
-        # the predicted samples into the prediction
+        # the predicted samples into the prediction -- except where a located shape sits (``times``):
+        # its size still starts at zero, so the window's data alone say how large it is
         fn, blind_n = _fit_window(new.spec, win, mesh, dict(times or {}) or None, options, new.p,
                                   held=tuple(times or ()))
         fits = (fb, fn)
@@ -1088,8 +1088,9 @@ def _times_held_first(spec, holding, options):
     """``spec`` started where a fit with some parameters held (``holding``: ``spec`` prepared with them held,
     :func:`_holding`) leaves the others.
 
-    A refit of an event shape from its scan's start with every parameter free wanders off: the base fit's
-    coefficients still hold the absorbed event, and the times move before the coefficients give it back
+    A refit of an event shape (or a drag hump placed in Mach) from its scan's start with every parameter free
+    wanders off: the base fit's coefficients still hold the absorbed event, and the times move before the
+    coefficients give it back
     (Halcyon-8's throttle bucket, 20 % down at 30-45 s: started at the scan's 31.25-43.75 s and 0.188, the
     free refit ended at a throttle-*up* over 26.7-31.4 s, chi2/dof 1.615; with the times held first, then
     freed, at 0.196 over 31.43-43.50 s, chi2/dof 1.022). When the held fit fails, ``spec`` is returned
