@@ -96,24 +96,26 @@ def acf(r, lags=(1, 15, 30)):
     return [float(np.dot(r[:-k], r[k:]) / np.dot(r, r)) for k in lags]
 
 
-def colour_report(fit, data, spec):
-    """How long the errors last, model-free and in the fit's residuals, and what it does to the standard
-    errors: the smooth curve's RMS over the window (the floor a continuous trajectory can reach), the
-    autocorrelation at 1, 15 and 30 samples, and the coloured-residual standard errors against white ones."""
+def colour_report(fit_s, fit, data, spec):
+    """How long the errors last, model-free and in the residuals of ``fit_s`` (the noise estimated), and what
+    it does to the standard errors of ``fit`` (the quantization's sigma; the sandwich does not depend on the
+    stated sigma): the smooth curve's RMS over the window (the floor a continuous trajectory can reach), the
+    autocorrelation at 1, 15 and 30 samples, and the coloured-residual standard errors against white ones
+    scaled by sqrt(chi2/dof) (the sigma the residuals give)."""
     smooth = smooth_residuals(data, 5.0)
     for c in ("h", "v"):
-        print(f"  {c}: smooth-curve floor RMS {np.sqrt(np.mean(smooth[c] ** 2)):.3g} (model {fit.rms[c]:.3g}); "
+        print(f"  {c}: smooth-curve floor RMS {np.sqrt(np.mean(smooth[c] ** 2)):.3g} (model {fit_s.rms[c]:.3g}); "
               f"autocorrelation at 1, 15, 30 samples: data about the curve {fmt(acf(smooth[c]), '{:.2f}')}, "
-              f"model residual {fmt(acf(fit.residuals[c]), '{:.2f}')}")
+              f"model residual {fmt(acf(fit_s.residuals[c]), '{:.2f}')}")
     try:
-        white = uncertainty(fit).standard_errors
+        white = uncertainty(fit).standard_errors * np.sqrt(fit.chi2_per_dof)
         col = uncertainty(fit, coloured=True)
     except ri.SensitivityError as exc:
         print(f"  no standard errors: {exc}")
         return
     ratio = col.standard_errors / white
-    print(f"  coloured-residual standard errors / white: median {np.median(ratio):.2f}, range "
-          f"{ratio.min():.2f}-{ratio.max():.2f}; {col.notes[-1]}")
+    print(f"  coloured-residual standard errors / white (x sqrt(chi2/dof) = {np.sqrt(fit.chi2_per_dof):.3g}): median "
+          f"{np.median(ratio):.2f}, range {ratio.min():.2f}-{ratio.max():.2f}; {col.notes[-1]}")
     for name in ("k_P", "k_mdot", "dm0", *(f"CD_{j}" for j in range(6))):
         i = spec.parameter_names.index(name)
         print(f"    {name:7s} {fit.p[i]: .4g} +- {white[i]:.3g} (white) +- {col.standard_errors[i]:.3g} (coloured)")
@@ -175,7 +177,7 @@ def main():
               f"v {fit_s.sigma['v']:.3f} m/s (quantization 28.9 m, 0.080 m/s; reading noise "
               f"{noise['h']:.1f} m, {noise['v']:.3f} m/s); RMS v by window "
               + fmt(rms_by_window(fit_s.residuals["v"], data["v"].times)))
-        colour_report(fit_s, data, spec)
+        colour_report(fit_s, fit, data, spec)
         flights.append(Flight(label, spec, data))
     per = sorted({n for fl in flights for n in fl.spec.parameter_names
                   if n.startswith(("alpha", "d_throttle")) or n == "dm0"})
