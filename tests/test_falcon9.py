@@ -84,6 +84,25 @@ def test_diagnosis_finds_the_throttle_down_and_the_throttle_closes_it(flight):
     assert fit_s.success and set(fit_s.sigma_estimated) == {"h", "v"}
     _estimated_sigmas_as_the_page_says(fit_s.sigma, data)
     _at_the_noise_as_the_page_says(fit_s, data, events)
+    _errors_last_as_the_page_says(fit_s, fit, data)
+
+
+def _acf(r, lag):
+    r = np.asarray(r, float) - np.mean(r)
+    return float(np.dot(r[:-lag], r[lag:]) / np.dot(r, r))
+
+
+def _errors_last_as_the_page_says(fit_s, fit, data):
+    """About a continuous curve (knots every 5 s) the speed's errors are correlated over half a second
+    (model-free), the model's speed residual is no larger than the curve's, and the coloured-residual
+    standard errors of the thrust and mass-flow scales are finite and below their priors' 0.03."""
+    from rocketid.estimability import uncertainty
+    curve = smooth_residuals(data, 5.0)["v"]
+    assert _acf(curve, 15) > 0.3
+    assert fit_s.rms["v"] <= np.sqrt(np.mean(curve ** 2))
+    col = uncertainty(fit, coloured=True)
+    se = dict(zip(col.parameter_names, col.standard_errors))
+    assert 0 < se["k_P"] < 0.03 and 0 < se["k_mdot"] < 0.03
 
 
 def _rms(r, k):
