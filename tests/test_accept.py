@@ -275,17 +275,19 @@ def test_when_the_ranking_cannot_be_made_every_candidate_is_refitted(monkeypatch
     assert "ranking failed" in scr.notes[0] and "every candidate is refitted" in scr.notes[0]
 
 
-def _confirmation(holdout_rms, sigma=(3.0, 3.0, 0.3), undetermined=()):
-    """A confirmation of an effect that passed everything but, possibly, the hold-out prediction."""
+def _confirmation(holdout_rms, sigma=(3.0, 3.0, 0.3), undetermined=(), window_fits=(True, True)):
+    """A confirmation of an effect that passed everything but, possibly, the hold-out prediction
+    (``window_fits``: whether the base and the new model's hold-out fits converged)."""
     from types import SimpleNamespace
 
     from rocketid.diagnostics.refit import Confirmation
     nlp = SimpleNamespace(channel_names=("x", "h", "v"), channel_sigmas=np.array(sigma))
     fit = SimpleNamespace(nlp=nlp, success=True)
+    fits = tuple(SimpleNamespace(success=ok) for ok in window_fits)
     return Confirmation(effects=(), fit=fit, base_fit=fit, lr_statistic=7000.0, lr_p_value=1e-300, dof=4,
                         aic=(9637.0, 2321.0), bic=(9689.0, 2397.0), whiteness={}, rms={}, holdout_rms=holdout_rms,
                         effect_estimates={}, chi2_per_dof=(4.02, 0.96), discretization={}, holdout=(0.0, 54.5454),
-                        level=0.05, lags=20, holdout_undetermined=tuple(undetermined))
+                        level=0.05, lags=20, holdout_undetermined=tuple(undetermined), holdout_fits=fits)
 
 
 def test_a_refit_that_predicts_the_held_out_flight_worse_than_the_base_is_not_confirmed():
@@ -305,6 +307,13 @@ def test_a_refit_that_predicts_the_held_out_flight_worse_than_the_base_is_not_co
     # worse, but not decisively (a factor below 4)
     assert _confirmation({"x": (30.0, 50.0), "h": (30.0, 50.0), "v": (3.0, 5.0)}).predicts
     assert _confirmation(None).predicts                      # no hold-out check: nothing to say
+    # Stage-30's 0.25 deg misalignment: both window fits stopped at IPOPT's iteration limit and their
+    # "predictions" (h 3.4e4 against 1.2e4 m) judge nothing
+    stopped = {"x": (7338.0, 7138.0), "h": (1.176e4, 3.439e4), "v": (647.9, 581.7)}
+    assert not _confirmation(stopped).predicts
+    for window_fits in ((False, True), (True, False), (False, False)):
+        c = _confirmation(stopped, window_fits=window_fits)
+        assert c.predicts and c.confirmed and c.prediction_note == ""
 
 
 def test_a_hold_out_that_does_not_determine_the_effect_judges_nothing():

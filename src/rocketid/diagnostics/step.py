@@ -237,7 +237,7 @@ def _tie_break(accs, i, fit, chosen_effects, contenders_effects, holdout, level,
                         options=options, timeout=timeout)
         except RocketidError:
             continue
-        if c.holdout_rms:
+        if c.holdout_rms and math.isfinite(c.holdout_error(1)):
             score[j] = c.holdout_error(1)
     if len(score) < 2:
         return None, (f"{names} reach the noise with BIC within {BIC_TIE:g} of each other: the data cannot tell "
