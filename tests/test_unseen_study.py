@@ -42,9 +42,6 @@ KNOWN_FAILURES: dict[str, str] = {
                     "exact truth leaves chi2/n 1.084 on them, seed 307), so no model can reach it",
     "back-pressure+headwind": "5e37825 to a570929: a spurious misalignment (0.43 deg) added first, then "
                               "back_pressure and wind; chi2/dof 1.043, h not white, partly explained",
-    "sliver-tailoff": "a570929: thrust_profile_9 at chi2/dof 0.983, partly explained: a thrust error in time trades "
-                      "against the CD(M) table on one trajectory (knots +7 .. -13 % for 0 .. -6 %, CD_0 0.80 for "
-                      "0.42); e16b567 called a drag correction + a 94 m/s wind explained",
 }
 
 
