@@ -1039,8 +1039,8 @@ def drag_bump_effect(mach_lo: float, mach_hi: float, width: float = DRAG_BUMP_WI
 
     The drag rise of a real vehicle peaks where its shape puts it (a shoulder, a fairing, a shock on a
     protuberance), not at the catalogue's Mach 1.1: ``M_bump`` is estimated in ``[0, mach_hi]`` (the scan
-    covers the Mach range flown, ``[mach_lo, mach_hi]``), the width by ``s_bump`` (realistic 1, bounded to +-1.5: a half-width of 0.22 to
-    4.5 times ``width``), the height ``dCD_bump`` >= 0 (realistic 0.1: a hump; a table too high somewhere is
+    covers the Mach range flown, ``[mach_lo, mach_hi]``), the width by ``s_bump`` (realistic 1, bounded to
+    +-1.5: a half-width of 0.22 to 4.5 times ``width``), the height ``dCD_bump`` >= 0 (realistic 0.1: a hump; a table too high somewhere is
     what the pinned correction :func:`drag_mach_effect` mends -- a free-sign bump with a free place and width
     is a dip anywhere, and imitated Kestrel-S's throttle tail-off at 33 s as a drag dip of 0.083 around Mach
     2.4, BIC 3053.3 against the throttle's 3053.9). It is the aerodynamic counterpart of a
