@@ -22,12 +22,12 @@ from rocketid.simulate import simulate
 
 
 def ar1(rng: np.random.Generator, n: int, rho: float) -> np.ndarray:
+    """Stationary unit-variance AR(1) noise by SciPy's linear filter (the first value is the first draw)."""
+    from scipy.signal import lfilter
     w = rng.normal(size=n)
-    e = np.empty(n)
-    e[0] = w[0]
-    for i in range(1, n):
-        e[i] = rho * e[i - 1] + np.sqrt(1 - rho ** 2) * w[i]
-    return e
+    c = np.sqrt(1 - rho ** 2)
+    w[0] /= c
+    return lfilter([c], [1.0, -rho], w)
 
 
 def main(rho: float = 0.9, sets: int = 30) -> None:
