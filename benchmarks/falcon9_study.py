@@ -98,8 +98,8 @@ def acf(r, lags=(1, 15, 30)):
 
 def colour_report(fit_s, fit, data, spec):
     """How long the errors last, model-free and in the residuals of ``fit_s`` (the noise estimated), and what
-    it does to the standard errors of ``fit`` (the quantization's sigma; the sandwich does not depend on the
-    stated sigma): the smooth curve's RMS over the window (the floor a continuous trajectory can reach), the
+    it does to the standard errors of ``fit`` (the quantization's sigma; the sandwich takes the residuals' own
+    scale, so the stated sigma enters only through the priors' relative weight): the smooth curve's RMS over the window (the floor a continuous trajectory can reach), the
     autocorrelation at 1, 15 and 30 samples, and the coloured-residual standard errors against white ones
     scaled by sqrt(chi2/dof) (the sigma the residuals give)."""
     smooth = smooth_residuals(data, 5.0)

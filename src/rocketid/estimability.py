@@ -482,9 +482,7 @@ def coloured_score_covariance(fit: EstimationResult, sens: Sensitivity) -> tuple
             Bc += (1 - k / (L + 1)) * (G + G.T)
         B += Bc
         lags[name] = L
-    H_prior = getattr(sens, "H_prior", None)
-    if H_prior is not None:
-        B += H_prior
+    B += sens.H_prior                                        # zeros without priors
     return 0.5 * (B + B.T), lags
 
 
