@@ -18,6 +18,7 @@ The table is in docs/effects.md ("Evaluation on a blind vehicle").
 from __future__ import annotations
 
 import math
+import re
 import sys
 from pathlib import Path
 
@@ -107,6 +108,36 @@ def test_the_window_scan_starts_a_refit_at_both_edges_of_a_throttle_bucket():
     assert 1 <= len(starts) <= 4
     near = [st for st in starts if abs(st["t_win_on"] - 23.0) <= 2.5 and abs(st["t_win_off"] - 39.0) <= 2.5]
     assert near and near[0]["d_window"] > 0, starts
+
+
+def test_a_short_deep_bucket_makes_the_thrust_family_a_contender_by_its_scan():
+    """A short deep throttle bucket from the truth's own dynamics (25 % down over 45-50 s, 1 s ramps): the
+    constant thrust error scores little (the fit's drag absorbs a constant), but the window's scan
+    peaks at the bucket, so the screen refits the thrust family and marks it for its located shapes."""
+    from rocketid.diagnostics.api import _candidate_effects
+    from rocketid.diagnostics.screen import screen
+
+    spec = halcyon.build_model()
+    hidden = {"throttle": {"depth": 0.25, "t_on": 45.0, "t_off": 50.0, "ramp": 1.0}}
+    fit = ri.estimate(spec, _measurements(truth.measurements(run.TIMES, hidden, seed=8), spec))
+    scr = screen(fit, _candidate_effects(None))
+    (thrust,) = [c for c in scr.contenders if c.effect.name == "thrust_level"]
+    assert thrust.located == "throttle_window", thrust.why
+    on, off = (float(v) for v in re.search(r"at ([0-9.]+)-([0-9.]+) ", thrust.why).groups())
+    assert abs(on - 45.5) <= 2.5 and abs(off - 49.5) <= 2.5, thrust.why      # the ramps' midpoints
+
+
+def test_clean_data_qualify_no_located_shape():
+    """On clean truth data no scan is significant after the correction for the locations it scored."""
+    from rocketid.diagnostics.api import _candidate_effects
+    from rocketid.diagnostics.screen import screen
+
+    spec = halcyon.build_model()
+    for seed in (12, 13):
+        fit = ri.estimate(spec, _measurements(truth.measurements(run.TIMES, {}, seed=seed), spec))
+        scr = screen(fit, _candidate_effects(None))
+        assert scr.scans, "the scans were not made"
+        assert not [c.effect.name for c in scr.contenders if c.located], [c.why for c in scr.contenders]
 
 
 def _measurements(table, spec) -> "ri.Measurements":

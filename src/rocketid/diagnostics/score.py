@@ -63,7 +63,7 @@ from ..summary import Section, Summary, SummaryText, Table
 from .effects import CATALOGUE, Effect, apply_effect, effect_parameter_problems, is_present, resolve_effects
 
 __all__ = ["CandidateScore", "CandidateRanking", "AugmentedModel", "augment", "rank_candidates", "holm", "onset_starts",
-           "COLLINEAR_COS", "SCORE_RATIO", "ABSORBED", "DETECTABLE"]
+           "scan_peak", "ScanPeak", "COLLINEAR_COS", "SCORE_RATIO", "ABSORBED", "DETECTABLE"]
 
 COLLINEAR_COS = 0.95
 """|cos| of the projected, R^-1-weighted output changes above which two candidates are collinear."""
@@ -805,17 +805,67 @@ def onset_starts(fit: EstimationResult, scan, *, n: int = 4, cap: float | None =
     if profile is None:
         return []
     Ct, g = profile
-    info = np.sum(Ct * Ct, axis=0)
-    ok = info > 0
     if scan.end is not None:
         return _window_starts(Ct, g, scan, n, cap)
-    size = np.where(ok, -g / np.where(ok, info, 1.0), 0.0)
-    ok &= _signed(size, scan)
-    lm = np.where(ok, g * g / np.where(ok, info, 1.0), 0.0)
+    lm, size, ok = _step_scores(Ct, g, scan)
     k = len(lm)
     peaks = [j for j in range(k) if ok[j] and (j == 0 or lm[j] >= lm[j - 1]) and (j == k - 1 or lm[j] >= lm[j + 1])]
     peaks.sort(key=lambda j: -lm[j])
     return [{scan.time: float(scan.times[j]), scan.size: _held(float(size[j]), scan, cap)} for j in peaks[:n]]
+
+
+class ScanPeak(NamedTuple):
+    """The highest score of a located shape's scan (:func:`scan_peak`)."""
+
+    statistic: float
+    """The score statistic (1 degree of freedom) at the best location."""
+    where: tuple
+    """The location: ``(onset,)`` for a step or a hump, ``(onset, end)`` for a window (the scan's unit)."""
+    tested: int
+    """How many locations (or pairs of them) were scored: the count a scan-wide significance test divides by."""
+
+    @property
+    def predicted_drop(self) -> float:
+        """Predicted fall of the objective ``J`` (half the statistic), as :attr:`CandidateScore.predicted_drop`."""
+        return 0.5 * self.statistic
+
+    def p_value(self, n_candidates: int = 1) -> float:
+        """Bonferroni p-value of the peak: over the locations scored and ``n_candidates`` candidates."""
+        return float(min(1.0, stats.chi2.sf(self.statistic, 1) * self.tested * max(1, n_candidates)))
+
+
+def scan_peak(scan, profile: tuple[np.ndarray, np.ndarray] | None) -> ScanPeak | None:
+    """The highest score statistic of a located shape over its scan (every onset time, or every pair of
+    them for a window; a location whose one-step size has a sign the bounds exclude does not count), from
+    the bank's :func:`scan_profile`. None when there is no profile or nothing can be scored.
+
+    The statistic is that of the best location *chosen after looking*: it is compared with a threshold
+    corrected for the number of locations (:meth:`ScanPeak.p_value`), not with ``chi2(1)``."""
+    if profile is None:
+        return None
+    Ct, g = profile
+    k = len(g)
+    if scan.end is None:
+        lm, _, ok = _step_scores(Ct, g, scan)
+        if not ok.any():
+            return None
+        j = int(np.argmax(np.where(ok, lm, -np.inf)))
+        return ScanPeak(float(lm[j]), (float(scan.times[j]),), k)
+    lm, _, _ = _pair_scores(Ct, g, scan)
+    if not np.isfinite(lm).any():
+        return None
+    a, b = np.unravel_index(int(np.argmax(lm)), lm.shape)
+    return ScanPeak(float(lm[a, b]), (float(scan.times[a]), float(scan.times[b])), k * (k - 1) // 2)
+
+
+def _step_scores(Ct: np.ndarray, g: np.ndarray, scan) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(LM, one-step size, usable)`` of each onset time of a step's scan."""
+    info = np.sum(Ct * Ct, axis=0)
+    ok = info > 0
+    size = np.where(ok, -g / np.where(ok, info, 1.0), 0.0)
+    ok &= _signed(size, scan)
+    lm = np.where(ok, g * g / np.where(ok, info, 1.0), 0.0)
+    return lm, size, ok
 
 
 def _signed(size: np.ndarray, scan) -> np.ndarray:
@@ -838,6 +888,21 @@ def _window_starts(Ct: np.ndarray, g: np.ndarray, scan, n: int, cap: float | Non
     minus the copy at ``b``: ``(g_a - g_b)^2 / (I_aa - 2 I_ab + I_bb)``, with the projected information
     ``I = Ct' Ct``), and the ``n`` highest local maxima over the pairs (each against its up to 8 neighbours),
     as ``{time: t_a, end: t_b, size: one-step size}``."""
+    lm, num, den = _pair_scores(Ct, g, scan)
+    k = len(g)
+    upper = np.isfinite(lm)
+    padded = np.pad(lm, 1, constant_values=-np.inf)
+    neigh = np.max([padded[1 + di:1 + di + k, 1 + dj:1 + dj + k] for di in (-1, 0, 1) for dj in (-1, 0, 1)
+                    if (di, dj) != (0, 0)], axis=0)
+    peaks = np.argwhere(upper & (lm >= neigh))
+    peaks = sorted(peaks, key=lambda ij: -lm[ij[0], ij[1]])
+    return [{scan.time: float(scan.times[a]), scan.end: float(scan.times[b]),
+             scan.size: _held(float(-num[a, b] / den[a, b]), scan, cap)} for a, b in peaks[:n]]
+
+
+def _pair_scores(Ct: np.ndarray, g: np.ndarray, scan) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(LM, g_a - g_b, I_aa - 2 I_ab + I_bb)`` of every pair of onset times ``a < b`` of a window's scan;
+    ``LM`` is ``-inf`` where the pair is not scored (``a >= b``, no information, a size of excluded sign)."""
     info = Ct.T @ Ct
     d = np.diag(info)
     den = d[:, None] + d[None, :] - 2.0 * info
@@ -846,10 +911,4 @@ def _window_starts(Ct: np.ndarray, g: np.ndarray, scan, n: int, cap: float | Non
     upper = np.triu(np.ones((k, k), bool), 1) & (den > 1e-12 * max(1.0, float(d.max(initial=0.0))))
     upper &= _signed(-num / np.where(upper, den, 1.0), scan)
     lm = np.where(upper, num * num / np.where(upper, den, 1.0), -np.inf)
-    padded = np.pad(lm, 1, constant_values=-np.inf)
-    neigh = np.max([padded[1 + di:1 + di + k, 1 + dj:1 + dj + k] for di in (-1, 0, 1) for dj in (-1, 0, 1)
-                    if (di, dj) != (0, 0)], axis=0)
-    peaks = np.argwhere(upper & (lm >= neigh))
-    peaks = sorted(peaks, key=lambda ij: -lm[ij[0], ij[1]])
-    return [{scan.time: float(scan.times[a]), scan.end: float(scan.times[b]),
-             scan.size: _held(float(-num[a, b] / den[a, b]), scan, cap)} for a, b in peaks[:n]]
+    return lm, num, den

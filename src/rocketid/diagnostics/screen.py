@@ -13,6 +13,17 @@ that could be the answer is refitted (:mod:`rocketid.diagnostics.refit`): a
 that leads its confounded group, or whose predicted fall of the objective is
 within a factor :data:`WITHIN` of the leader's.
 
+A family with **located shapes** (a throttle window, a drag hump: a change
+placed at an estimated time or Mach number) is also scored by their scans
+(:func:`~rocketid.diagnostics.score.scan_peak`): its smooth shape can score
+low where its located shape scores high (a 30 % throttle bucket over 6 s
+ranked the constant thrust error 8th and confounded, while the window's scan
+predicted a fall of J six times the leader's). Such a family is a contender
+when its best scan location is significant after correcting for the
+locations scored and the candidates (Bonferroni), and its predicted fall is
+within :data:`WITHIN` of the leader's; it is marked (:attr:`Contender.located`)
+so that the refits try its located shapes.
+
 The vehicle's scales (:class:`~rocketid.diagnostics.effects.Vehicle`: thrust,
 mass flow, speed, the altitude and Mach ranges flown) are read from the fit
 through the model's physical roles; the realistic size of each effect is
@@ -31,7 +42,7 @@ from ..errors import ModelError, RocketidError
 from ..simulate import evaluate_along
 from ..solve import EstimationResult
 from .effects import Effect, Vehicle
-from .score import CandidateRanking, rank_candidates
+from .score import CandidateRanking, ScanPeak, rank_candidates, scan_peak, scan_profile
 
 __all__ = ["Contender", "Screen", "screen", "vehicle_of", "WITHIN", "MAX_CONTENDERS"]
 
@@ -55,11 +66,15 @@ class Contender:
     start : dict
         Starting values of its parameters (the score test's one-step estimate, held
         within 5 realistic sizes and the bounds; 0 otherwise).
+    located : str
+        The located shape of its family (a refinement with a scan) whose scan makes it a
+        contender, or names it as one; empty otherwise. Its family's refined shapes are tried.
     """
 
     effect: Effect
     why: str
     start: dict = field(default_factory=dict)
+    located: str = ""
 
 
 @dataclass(frozen=True)
@@ -74,12 +89,16 @@ class Screen:
     notes : tuple of str
     failed : str
         Why the ranking could not be made (empty when it was).
+    scans : dict
+        The scans made at the fit: bank name -> :func:`~rocketid.diagnostics.score.scan_profile` (or None),
+        reused by the refits that start located shapes at the same fit.
     """
 
     ranking: CandidateRanking | None
     contenders: tuple
     notes: tuple = ()
     failed: str = ""
+    scans: dict = field(default_factory=dict, compare=False, repr=False)
 
     @property
     def names(self) -> tuple:
@@ -207,9 +226,11 @@ def screen(fit: EstimationResult, candidates: Sequence[Effect], *, level: float 
                           (f"the candidate ranking failed ({exc}); every candidate is refitted",), failed=str(exc))
     vehicle = vehicle if vehicle is not None else vehicle_of(fit)
     sig = [c for c in ranking.candidates if c.significant]
-    if not sig:
-        return Screen(ranking, (), (f"no candidate is significant at {level:g}: nothing is refitted",))
-    lead = max(c.predicted_drop for c in sig)
+    lead = max((c.predicted_drop for c in sig), default=0.0)
+    scans: dict = {}
+    located = _located(fit, ranking, vehicle, level, lead, scans)
+    if not sig and not located:
+        return Screen(ranking, (), (f"no candidate is significant at {level:g}: nothing is refitted",), scans=scans)
     leaders = set()
     chosen = []
     for c in sig:
@@ -222,9 +243,49 @@ def screen(fit: EstimationResult, candidates: Sequence[Effect], *, level: float 
         if why:
             chosen.append((c, "; ".join(why)))
     if len(chosen) > MAX_CONTENDERS:
-        notes.append(f"{len(chosen)} candidates qualify; the {MAX_CONTENDERS} best ranked are refitted "
-                     f"({', '.join(c.name for c, _ in chosen[MAX_CONTENDERS:])} are not)")
+        cut = [c.name for c, _ in chosen[MAX_CONTENDERS:] if c.name not in located]
+        if cut:
+            notes.append(f"{len(chosen)} candidates qualify; the {MAX_CONTENDERS} best ranked are refitted "
+                         f"({', '.join(cut)} are not)")
         chosen = chosen[:MAX_CONTENDERS]
-    contenders = tuple(Contender(ranking.effect(c.name), why, _start(c, ranking.effect(c.name), vehicle, fit.spec))
-                       for c, why in chosen)
-    return Screen(ranking, contenders, tuple(notes))
+    named = {c.name for c, _ in chosen}
+    # a family whose located shape's scan qualifies is refitted whatever its smooth shape's rank (not counted
+    # against MAX_CONTENDERS: at most one per family with located shapes)
+    chosen += [(c, "") for c in ranking.candidates if c.name in located and c.name not in named]
+    contenders = []
+    for c, why in chosen:
+        shape, peak = located.get(c.name, ("", None))
+        if peak is not None:
+            where = "-".join(f"{w:.4g}" for w in peak.where)
+            scan_why = (f"its located shape {shape}'s scan predicts a fall of J of {peak.predicted_drop:.4g} "
+                        f"at {where} (p {peak.p_value(len(ranking.candidates)):.2g} over {peak.tested} locations)")
+            why = f"{why}; {scan_why}" if why else scan_why
+        effect = ranking.effect(c.name)
+        contenders.append(Contender(effect, why, _start(c, effect, vehicle, fit.spec), shape))
+    if any(c.name not in {s.name for s in sig} for c, _ in chosen):
+        notes.append("refitted for their located shapes' scans (not significant as constant shapes): "
+                     + ", ".join(c.name for c, _ in chosen if c.name not in {s.name for s in sig}))
+    return Screen(ranking, tuple(contenders), tuple(notes), scans=scans)
+
+
+def _located(fit: EstimationResult, ranking: CandidateRanking, vehicle: Vehicle, level: float, lead: float,
+             scans: dict) -> dict[str, tuple[str, ScanPeak]]:
+    """The candidates whose located shapes' scans qualify them (module notes): candidate name -> (the located
+    shape, its scan's peak), the best-scoring shape of each family. ``scans`` collects the profiles made."""
+    out: dict[str, tuple[str, ScanPeak]] = {}
+    n = len(ranking.candidates)
+    for c in ranking.candidates:
+        try:
+            shapes = [v for v in ranking.effect(c.name).refinements(vehicle) if v.scan is not None]
+        except (RocketidError, ValueError):
+            continue
+        for v in shapes:
+            bank = v.scan.bank
+            if bank.name not in scans:
+                scans[bank.name] = scan_profile(fit, bank)
+            peak = scan_peak(v.scan, scans[bank.name])
+            if peak is None or peak.p_value(n) >= level or peak.predicted_drop < lead / WITHIN:
+                continue
+            if c.name not in out or peak.statistic > out[c.name][1].statistic:
+                out[c.name] = (v.name, peak)
+    return out

@@ -357,15 +357,18 @@ family came fourth, behind density, drag and wind, and its shapes in time were n
 
 
 def _families_to_refine(accs: Sequence[Acceptance], scr: Screen, vehicle: Vehicle, chosen: int | None) -> list[int]:
-    """Indices of the contenders whose families get their refined shapes tried: the chosen one first,
-    then the significant refits with refinements, best objective first (:data:`REFINE_FAMILIES` in all)."""
+    """Indices of the contenders whose families get their refined shapes tried: the chosen one first, then
+    those the screen named for a located shape's scan (:attr:`~rocketid.diagnostics.screen.Contender.located`:
+    the scan, not the smooth shape's refit, says the family may be the answer), then the significant refits
+    with refinements, best objective first (:data:`REFINE_FAMILIES` in all)."""
     n = len(scr.contenders)
     helped = sorted((j for j in range(min(n, len(accs))) if j != chosen and accs[j].refit.success
                      and accs[j].check("significant").passed and scr.contenders[j].effect.refinements(vehicle)),
                     key=lambda j: accs[j].refit.objective)
     first = [chosen] if chosen is not None and chosen < n and scr.contenders[chosen].effect.refinements(vehicle) else []
+    located = [j for j in range(min(n, len(accs))) if j != chosen and scr.contenders[j].located]
     seen, out = set(), []
-    for j in first + helped:
+    for j in first + located + helped:
         key = scr.contenders[j].effect.refinements(vehicle)[0].name
         if key not in seen:
             seen.add(key)
@@ -409,12 +412,14 @@ def _ladders(refinements: Sequence[Sequence[Effect]]) -> list[list[Effect]]:
 
 
 def _refine_families(families: Sequence[Sequence[Effect]], make_task, judge, workers,
-                     fit: EstimationResult | None = None, vehicle: Vehicle | None = None) -> list[tuple]:
+                     fit: EstimationResult | None = None, vehicle: Vehicle | None = None,
+                     scans: dict | None = None) -> list[tuple]:
     """Refit each family's shapes, fewest parameters first, level by level (the families of a level in
     parallel); a family stops at the first shape that does not lower BIC below its best so far -- the
     knot count is chosen by BIC. A shape with several starting points (an event time:
     :func:`_refit_from_starts`) is refitted from each, and the refit with the lowest objective stands for it.
-    ``make_task(effect, start)`` builds a refit. Returns ``[(effect, acceptance)]`` of every shape refitted."""
+    ``make_task(effect, start)`` builds a refit; ``scans``: the scans already made at ``fit`` (the screen's).
+    Returns ``[(effect, acceptance)]`` of every shape refitted."""
     out = []
     best = [math.inf] * len(families)
     alive = [True] * len(families)
@@ -422,7 +427,8 @@ def _refine_families(families: Sequence[Sequence[Effect]], make_task, judge, wor
         batch = [(k, f[level]) for k, f in enumerate(families) if alive[k] and level < len(f)]
         if not batch:
             break
-        for (k, v), r in zip(batch, _refit_from_starts([(v, {}) for _, v in batch], make_task, workers, fit, vehicle)):
+        for (k, v), r in zip(batch, _refit_from_starts([(v, {}) for _, v in batch], make_task, workers, fit, vehicle,
+                                                       scans)):
             if _from_the_start(v, r):
                 alive[k] = False
                 continue
@@ -461,14 +467,15 @@ def _best_start(refits: Sequence[Refit]) -> Refit:
 
 
 def _refit_from_starts(items: Sequence[tuple], make_task, workers, fit: EstimationResult | None = None,
-                       vehicle: Vehicle | None = None) -> list[Refit]:
+                       vehicle: Vehicle | None = None, scans: dict | None = None) -> list[Refit]:
     """Refit each ``(effect, start)`` in one parallel batch, an effect with several starting points once from
     each of them (laid over ``start``); returns one refit per item, the best of its starts (:func:`_best_start`).
 
     An event shape's starts are where its scan at ``fit`` puts them (:func:`~rocketid.diagnostics.score.
     onset_starts`: the best local maxima of its score profile over the onset time, with their one-step sizes
-    held within 5 realistic sizes); without a fit, or when the scan cannot be made, :attr:`Effect.starts`."""
-    profiles: dict = {}
+    held within 5 realistic sizes); without a fit, or when the scan cannot be made, :attr:`Effect.starts`.
+    ``scans``: profiles already made at ``fit`` by bank name (the screen's), extended here."""
+    profiles: dict = scans if scans is not None else {}
     runs = [(b, {**start, **st}) for b, (v, start) in enumerate(items)
             for st in (_starts(v, fit, vehicle, profiles) or ({},))]
     results = refit_all([make_task(items[b][0], st) for b, st in runs], workers=workers)
@@ -686,7 +693,7 @@ def _refit_contenders(ctx: _Search, current: EstimationResult, chosen: list, scr
     shape: a surface wind, a jet off the basis). Returns ``(screen, acceptances, index or None, why, n_tests)``,
     ``n_tests`` the contenders and their refined shapes (the Bonferroni count of the refined shapes' LR tests)."""
     refits = _refit_from_starts([(c.effect, c.start) for c in scr.contenders], _variant_task(ctx, current, chosen),
-                                ctx.workers, current, ctx.vehicle)
+                                ctx.workers, current, ctx.vehicle, scr.scans)
     n_tests = len(refits) + sum(len(c.effect.refinements(ctx.vehicle)) for c in scr.contenders)
     accs = [accept(r, ctx.band, level=ctx.level, n_tests=len(refits)) for r in refits]
     i, why = _choose(accs)
@@ -695,7 +702,7 @@ def _refit_contenders(ctx: _Search, current: EstimationResult, chosen: list, scr
         if fam:
             found = _refine_families(_ladders([scr.contenders[j].effect.refinements(ctx.vehicle) for j in fam]),
                                      _variant_task(ctx, current, chosen), _judge(ctx, n_tests), ctx.workers,
-                                     current, ctx.vehicle)
+                                     current, ctx.vehicle, scr.scans)
             va = [a for _, a in found]
             ok = _choosable(found)
             j, why_v = _choose([va[q] for q in ok])
@@ -738,7 +745,7 @@ def _refine_choice(ctx: _Search, current: EstimationResult, chosen: list, scr: S
     if not families:
         return scr, accs, effect, pick, why
     found = _refine_families(families, _variant_task(ctx, current, chosen), _judge(ctx, n_tests), ctx.workers,
-                             current, ctx.vehicle)
+                             current, ctx.vehicle, scr.scans)
     va = [a for _, a in found]
     accs = accs + va
     scr = replace(scr, contenders=scr.contenders + tuple(Contender(v, "a refined shape") for v, _ in found))
