@@ -327,6 +327,28 @@ def test_wind_profile_has_a_surface_value_and_hat_knots(ra66m_spec):
     assert set(no_surface.realistic) == {"W_1", "W_2"}
 
 
+def test_profile_knots_start_where_the_flight_starts():
+    """A flight that starts aloft (an air launch at 11.8 km) gets wind and density knots from its start
+    altitude up, the first wind value a wind like the others (not a surface wind), and no surface-layer knot;
+    a flight from the pad keeps the ground knot and the knot at the top of the surface layer."""
+    from rocketid.diagnostics.effects import SURFACE_LAYER_M, Vehicle
+
+    def vehicle(z0, z1):
+        lev = tuple(float(z) for z in np.linspace(z0, z1, 101))
+        return Vehicle(thrust=5e5, mass=2e4, mass_flow=200.0, speed=2900.0, start_speed=236.0, duration=68.0,
+                       altitude=(z0 - 300.0, z1), mach=(0.7, 9.0), sigma={"x": 2.0, "h": 2.0, "v": 0.2},
+                       sample_interval=0.05, knot_times=tuple(np.linspace(0, 68, 69)), aero_altitudes=lev)
+    aloft, pad = vehicle(11800.0, 30000.0), vehicle(0.0, 30000.0)
+    for e in CATALOGUE["wind"].refinements(aloft) + CATALOGUE["density"].refinements(aloft):
+        knots = [float(k) for k in e.description.split(" at ")[1].split(" km")[0].split(", ")]
+        assert knots[0] == pytest.approx(11.8) and all(k > 11.8 for k in knots[1:]), (e.name, knots)
+    wind_aloft = CATALOGUE["wind"].refinements(aloft)[0]
+    assert wind_aloft.realistic["W_0"] == pytest.approx(30.0) and "at the start altitude" in wind_aloft.description
+    wind_pad = CATALOGUE["wind"].refinements(pad)[0]
+    knots = [float(k) for k in wind_pad.description.split(" at ")[1].split(" km")[0].split(", ")]
+    assert knots[:2] == [0.0, SURFACE_LAYER_M / 1000.0] and wind_pad.realistic["W_0"] == pytest.approx(10.0)
+
+
 def test_drag_correction_is_pinned_at_the_tables_knots(ra66m_spec):
     """The CD(M) refinement adds shape between the model's own Mach knots: at those knots it is 0 whatever
     its values, so it cannot trade with the table's values."""

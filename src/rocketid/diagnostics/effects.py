@@ -921,8 +921,10 @@ def wind_profile_effect(knots_km: Sequence[float], *, name: str | None = None, p
     Parameters
     ----------
     knots_km : sequence of float
-        Knot altitudes, km, increasing; the first is the ground (0), where ``W_0`` is the
-        surface wind. ``W`` is held constant above the last knot.
+        Knot altitudes, km, increasing; the first is where the flight starts: the ground (0), where
+        ``W_0`` is the surface wind, or the start altitude of a flight that starts aloft (an air launch,
+        a window cut in flight), where ``W_0`` is the wind met there. ``W`` is held constant below the
+        first knot and above the last.
     name : str, optional
         Default ``wind_pl_<number of knots>``.
     prefix : str
@@ -961,10 +963,12 @@ def wind_profile_effect(knots_km: Sequence[float], *, name: str | None = None, p
         return _air_relative(m, name, build)
 
     realistic = {n: realistic_speed for n in names}
-    if surface:
-        realistic[names[0]] = realistic_speed / 3
+    aloft = knots[0] * 1000.0 >= SURFACE_LAYER_M
+    if surface and not aloft:
+        realistic[names[0]] = realistic_speed / 3          # a surface wind; aloft, a wind like the others
+    where = "the wind at the start altitude" if aloft else "the surface wind"
     desc = (f"horizontal wind W(h) piecewise linear in altitude through {prefix}j at "
-            f"{', '.join(f'{k:g}' for k in knots)} km ({prefix}0 the surface wind{'' if surface else ', fixed at 0'}; "
+            f"{', '.join(f'{k:g}' for k in knots)} km ({prefix}0 {where}{'' if surface else ', fixed at 0'}; "
             "constant above the last knot), positive downrange; air-relative velocity, drag along it, lift normal "
             "to it, alpha_air in the lift coefficient, qbar and Mach from the airspeed")
     return Effect(name, f"wind piecewise linear in altitude ({len(knots)} knots)", "environment", apply, desc, realistic)
@@ -1229,17 +1233,27 @@ DENSITY_KNOT_INTERVALS = (3, 6, 9)
 
 
 def _profile_knots_km(vehicle: "Vehicle | None", n: int) -> list[float]:
-    """``n + 1`` knot altitudes, km, from the ground: at equal shares of the aerodynamic action along the
-    flight (:attr:`Vehicle.aero_altitudes`) -- a knot where the air barely acts on the vehicle cannot be
-    pinned by the data (measured on Stage-30, flying to 31 km: with knots of equal height the top one went
-    to -196 m/s) -- or of equal height up to the highest altitude flown when that is unknown."""
+    """``n + 1`` knot altitudes, km, from the lowest altitude flown: at equal shares of the aerodynamic action
+    along the flight (:attr:`Vehicle.aero_altitudes`) -- a knot where the air barely acts on the vehicle
+    cannot be pinned by the data (measured on Stage-30, flying to 31 km: with knots of equal height the top
+    one went to -196 m/s) -- or of equal height up to the highest altitude flown when that is unknown.
+
+    The first knot is the ground (0) for a flight that starts within :data:`SURFACE_LAYER_M` of it, else the
+    altitude where the flight starts (an air launch, a window cut in flight): a knot below the flight is not
+    seen by the data. (Measured on an air-launched stage starting at 11.8 km: with knots at 0 and 0.5 km the
+    wind profile's knot values had a direction of standard error 2e5 m/s -- a common shift of every knot
+    above the ground, which the wind carried from the start cancels -- and a cold atmosphere was called
+    explained by that wind.)"""
     lev = list(vehicle.aero_altitudes) if vehicle is not None else []
-    if len(lev) == 101 and lev[-1] > 0:
-        raw = [0.0] + [lev[round(100 * k / n)] for k in range(1, n + 1)]
+    low = vehicle.altitude[0] if vehicle is not None and math.isfinite(vehicle.altitude[0]) else 0.0
+    base = float(lev[0]) if len(lev) == 101 else float(low)
+    base = 0.0 if base < SURFACE_LAYER_M else base
+    if len(lev) == 101 and lev[-1] > base:
+        raw = [base] + [lev[round(100 * k / n)] for k in range(1, n + 1)]
     else:
         top = vehicle.altitude[1] if vehicle is not None and math.isfinite(vehicle.altitude[1]) else 30000.0
-        raw = list(np.linspace(0.0, max(top, 2000.0), n + 1))
-    knots = [0.0]
+        raw = list(np.linspace(base, max(top, base + 2000.0), n + 1))
+    knots = [base]
     for z in raw[1:]:
         if z - knots[-1] >= 100.0:
             knots.append(float(z))
@@ -1252,8 +1266,8 @@ def _refine_wind(vehicle: "Vehicle | None") -> list[Effect]:
         k = _profile_knots_km(vehicle, n)
         # a knot at the top of the surface layer (500 m), where a wind grows from its ground value (measured:
         # RA-66M, launched from rest into a wind grown over 300 m, took a spurious misalignment to follow the
-        # lift-off when the first knot above the ground was at 2.3 km)
-        if len(k) > 1 and k[1] > 2 * SURFACE_LAYER_M / 1000.0:
+        # lift-off when the first knot above the ground was at 2.3 km); a flight that starts aloft has none
+        if len(k) > 1 and k[0] == 0.0 and k[1] > 2 * SURFACE_LAYER_M / 1000.0:
             k = [0.0, SURFACE_LAYER_M / 1000.0] + k[1:]
         if len(k) >= 2 and all(len(k) > len(e.realistic) for e in out):
             out.append(wind_profile_effect(k, name=f"wind_pl_{len(k)}"))
