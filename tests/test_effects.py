@@ -552,3 +552,39 @@ def test_a_heavier_vehicle_is_found_as_a_start_mass_error(ra66m_spec):
     veh = Vehicle(thrust=4e5, mass=20e3, mass_flow=100.0, speed=900.0, start_speed=0.0, duration=66.0,
                   altitude=(0.0, 3e4), mach=(0.0, 2.7), sigma={"x": 1.0}, sample_interval=0.01)
     assert CATALOGUE["start_mass"].sizes(veh)["dm_start"] == pytest.approx(200.0)
+
+
+def test_temperature_offset_follows_the_hydrostatic_equation():
+    """A day 10 K colder than the standard at the standard's sea-level pressure: the effect's density and
+    speed of sound against the hydrostatic equation integrated here (the standard's layer temperatures
+    written from its table, geopotential altitude, scipy's ODE solver), at 5-40 km."""
+    import sys
+    from pathlib import Path
+
+    from scipy.integrate import solve_ivp
+    sys.path.insert(0, str(Path(__file__).parent / "vehicles"))
+    import stage30
+
+    base = stage30.build_model().freeze()
+    spec = with_effects(base, ["temperature"])
+    h, cold = spec.symbol("h"), {spec.symbol("dT_air"): -10.0}
+    rho0, rho1 = (sp.lambdify(h, s.expand(s.symbol("rho")).subs(cold)) for s in (base, spec))
+    a0, a1 = (sp.lambdify(h, s.expand(s.symbol("a_sound")).subs(cold)) for s in (base, spec))
+    table = [(0.0, 288.15, -6.5e-3), (11e3, 216.65, 0.0), (20e3, 216.65, 1e-3), (32e3, 228.65, 2.8e-3),
+             (47e3, 270.65, 0.0)]
+
+    def t_std(H):
+        hb, tb, lb = [row for row in table if row[0] <= H][-1]
+        return tb + lb * (H - hb)
+
+    gm_r = 9.80665 * 0.0289644 / 8.31432
+    # d ln p / dH for the standard and for the cold day; their difference integrated from sea level
+    sol = solve_ivp(lambda H, y: [-gm_r / (t_std(H) - 10.0) + gm_r / t_std(H)], (0.0, 40e3), [0.0],
+                    dense_output=True, rtol=1e-11, atol=1e-13, max_step=200.0)
+    r0 = 6356766.0
+    for z in (5e3, 12e3, 25e3, 40e3):
+        H = r0 * z / (r0 + z)
+        expected = math.exp(sol.sol(H)[0]) * t_std(H) / (t_std(H) - 10.0)
+        assert rho1(z) / rho0(z) == pytest.approx(expected, rel=2e-4), z
+        assert a1(z) / a0(z) == pytest.approx(math.sqrt((t_std(H) - 10.0) / t_std(H)), rel=1e-9), z
+    assert rho1(25e3) / rho0(25e3) < 0.95 < 1.0 < rho1(1e3) / rho0(1e3)     # denser low, thinner aloft

@@ -44,7 +44,9 @@ DRAG = {"transonic_drag", "drag_mach_", "drag_bump"}
 HSENS = {"bias_h", "bias_h_drift", "scale_h"}
 VSENS = {"bias_v", "bias_v_drift", "scale_v"}
 WIND = {"wind", "wind_pl_"}
-DENS = {"density", "density_pl_"}
+# temperature, the atmosphere's temperature offset (density and speed of sound), was added to the catalogue
+# after the study was written (2026-11-26, because an air-launch study's cold day was explained by a wind)
+DENS = {"density", "density_pl_", "temperature"}
 # misalignment_onset, the family's shape with an onset time, was added to the catalogue after this study was
 # written (2026-11-25, because the late misalignment was explained by a wind); it is the same family
 MISAL = {"misalignment", "misalignment_fade", "misalignment_onset"}

@@ -164,7 +164,10 @@ def variant_final_of(report) -> dict | None:
 
 
 #: refined or alternative forms the diagnosis may report for a catalogue effect (same physics)
-ALIASES = {"thrust_level": ("thrust_profile",), "transonic_drag": ("drag_mach", "drag_bump")}
+# temperature (the atmosphere's temperature offset: density and speed of sound) is the density family's;
+# added to the catalogue after the study was written (2026-11-26)
+ALIASES = {"thrust_level": ("thrust_profile",), "transonic_drag": ("drag_mach", "drag_bump"),
+           "density": ("temperature",)}
 
 
 def _matches(found: str, true: str) -> bool:

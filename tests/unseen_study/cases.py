@@ -52,6 +52,8 @@ def family(effect: str) -> str:
         return "thrust_profile"                          # (added 2026-11-25 and 2026-11-26)
     if effect == "drag_bump":                            # a drag hump at an estimated Mach number (2026-11-26)
         return "transonic_drag"
+    if effect == "temperature":                          # the atmosphere's temperature offset (2026-11-26)
+        return "density"
     for fam in ("thrust_profile", "wind", "density", "back_pressure", "drag_mach", "bias_x", "bias_h", "bias_v",
                 "misalignment", "earth_rotation", "time_offset", "transonic_drag", "mass_flow", "start_mass",
                 "scale_v"):

@@ -53,14 +53,14 @@ import sympy as sp
 
 from ..errors import ModelError
 from ..model import ROLES, Model, ModelSpec, missing_role_message
-from ..physics.atmosphere import us76_pressure
+from ..physics.atmosphere import us76_offset_log_pressure_ratio, us76_pressure, us76_temperature
 from ..physics.gravity import EARTH_RADIUS
 
 __all__ = ["Effect", "Vehicle", "back_pressure_effect", "thrust_profile_effect", "throttle_effect", "wind_profile_effect",
            "density_profile_effect", "drag_mach_effect", "piecewise_linear", "CATALOGUE", "KINDS", "custom_effect", "with_effects", "apply_effect", "resolve_effects",
            "is_present", "check_effect_parameters", "effect_parameter_problems", "wind_effect", "density_effect", "earth_rotation_effect",
            "liftoff_fade", "EARTH_RATE", "LIFTOFF_FADE_TIME", "misalignment_onset_effect", "mass_jettison_effect", "throttle_step_effect", "onset_step",
-           "ONSET_STARTS"]
+           "ONSET_STARTS", "temperature_effect", "TEMPERATURE_REALISTIC_K"]
 
 #: The kinds of effect (``"custom"`` for the user's own).
 KINDS = ("propulsion", "mass", "aero", "environment", "kinematics", "sensor", "custom")
@@ -1110,6 +1110,48 @@ def density_effect(centres_km: Sequence[float] = DENSITY_CENTRES_KM, width_km: f
     return Effect(name, "density deviation profile", "environment", apply, desc, {n: realistic for n in names})
 
 
+TEMPERATURE_REALISTIC_K = 10.0
+"""Realistic size of an air-temperature offset, K: a hot or a cold day against the standard atmosphere."""
+
+
+def temperature_effect(*, name: str = "temperature", realistic: float = TEMPERATURE_REALISTIC_K) -> Effect:
+    """The air ``dT_air`` kelvin warmer (or colder) than the standard at every altitude, at the standard's
+    sea-level pressure: a hot or a cold day.
+
+    Temperature ``T = T_std(h) + dT_air``; the hydrostatic equation then gives the pressure ratio ``p / p_std``
+    in closed form (:func:`~rocketid.physics.atmosphere.us76_offset_log_pressure_ratio`); the density ``rho (p / p_std) T_std / T`` and the speed of sound
+    ``a sqrt(T / T_std)`` (so the Mach number changes too). The model's own density and speed-of-sound
+    definitions (roles ``density`` and ``sound_speed``) are scaled, whichever density model they use; a model
+    without the ``sound_speed`` role gets the density change alone. ``T_std`` is the 1976 standard's.
+
+    Notes
+    -----
+    A density deviation of any shape (:func:`density_effect`) changes only the density; a temperature offset
+    lowers the density at low altitude and raises it aloft (warm day) while the speed of sound follows the
+    temperature. Both are the same physical family (the atmosphere off the standard) for the diagnosis.
+    """
+    def apply(m: Model) -> tuple:
+        sym, rho = _role_definition(m, "density", name)
+        h = _role_state(m, "altitude", name)
+        dT = m.parameter("dT_air", 0.0, bounds=(-4.0 * realistic, 4.0 * realistic), nominal=realistic)
+        t_std = us76_temperature(h)
+        m.redefine(sym, rho * sp.exp(us76_offset_log_pressure_ratio(h, dT)) * t_std / (t_std + dT))
+        sound = m.role("sound_speed")
+        if isinstance(sound, sp.Symbol):
+            try:
+                a = m.definition(sound)
+            except ModelError:
+                a = None
+            if a is not None:
+                m.redefine(sound, a * sp.sqrt(1 + dT / t_std))
+        return (dT,)
+
+    desc = ("air temperature T_std(h) + dT_air, K, at the standard's sea-level pressure: density rho (p/p_std) "
+            "T_std/T with the hydrostatic pressure ratio, speed of sound a sqrt(T/T_std) (Mach changes with it)")
+    return Effect(name, "air temperature offset (hot or cold day)", "environment", apply, desc,
+                  {"dT_air": float(realistic)})
+
+
 def earth_rotation_effect(latitude_deg: float = 28.5, azimuth_deg: float = 90.0, *,
                           name: str = "earth_rotation") -> Effect:
     """Coriolis and centrifugal accelerations in the vertical plane of a launch at
@@ -1346,6 +1388,7 @@ def _build_catalogue() -> dict[str, Effect]:
                "(start speed > 0), else phased in by the lift-off fade f_lo(t)", {"delta_thrust": math.radians(0.25)},
                refine=_refine_misalignment),
         replace(density_effect(), refine=_refine_density),
+        temperature_effect(),
         Effect("bias_x", "downrange sensor bias", "sensor", _bias("x"), "z_x = x + b_x, m", {"b_x": 5.0},
                relative=rel_bias("x", 5.0, 5.0), refine=_refine_bias("x", "m", 5.0, 5.0)),
         Effect("bias_h", "altitude sensor bias", "sensor", _bias("h"), "z_h = h + b_h, m", {"b_h": 5.0},

@@ -291,6 +291,46 @@ def us76_speed_of_sound(h) -> sp.Piecewise:
     return _piecewise(h, exprs, US76_BOUNDARIES)
 
 
+def us76_offset_log_pressure_ratio(h, dT) -> sp.Piecewise:
+    """``ln(p / p_std)`` of an atmosphere ``dT`` kelvin warmer than the 1976 standard at every altitude, at the
+    standard's sea-level pressure (a hot or a cold day).
+
+    The hydrostatic equation ``d ln p / dH = -g0 M0 / (R* T)`` with ``T = T_std + dT`` gives
+    ``ln(p / p_std) = (g0 M0 / R*) int_0^H (1/T_std - 1/(T_std + dT)) dH'``, in closed form per layer:
+    ``(1/L_b) ln(T (T_b + dT) / ((T + dT) T_b))`` in a gradient layer, ``(H - H_b)(1/T_b - 1/(T_b + dT))``
+    in an isothermal one, each layer's base value carried up from the layers below (exact, no expansion in
+    ``dT``).
+
+    Parameters
+    ----------
+    h : float or sympy.Expr
+        Geometric altitude, m (0-86 km; the lowest layer is continued below 0, the top one above).
+    dT : float or sympy.Expr
+        The temperature offset, K.
+
+    Returns
+    -------
+    sympy.Piecewise
+    """
+    h, dT = sp.sympify(h), sp.sympify(dT)
+    H = geopotential_altitude(h)
+    tops = _US76_HB[1:] + (_US76_H_TOP,)
+    c = sp.Float(_HYDRO)
+    base = sp.S.Zero
+    exprs = []
+    for (hb, lb, tb, _), top in zip(US76_LAYERS, tops):
+        Tb = sp.Float(tb)
+        if lb == 0.0:
+            exprs.append(base + c * (H - sp.Float(hb)) * (1 / Tb - 1 / (Tb + dT)))
+            base = base + c * sp.Float(top - hb) * (1 / Tb - 1 / (Tb + dT))
+        else:
+            t = Tb + sp.Float(lb) * (H - sp.Float(hb))
+            exprs.append(base + c / sp.Float(lb) * sp.log(t * (Tb + dT) / ((t + dT) * Tb)))
+            t_top = sp.Float(tb + lb * (top - hb))
+            base = base + c / sp.Float(lb) * sp.log(t_top * (Tb + dT) / ((t_top + dT) * Tb))
+    return _piecewise(h, exprs, US76_BOUNDARIES)
+
+
 # Yang (1983): rho / rho_SL = c * W^a per layer, W a function of H in km.
 _YANG_LAYERS = (
     # (c, a, W(Hkm)) -- coefficients of Yang 1983 without the typos of public copies
