@@ -111,24 +111,25 @@ def test_the_window_scan_starts_a_refit_at_both_edges_of_a_throttle_bucket():
 
 
 def test_a_short_deep_bucket_makes_the_thrust_family_a_contender_by_its_scan():
-    """A short deep throttle bucket from the truth's own dynamics (25 % down over 45-50 s, 1 s ramps): the
-    constant thrust error scores little (the fit's drag absorbs a constant), but the window's scan
-    peaks at the bucket, so the screen refits the thrust family and marks it for its located shapes."""
+    """A short deep throttle bucket from the truth's own dynamics (30 % down over 35-41 s, 1.5 s ramps; the
+    throttle checks' case, benchmarks/throttle_checks.py): the constant thrust error is significant but ranked
+    out (confounded, far below the leader), while the window's scan peaks at the bucket, so the screen refits
+    the thrust family and marks it for its located shapes."""
     from rocketid.diagnostics.api import _candidate_effects
     from rocketid.diagnostics.screen import screen
 
     spec = halcyon.build_model()
-    hidden = {"throttle": {"depth": 0.25, "t_on": 45.0, "t_off": 50.0, "ramp": 1.0}}
-    fit = ri.estimate(spec, _measurements(truth.measurements(run.TIMES, hidden, seed=8), spec))
+    hidden = {"throttle": {"depth": 0.3, "t_on": 35.0, "t_off": 41.0, "ramp": 1.5}}
+    fit = ri.estimate(spec, _measurements(truth.measurements(run.TIMES, hidden, seed=23), spec))
     scr = screen(fit, _candidate_effects(None))
     (thrust,) = [c for c in scr.contenders if c.effect.name == "thrust_level"]
-    assert thrust.located == "throttle_window", thrust.why
+    assert thrust.located == "throttle_window" and thrust.why.startswith("its located shape"), thrust.why
     on, off = (float(v) for v in re.search(r"at ([0-9.]+)-([0-9.]+) ", thrust.why).groups())
-    assert abs(on - 45.5) <= 2.5 and abs(off - 49.5) <= 2.5, thrust.why      # the ramps' midpoints
+    assert abs(on - 35.75) <= 2.5 and abs(off - 40.25) <= 2.5, thrust.why    # the ramps' midpoints
 
 
 def test_clean_data_qualify_no_located_shape():
-    """On clean truth data no scan is significant after the correction for the locations it scored."""
+    """On clean truth data the screen refits no family for a located shape's scan."""
     from rocketid.diagnostics.api import _candidate_effects
     from rocketid.diagnostics.screen import screen
 
@@ -136,7 +137,6 @@ def test_clean_data_qualify_no_located_shape():
     for seed in (12, 13):
         fit = ri.estimate(spec, _measurements(truth.measurements(run.TIMES, {}, seed=seed), spec))
         scr = screen(fit, _candidate_effects(None))
-        assert scr.scans, "the scans were not made"
         assert not [c.effect.name for c in scr.contenders if c.located], [c.why for c in scr.contenders]
 
 

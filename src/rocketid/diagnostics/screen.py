@@ -13,16 +13,17 @@ that could be the answer is refitted (:mod:`rocketid.diagnostics.refit`): a
 that leads its confounded group, or whose predicted fall of the objective is
 within a factor :data:`WITHIN` of the leader's.
 
-A family with **located shapes** (a throttle window, a drag hump: a change
-placed at an estimated time or Mach number) is also scored by their scans
-(:func:`~rocketid.diagnostics.score.scan_peak`): its smooth shape can score
-low where its located shape scores high (a 30 % throttle bucket over 6 s
-ranked the constant thrust error 8th and confounded, while the window's scan
-predicted a fall of J six times the leader's). Such a family is a contender
-when its best scan location is significant after correcting for the
-locations scored and the candidates (Bonferroni), and its predicted fall is
-within :data:`WITHIN` of the leader's; it is marked (:attr:`Contender.located`)
-so that the refits try its located shapes.
+A significant family left out by these rules that has **located shapes** (a
+throttle window, a drag hump: a change placed at an estimated time or Mach
+number) is also scored by their scans (:func:`~rocketid.diagnostics.score.
+scan_peak`): its smooth shape can score low where its located shape scores
+high (a 30 % throttle bucket over 6 s ranked the constant thrust error 8th and
+confounded, while the window's scan predicted a fall of J six times the
+leader's). Such a family is a contender when its best scan location is
+significant after correcting for the locations scored and the candidates
+(Bonferroni), and its predicted fall is within :data:`WITHIN` of the leader's;
+it is marked (:attr:`Contender.located`) so that the refits try its located
+shapes.
 
 The vehicle's scales (:class:`~rocketid.diagnostics.effects.Vehicle`: thrust,
 mass flow, speed, the altitude and Mach ranges flown) are read from the fit
@@ -226,11 +227,9 @@ def screen(fit: EstimationResult, candidates: Sequence[Effect], *, level: float 
                           (f"the candidate ranking failed ({exc}); every candidate is refitted",), failed=str(exc))
     vehicle = vehicle if vehicle is not None else vehicle_of(fit)
     sig = [c for c in ranking.candidates if c.significant]
-    lead = max((c.predicted_drop for c in sig), default=0.0)
-    scans: dict = {}
-    located = _located(fit, ranking, vehicle, level, lead, scans)
-    if not sig and not located:
-        return Screen(ranking, (), (f"no candidate is significant at {level:g}: nothing is refitted",), scans=scans)
+    if not sig:
+        return Screen(ranking, (), (f"no candidate is significant at {level:g}: nothing is refitted",))
+    lead = max(c.predicted_drop for c in sig)
     leaders = set()
     chosen = []
     for c in sig:
@@ -242,6 +241,10 @@ def screen(fit: EstimationResult, candidates: Sequence[Effect], *, level: float 
             why.append(f"predicted fall of J within {WITHIN:g}x of the leader's")
         if why:
             chosen.append((c, "; ".join(why)))
+    # the significant candidates left out whose located shapes' scans qualify them (module notes)
+    scans: dict = {}
+    located = _located(fit, ranking, [c for c in sig if c.name not in {k.name for k, _ in chosen[:MAX_CONTENDERS]}],
+                       vehicle, level, lead, scans)
     if len(chosen) > MAX_CONTENDERS:
         cut = [c.name for c, _ in chosen[MAX_CONTENDERS:] if c.name not in located]
         if cut:
@@ -262,19 +265,22 @@ def screen(fit: EstimationResult, candidates: Sequence[Effect], *, level: float 
             why = f"{why}; {scan_why}" if why else scan_why
         effect = ranking.effect(c.name)
         contenders.append(Contender(effect, why, _start(c, effect, vehicle, fit.spec), shape))
-    if any(c.name not in {s.name for s in sig} for c, _ in chosen):
-        notes.append("refitted for their located shapes' scans (not significant as constant shapes): "
-                     + ", ".join(c.name for c, _ in chosen if c.name not in {s.name for s in sig}))
+    if located:
+        notes.append("refitted for their located shapes' scans (ranked out as constant shapes): "
+                     + ", ".join(f"{c} ({shape})" for c, (shape, _) in located.items()))
     return Screen(ranking, tuple(contenders), tuple(notes), scans=scans)
 
 
-def _located(fit: EstimationResult, ranking: CandidateRanking, vehicle: Vehicle, level: float, lead: float,
-             scans: dict) -> dict[str, tuple[str, ScanPeak]]:
-    """The candidates whose located shapes' scans qualify them (module notes): candidate name -> (the located
-    shape, its scan's peak), the best-scoring shape of each family. ``scans`` collects the profiles made."""
+def _located(fit: EstimationResult, ranking: CandidateRanking, candidates, vehicle: Vehicle, level: float,
+             lead: float, scans: dict) -> dict[str, tuple[str, ScanPeak]]:
+    """Of ``candidates`` (significant ones the screen left out), those whose located shapes' scans qualify
+    them (module notes): candidate name -> (the located shape, its scan's peak), the best-scoring shape of each
+    family. ``scans`` collects the profiles made. (Scanning only these keeps the scans' cost -- a sensitivity
+    solve of a 32-copy bank each, and its code generation on a new model -- off clean data and off families
+    the screen refits anyway.)"""
     out: dict[str, tuple[str, ScanPeak]] = {}
     n = len(ranking.candidates)
-    for c in ranking.candidates:
+    for c in candidates:
         try:
             shapes = [v for v in ranking.effect(c.name).refinements(vehicle) if v.scan is not None]
         except (RocketidError, ValueError):
