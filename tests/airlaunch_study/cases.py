@@ -1,0 +1,131 @@
+"""The cases of the air-launch study: Osprey-A with hidden effects at realistic sizes.
+
+Each case names the hidden effects (``truth.Hidden``), the noise seed, and which catalogue
+families count as the right answer (``right``: every family in the final model must be one of
+these, and one of ``needed`` must be there; for a pair, one of each set in ``needed_each``).
+Sizes, relative to Osprey-A (19.5 t at ignition, sea-level thrust table 540 -> 585 -> 470 kN,
+ignition at 11.8 km and Mach 0.80, burn-out at 68 s near 54.5 km and Mach 8.9, wing area 12 m^2):
+
+- hot motor: thrust curve 3 % higher and 3 % faster, ``P(t) = 1.03 P_tab(1.03 t)``, the mass flow
+  with it (a warm grain);
+- back-pressure: the table is a sea-level static firing, the truth thrust
+  ``P_tab + A_e (p_sl - p_a(h))`` with ``A_e`` 0.9 m^2 (a 1.07 m exit): +73 kN at ignition
+  altitude, +91 kN in vacuum -- nearly a constant 13-19 % increase, since ``p_a`` is already
+  small at 12 km; whether this can be told from a thrust level is part of the question, so both
+  families count as right;
+- jet stream: a 40 m/s headwind peaked at 12 km, half of it 3 km below the core and 4.5 km
+  above (it decays more slowly aloft); the vehicle starts inside the core;
+- cold column: the 1976 temperature profile 10 K colder from the ground up, pressure through the
+  hydrostatic equation (density +3.6 % at the ground, -2.1 % at 11.8 km, -8.0 % at 20 km,
+  -15 % at 30 km, -24 % at 50 km); the speed of sound falls with the temperature (Mach 2.4 %
+  higher);
+- misalignment 0.3 deg from ignition;
+- altimeter bias 15 m, constant;
+- speed-channel scale error +0.3 %;
+- Earth rotation: launched due east at 28.5 N (Coriolis and centrifugal);
+- time tags 30 ms late (0.6 of a sample at 20 Hz);
+- start mass 1.5 % (292.5 kg) above the declared 19 500 kg;
+- a transonic drag hump +0.15 at Mach 1.1 (14 % of the drag there, on the body's cross-section),
+  half-height half-width 0.15, between the table's knots 1.0 and 1.25, passed in the first
+  seconds after ignition;
+- three pairs; six clean seeds.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from .truth import Hidden
+
+THRUST = frozenset({"thrust_level", "thrust_profile", "mass_flow"})
+JET = (-40.0, 12_000.0, 3_000.0, 4_500.0)
+MIS = math.radians(0.3)
+DM0 = 292.5
+
+
+@dataclass(frozen=True)
+class Case:
+    """One evaluation case."""
+
+    name: str
+    hidden: Hidden
+    seed: int
+    truth: str                                  # in words, for the table
+    right: frozenset = frozenset()              # families allowed in the final model
+    needed: frozenset = frozenset()             # families of which one must be in it
+    needed_each: tuple = ()                     # pairs: one family of EACH of these sets must be in it
+    sizes: tuple = ()                           # (parameter, true value) pairs to compare
+    out_of_catalogue: bool = False              # no catalogue family is right: only an honest verdict passes
+
+
+def family(effect: str) -> str:
+    """The catalogue family of an effect name (``wind_pl_6`` -> ``wind``, ``bias_h_drift`` -> ``bias_h``)."""
+    if effect in ("throttle_step", "throttle_window"):   # thrust and mass flow changed at estimated times
+        return "thrust_profile"
+    if effect == "drag_bump":                            # a drag hump at an estimated Mach number
+        return "transonic_drag"
+    if effect == "mass_jettison":                        # the start-mass family's event shape (docs/effects.md)
+        return "start_mass"
+    if effect == "temperature":                          # the atmosphere's temperature offset, density family
+        return "density"                                 # (added to the catalogue 2026-11-26, e7f4dfd)
+    for fam in ("thrust_profile", "wind", "density", "back_pressure", "drag_mach", "bias_x", "bias_h", "bias_v",
+                "misalignment", "earth_rotation", "time_offset", "transonic_drag", "mass_flow", "start_mass",
+                "scale_v", "scale_h"):
+        if effect == fam or effect.startswith(fam + "_"):
+            return fam
+    return effect
+
+
+CASES = (
+    Case("hot-motor", Hidden(hot_motor=1.03), 401,
+         "thrust curve 3 % faster and higher, P(t) = 1.03 P_tab(1.03 t), mass flow with it",
+         right=THRUST, needed=frozenset({"thrust_level", "thrust_profile"})),
+    Case("back-pressure", Hidden(A_e=0.9), 402,
+         "sea-level thrust table, truth P_tab + A_e (p_sl - p_a(h)), A_e 0.9 m^2 (+73 kN at 11.8 km)",
+         right=frozenset({"back_pressure", "thrust_level", "thrust_profile"}),
+         needed=frozenset({"back_pressure", "thrust_level", "thrust_profile"}), sizes=(("A_e", 0.9),)),
+    Case("jet-stream", Hidden(jet=JET), 403,
+         "headwind jet 40 m/s at 12 km (half 3 km below, 4.5 km above), start inside it",
+         right=frozenset({"wind"}), needed=frozenset({"wind"})),
+    Case("cold-column", Hidden(dT=-10.0), 404,
+         "atmosphere 10 K colder over the column, hydrostatic (density -2 % at 12 km, -15 % at 30 km; Mach +2.4 %)",
+         right=frozenset({"density"}), needed=frozenset({"density"})),
+    Case("misalignment", Hidden(delta=MIS), 405,
+         "thrust misalignment 0.3 deg from ignition",
+         right=frozenset({"misalignment"}), needed=frozenset({"misalignment"}), sizes=(("delta_thrust", MIS),)),
+    Case("h-bias", Hidden(bias_h=(15.0, 0.0)), 406,
+         "altimeter bias 15 m",
+         right=frozenset({"bias_h"}), needed=frozenset({"bias_h"}), sizes=(("b_h", 15.0),)),
+    Case("v-scale", Hidden(scale_v=0.003), 407,
+         "speed channel reads 0.3 % long",
+         right=frozenset({"scale_v"}), needed=frozenset({"scale_v"}), sizes=(("k_v", 0.003),)),
+    Case("earth-rotation", Hidden(rotation=(28.5, 90.0)), 408,
+         "Earth rotation, 28.5 N, launched due east (Coriolis and centrifugal)",
+         right=frozenset({"earth_rotation"}), needed=frozenset({"earth_rotation"}), sizes=(("k_rot", 1.0),)),
+    Case("time-offset", Hidden(tau=0.03), 409,
+         "time tags 30 ms late (exact shift)",
+         right=frozenset({"time_offset"}), needed=frozenset({"time_offset"}), sizes=(("tau", 0.03),)),
+    Case("heavy-start", Hidden(dm0=DM0), 410,
+         "start mass 292.5 kg (1.5 %) above the declared 19 500 kg",
+         right=frozenset({"start_mass"}), needed=frozenset({"start_mass"}), sizes=(("dm_start", DM0),)),
+    Case("drag-hump", Hidden(drag_bump=(0.15, 1.1, 0.15)), 411,
+         "drag hump +0.15 (14 %) at Mach 1.1 (half-width 0.15), between the CD knots 1.0 and 1.25",
+         right=frozenset({"transonic_drag", "drag_mach"}), needed=frozenset({"transonic_drag", "drag_mach"})),
+    Case("jet-stream+h-bias", Hidden(jet=JET, bias_h=(15.0, 0.0)), 412,
+         "headwind jet 40 m/s at 12 km + altimeter bias 15 m",
+         right=frozenset({"wind", "bias_h"}), needed=frozenset({"wind", "bias_h"}),
+         needed_each=(frozenset({"wind"}), frozenset({"bias_h"})), sizes=(("b_h", 15.0),)),
+    Case("hot-motor+misalignment", Hidden(hot_motor=1.03, delta=MIS), 413,
+         "hot motor (k 1.03) + misalignment 0.3 deg",
+         right=THRUST | {"misalignment"}, needed=frozenset({"thrust_level", "thrust_profile", "misalignment"}),
+         needed_each=(frozenset({"thrust_level", "thrust_profile"}), frozenset({"misalignment"})),
+         sizes=(("delta_thrust", MIS),)),
+    Case("cold-column+v-scale", Hidden(dT=-10.0, scale_v=0.003), 414,
+         "atmosphere 10 K colder + speed channel 0.3 % long",
+         right=frozenset({"density", "scale_v"}), needed=frozenset({"density", "scale_v"}),
+         needed_each=(frozenset({"density"}), frozenset({"scale_v"})), sizes=(("k_v", 0.003),)),
+) + tuple(Case(f"clean-{seed}", Hidden(), seed, f"clean (seed {seed})") for seed in range(500, 506))
+
+ALL = CASES
+BY_NAME = {c.name: c for c in ALL}

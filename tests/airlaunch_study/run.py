@@ -1,0 +1,45 @@
+"""Run the air-launch evaluation: make each case's data, run ``rocketid diagnose`` on it from the
+command line as a user would, and score the final model.
+
+    python tests/airlaunch_study/run.py --json air.json [--cases NAME ...] [--docs docs/effects.md]
+
+Osprey-A (``tests/vehicles/osprey.py``), an air-launched winged stage started at ignition in
+flight. Data and reports go to ``$ROCKETID_AIR_DIR`` (default ``/tmp/rocketid-air``): one CSV per
+case and one report folder per case. One diagnosis at a time (``--workers`` is passed through,
+default 1 so the two shared cores are not both taken). ``--rescore`` (with ``--json``) re-scores stored
+results and runs no diagnosis; ``--docs`` rewrites the table between the markers
+``<!-- air-table:start -->`` and ``<!-- air-table:end -->`` (``--marker`` names others).
+
+The harness and the outcome classes are ``tests/study_harness.py``'s (:class:`study_harness.Study`).
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+TESTS = HERE.parent
+for extra in (TESTS, TESTS / "vehicles"):
+    if str(extra) not in sys.path:
+        sys.path.insert(0, str(extra))
+
+import osprey as O  # noqa: E402
+from study_harness import Study  # noqa: E402
+
+from airlaunch_study.cases import ALL, BY_NAME, family  # noqa: E402
+
+STUDY = Study("Osprey-A (air-launched)", TESTS / "vehicles" / "osprey.py", dict(O.truth(None)), ALL, family,
+              "airlaunch_study.truth", "ROCKETID_AIR_DIR", "/tmp/rocketid-air", "air-table", timeout=3600.0)
+MODEL_FILE, COEFFICIENTS = STUDY.model_file, STUDY.coefficients
+data_dir, make_data, diagnose_cli = STUDY.data_dir, STUDY.make_data, STUDY.diagnose_cli
+classify, acceptable, sizes, row, table = STUDY.classify, STUDY.acceptable, STUDY.sizes, STUDY.row, STUDY.table
+__all__ = ["STUDY", "BY_NAME", "classify", "acceptable", "row", "diagnose_cli", "make_data", "main"]
+
+
+def main(argv=None) -> int:
+    return STUDY.main(argv, __doc__)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,221 @@
+"""What the vehicle evaluations share (``tests/unseen_study``, ``tests/airlaunch_study``): make each case's
+data, run ``rocketid diagnose`` on it from the command line as a user would, and score the final model.
+
+A :class:`Study` is configured with the vehicle's model file and true coefficients, the cases, the
+family of an effect name, the data directory's environment variable and the table's title; each
+study's ``run.py`` makes one and exposes its functions (``classify``, ``acceptable``, ``row``,
+``diagnose_cli``, ``main``).
+
+Outcome classes (:meth:`Study.classify`):
+
+- ``right & explained``: the final model holds every needed family and only right ones, the
+  verdict is "explained" (for a pair, one family of each of ``needed_each``);
+- ``right but partly``: only right families, but the verdict is not "explained" or a needed
+  family is missing;
+- ``nothing found``: no effect added (correct for clean data and for an effect the base fit
+  already absorbs to the noise);
+- ``wrong, not called explained``: a family that is not right is in the final model, verdict not
+  "explained";
+- ``WRONG called explained``: a family that is not right is in the final model and the verdict
+  is "explained" (the worst outcome).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import os
+import platform
+import subprocess
+import sys
+import time
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Callable
+
+TESTS = Path(__file__).resolve().parent
+REPO = TESTS.parent
+
+
+@dataclass(frozen=True)
+class Study:
+    """One vehicle's evaluation (module notes)."""
+
+    label: str                      # the table's title starts with it
+    model_file: Path
+    coefficients: dict              # the model's true coefficients (the sizes column)
+    cases: tuple                    # every case, in table order
+    family: Callable[[str], str]
+    truth: str                      # the truth module (``measurements(hidden, seed)``)
+    env: str                        # environment variable of the data directory
+    default_dir: str
+    marker: str                     # the docs table's markers
+    timeout: float = 3600.0
+
+    @property
+    def by_name(self) -> dict:
+        return {c.name: c for c in self.cases}
+
+    def data_dir(self) -> Path:
+        """Where data and reports go."""
+        return Path(os.environ.get(self.env, self.default_dir))
+
+    def make_data(self, case) -> Path:
+        """The case's CSV (made once; the truth simulation is deterministic and the noise seeded)."""
+        path = self.data_dir() / f"{case.name}.csv"
+        if not path.exists():
+            path.parent.mkdir(parents=True, exist_ok=True)
+            importlib.import_module(self.truth).measurements(case.hidden, case.seed).to_csv(path)
+        return path
+
+    def diagnose_cli(self, case, workers: int = 1, timeout: float | None = None) -> dict:
+        """Run ``rocketid diagnose`` on the case's CSV; return the report's diagnosis.json and the wall time
+        (a diagnosis that outlasts ``timeout`` is recorded as such, not fatal to the study)."""
+        csv = self.make_data(case)
+        out = self.data_dir() / f"report-{case.name}"
+        command = [sys.executable, "-c", "import sys; from rocketid.cli import main; sys.exit(main())",
+                   "diagnose", str(csv), "--model", str(self.model_file), "--out", str(out),
+                   "--workers", str(workers)]
+        start = time.perf_counter()
+        try:
+            done = subprocess.run(command, capture_output=True, text=True,
+                                  timeout=self.timeout if timeout is None else timeout)
+            code, stdout, stderr = done.returncode, done.stdout, done.stderr
+        except subprocess.TimeoutExpired as exc:
+            code = "timeout"
+            stdout = exc.stdout.decode() if isinstance(exc.stdout, bytes) else (exc.stdout or "")
+            stderr = exc.stderr.decode() if isinstance(exc.stderr, bytes) else (exc.stderr or "")
+        record = {"case": case.name, "command": "rocketid " + " ".join(command[3:]),
+                  "wall_s": time.perf_counter() - start, "exit": code, "stdout": stdout[-4000:],
+                  "stderr": stderr[-2000:]}
+        diag = out / "diagnosis.json"
+        if code in (0, 1) and diag.exists():
+            d = json.loads(diag.read_text())
+            record["final"] = d.get("final")
+            record["base_chi2"] = d.get("comparison", {}).get("chi2_per_dof")
+            record["band"] = d.get("noise_band", {}).get("upper")
+            record["steps"] = [{"number": s.get("number"), "contenders": s.get("contenders"), "why": s.get("why")}
+                               for s in d.get("steps", [])]
+        return record
+
+    def classify(self, case, record) -> str:
+        """The outcome class of one case (module notes)."""
+        final = record.get("final")
+        if not final:
+            return "diagnosis failed"
+        families = {self.family(e) for e in final.get("effects", [])}
+        explained = final.get("verdict") == "explained"
+        if not families:
+            return "nothing found"
+        if not families <= case.right:
+            return "WRONG called explained" if explained else "wrong, not called explained"
+        each = all(families & group for group in getattr(case, "needed_each", ()))
+        if explained and case.needed and (families & case.needed) and each:
+            return "right & explained"
+        return "right but partly"
+
+    def acceptable(self, case, record) -> bool:
+        """What the evaluation asks: clean data add nothing; an effect the base fit does not show (base
+        chi2/dof inside the noise band) may go unfound; a visible one is found and explained."""
+        outcome = self.classify(case, record)
+        if not case.right:
+            if getattr(case, "out_of_catalogue", False):       # honest: anything but "explained"
+                return outcome in ("nothing found", "wrong, not called explained")
+            return outcome == "nothing found"                  # clean data
+        if outcome == "nothing found":
+            return record.get("base_chi2") is not None and record["base_chi2"] <= (record.get("band") or 1.0)
+        return outcome == "right & explained"
+
+    def sizes(self, case, record) -> str:
+        """The final model's effect parameters against the truth, and the largest coefficient deviation."""
+        params = (record.get("final") or {}).get("parameters", {})
+        truth_sizes = dict(case.sizes)
+        parts = []
+        for name, pv in params.items():
+            if name in self.coefficients:
+                continue
+            value, std = pv.get("value"), pv.get("std")
+            text = f"{name} {value:.4g}" + (f" +- {std:.2g}" if std is not None else "")
+            if name in truth_sizes:
+                text += f" (truth {truth_sizes[name]:.4g})"
+            parts.append(text)
+        devs = [(abs(params[n]["value"] / true - 1), n, params[n]["value"], true)
+                for n, true in self.coefficients.items() if n in params and params[n].get("value") is not None]
+        if devs:
+            worst = max(devs)
+            parts.append(f"worst coefficient {worst[1]} {worst[2]:.3g} (truth {worst[3]:.3g}, {100 * worst[0]:.0f} %)")
+        return "; ".join(parts) if parts else "-"
+
+    def row(self, case, record) -> str:
+        final = record.get("final") or {}
+        effects = " + ".join(final.get("effects", [])) or "nothing"
+        base, chi = record.get("base_chi2"), final.get("chi2_per_dof")
+        chi_text = f"{base:.4g} -> {chi:.4g}" if base is not None and chi is not None else "-"
+        return (f"| {case.name} | {case.truth} | {effects} | {chi_text} | {self.sizes(case, record)} | "
+                f"{final.get('verdict', 'failed: exit ' + str(record.get('exit')))} | {self.classify(case, record)} | "
+                f"{'yes' if self.acceptable(case, record) else '**no**'} | {record.get('wall_s', 0):.0f} |")
+
+    def table(self, records: dict, title: str) -> str:
+        lines = [title, "",
+                 "| case | truth (hidden) | final effects | chi2/dof base -> final | sizes vs truth | verdict | outcome | "
+                 "acceptable | s |",
+                 "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+        counts: dict[str, int] = {}
+        for case in self.cases:
+            if case.name in records:
+                lines.append(self.row(case, records[case.name]))
+                outcome = self.classify(case, records[case.name])
+                counts[outcome] = counts.get(outcome, 0) + 1
+        lines += ["", "Outcomes: " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items())) + "."]
+        return "\n".join(lines)
+
+    def main(self, argv=None, doc: str = "") -> int:
+        parser = argparse.ArgumentParser(description=(doc or self.label).splitlines()[0])
+        parser.add_argument("--cases", nargs="*", help="case names (default: all)")
+        parser.add_argument("--json", required=True, help="results file (read and extended)")
+        parser.add_argument("--workers", type=int, default=1)
+        parser.add_argument("--rescore", action="store_true", help="only re-score and print the stored results")
+        parser.add_argument("--docs", help="rewrite the table in this markdown file")
+        parser.add_argument("--marker", default=self.marker, help="the table's markers in --docs (NAME:start, NAME:end)")
+        args = parser.parse_args(argv)
+        path = Path(args.json)
+        stored = json.loads(path.read_text()) if path.exists() else {"records": {}}
+        names = args.cases or [c.name for c in self.cases]
+        unknown = [n for n in names if n not in self.by_name]
+        if unknown:
+            parser.error(f"unknown case(s) {', '.join(unknown)}; known: {', '.join(self.by_name)}")
+        if not args.rescore:
+            stored["commit"] = git_commit()
+            stored.setdefault("when", datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC"))
+            stored["machine"] = platform.machine()
+            for name in names:
+                record = self.diagnose_cli(self.by_name[name], workers=args.workers)
+                stored["records"][name] = record
+                path.write_text(json.dumps(stored, indent=1))
+                print(self.row(self.by_name[name], record), flush=True)
+        title = (f"{self.label}, `rocketid diagnose` of src/rocketid at commit {stored.get('commit')}, "
+                 f"{stored.get('when')}, {stored.get('machine')}, one diagnosis at a time (`--workers {args.workers}`) "
+                 "on 2 shared cores.")
+        text = self.table(stored["records"], title)
+        print(text)
+        if args.docs:
+            doc_path = Path(args.docs)
+            body = doc_path.read_text()
+            start, end = f"<!-- {args.marker}:start -->", f"<!-- {args.marker}:end -->"
+            if start not in body or end not in body:
+                raise SystemExit(f"{doc_path}: no {start} ... {end} markers")
+            head, rest = body.split(start, 1)
+            _, tail = rest.split(end, 1)
+            doc_path.write_text(f"{head}{start}\n{text}\n{end}{tail}")
+        return 0
+
+
+def git_commit() -> str:
+    """The last commit that changed ``src/rocketid`` (what the diagnoses ran)."""
+    try:
+        return subprocess.run(["git", "-C", str(REPO), "log", "-1", "--format=%h", "--", "src/rocketid"],
+                              capture_output=True, text=True, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
