@@ -1118,9 +1118,10 @@ def temperature_effect(*, name: str = "temperature", realistic: float = TEMPERAT
     """The air ``dT_air`` kelvin warmer (or colder) than the standard at every altitude, at the standard's
     sea-level pressure: a hot or a cold day.
 
-    Temperature ``T = T_std(h) + dT_air``; the hydrostatic equation then gives the pressure ratio ``p / p_std``
-    in closed form (:func:`~rocketid.physics.atmosphere.us76_offset_log_pressure_ratio`); the density ``rho (p / p_std) T_std / T`` and the speed of sound
-    ``a sqrt(T / T_std)`` (so the Mach number changes too). The model's own density and speed-of-sound
+    Temperature ``T = T_std(h) + dT_air``; the hydrostatic equation then gives the pressure ratio
+    ``p / p_std`` in closed form (:func:`~rocketid.physics.atmosphere.us76_offset_log_pressure_ratio`); the
+    density is ``rho (p / p_std) T_std / T`` and the speed of sound ``a sqrt(T / T_std)`` (so the Mach number
+    changes too). The model's own density and speed-of-sound
     definitions (roles ``density`` and ``sound_speed``) are scaled, whichever density model they use; a model
     without the ``sound_speed`` role gets the density change alone. ``T_std`` is the 1976 standard's.
 
@@ -1130,9 +1131,8 @@ def temperature_effect(*, name: str = "temperature", realistic: float = TEMPERAT
     of its own: as a candidate its one parameter won on BIC against a density profile it did not explain
     (RA-66M with a 6 % tanh density profile: 6.7 K warm, accepted at the step, then failing the hold-out,
     where the profile had been explained). A density deviation of any shape (:func:`density_effect`) changes
-    only the density; a temperature offset
-    lowers the density at low altitude and raises it aloft (warm day) while the speed of sound follows the
-    temperature. Both are the same physical family (the atmosphere off the standard) for the diagnosis.
+    only the density; a temperature offset lowers the density at low altitude and raises it aloft (warm day)
+    while the speed of sound follows the temperature. Both are the same physical family (the atmosphere off the standard) for the diagnosis.
     """
     def apply(m: Model) -> tuple:
         sym, rho = _role_definition(m, "density", name)
@@ -1141,13 +1141,8 @@ def temperature_effect(*, name: str = "temperature", realistic: float = TEMPERAT
         t_std = us76_temperature(h)
         m.redefine(sym, rho * sp.exp(us76_offset_log_pressure_ratio(h, dT)) * t_std / (t_std + dT))
         sound = m.role("sound_speed")
-        if isinstance(sound, sp.Symbol):
-            try:
-                a = m.definition(sound)
-            except ModelError:
-                a = None
-            if a is not None:
-                m.redefine(sound, a * sp.sqrt(1 + dT / t_std))
+        if isinstance(sound, sp.Symbol) and sound in {d for d, _ in m._definitions}:
+            m.redefine(sound, m.definition(sound) * sp.sqrt(1 + dT / t_std))
         return (dT,)
 
     desc = ("air temperature T_std(h) + dT_air, K, at the standard's sea-level pressure: density rho (p/p_std) "
