@@ -34,7 +34,8 @@ ignition at 11.8 km and Mach 0.80, burn-out at 68 s near 54.5 km and Mach 8.9, w
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+
+from study_harness import Case
 
 from .truth import Hidden
 
@@ -42,39 +43,6 @@ THRUST = frozenset({"thrust_level", "thrust_profile", "mass_flow"})
 JET = (-40.0, 12_000.0, 3_000.0, 4_500.0)
 MIS = math.radians(0.3)
 DM0 = 292.5
-
-
-@dataclass(frozen=True)
-class Case:
-    """One evaluation case."""
-
-    name: str
-    hidden: Hidden
-    seed: int
-    truth: str                                  # in words, for the table
-    right: frozenset = frozenset()              # families allowed in the final model
-    needed: frozenset = frozenset()             # families of which one must be in it
-    needed_each: tuple = ()                     # pairs: one family of EACH of these sets must be in it
-    sizes: tuple = ()                           # (parameter, true value) pairs to compare
-    out_of_catalogue: bool = False              # no catalogue family is right: only an honest verdict passes
-
-
-def family(effect: str) -> str:
-    """The catalogue family of an effect name (``wind_pl_6`` -> ``wind``, ``bias_h_drift`` -> ``bias_h``)."""
-    if effect in ("throttle_step", "throttle_window"):   # thrust and mass flow changed at estimated times
-        return "thrust_profile"
-    if effect == "drag_bump":                            # a drag hump at an estimated Mach number
-        return "transonic_drag"
-    if effect == "mass_jettison":                        # the start-mass family's event shape (docs/effects.md)
-        return "start_mass"
-    if effect == "temperature":                          # the atmosphere's temperature offset, density family
-        return "density"                                 # (added to the catalogue 2026-11-26, e7f4dfd)
-    for fam in ("thrust_profile", "wind", "density", "back_pressure", "drag_mach", "bias_x", "bias_h", "bias_v",
-                "misalignment", "earth_rotation", "time_offset", "transonic_drag", "mass_flow", "start_mass",
-                "scale_v", "scale_h"):
-        if effect == fam or effect.startswith(fam + "_"):
-            return fam
-    return effect
 
 
 CASES = (

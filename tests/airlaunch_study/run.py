@@ -25,9 +25,9 @@ for extra in (TESTS, TESTS / "vehicles"):
         sys.path.insert(0, str(extra))
 
 import osprey as O  # noqa: E402
-from study_harness import Study  # noqa: E402
+from study_harness import Study, family  # noqa: E402
 
-from airlaunch_study.cases import ALL, BY_NAME, family  # noqa: E402
+from airlaunch_study.cases import ALL, BY_NAME  # noqa: E402
 
 STUDY = Study("Osprey-A (air-launched)", TESTS / "vehicles" / "osprey.py", dict(O.truth(None)), ALL, family,
               "airlaunch_study.truth", "ROCKETID_AIR_DIR", "/tmp/rocketid-air", "air-table", timeout=3600.0)

@@ -25,41 +25,12 @@ these, and each of ``needed`` must be there). Sizes, relative to Kestrel-S (thru
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+
+from study_harness import Case
 
 from .truth import Hidden
 
 THRUST = frozenset({"thrust_level", "thrust_profile", "mass_flow"})
-
-
-@dataclass(frozen=True)
-class Case:
-    """One evaluation case."""
-
-    name: str
-    hidden: Hidden
-    seed: int
-    truth: str                                  # in words, for the table
-    right: frozenset = frozenset()              # families allowed in the final model
-    needed: frozenset = frozenset()             # families that must be in it
-    sizes: tuple = ()                           # (parameter, true value) pairs to compare
-    out_of_catalogue: bool = False              # no catalogue family is right: only an honest verdict passes
-
-
-def family(effect: str) -> str:
-    """The catalogue family of an effect name (``wind_surface_6`` -> ``wind``, ``bias_h_drift`` -> ``bias_h``)."""
-    if effect in ("throttle_step", "throttle_window"):   # thrust and mass flow changed at estimated times
-        return "thrust_profile"                          # (added 2026-11-25 and 2026-11-26)
-    if effect == "drag_bump":                            # a drag hump at an estimated Mach number (2026-11-26)
-        return "transonic_drag"
-    if effect == "temperature":                          # the atmosphere's temperature offset (2026-11-26)
-        return "density"
-    for fam in ("thrust_profile", "wind", "density", "back_pressure", "drag_mach", "bias_x", "bias_h", "bias_v",
-                "misalignment", "earth_rotation", "time_offset", "transonic_drag", "mass_flow", "start_mass",
-                "scale_v"):
-        if effect == fam or effect.startswith(fam + "_"):
-            return fam
-    return effect
 
 
 MIS = math.radians(0.3)

@@ -24,9 +24,9 @@ for extra in (TESTS, TESTS / "vehicles"):
         sys.path.insert(0, str(extra))
 
 import kestrel as K  # noqa: E402
-from study_harness import Study  # noqa: E402
+from study_harness import Study, family  # noqa: E402
 
-from unseen_study.cases import ALL, BY_NAME, family  # noqa: E402
+from unseen_study.cases import ALL, BY_NAME  # noqa: E402
 
 STUDY = Study("Kestrel-S", TESTS / "vehicles" / "kestrel.py", dict(K.truth(None)), ALL, family,
               "unseen_study.truth", "ROCKETID_UNSEEN_DIR", "/tmp/rocketid-unseen", "unseen-table", timeout=1800.0)

@@ -243,15 +243,14 @@ def screen(fit: EstimationResult, candidates: Sequence[Effect], *, level: float 
             chosen.append((c, "; ".join(why)))
     # the significant candidates left out whose located shapes' scans qualify them (module notes)
     scans: dict = {}
-    located = _located(fit, ranking, [c for c in sig if c.name not in {k.name for k, _ in chosen[:MAX_CONTENDERS]}],
-                       vehicle, level, lead, scans)
+    named = {c.name for c, _ in chosen[:MAX_CONTENDERS]}
+    located = _located(fit, ranking, [c for c in sig if c.name not in named], vehicle, level, lead, scans)
     if len(chosen) > MAX_CONTENDERS:
         cut = [c.name for c, _ in chosen[MAX_CONTENDERS:] if c.name not in located]
         if cut:
             notes.append(f"{len(chosen)} candidates qualify; the {MAX_CONTENDERS} best ranked are refitted "
                          f"({', '.join(cut)} are not)")
         chosen = chosen[:MAX_CONTENDERS]
-    named = {c.name for c, _ in chosen}
     # a family whose located shape's scan qualifies is refitted whatever its smooth shape's rank (not counted
     # against MAX_CONTENDERS: at most one per family with located shapes)
     chosen += [(c, "") for c in ranking.candidates if c.name in located and c.name not in named]
