@@ -60,7 +60,7 @@ __all__ = ["Effect", "Vehicle", "back_pressure_effect", "thrust_profile_effect",
            "density_profile_effect", "drag_mach_effect", "piecewise_linear", "CATALOGUE", "KINDS", "custom_effect", "with_effects", "apply_effect", "resolve_effects",
            "is_present", "check_effect_parameters", "effect_parameter_problems", "wind_effect", "density_effect", "earth_rotation_effect",
            "liftoff_fade", "EARTH_RATE", "LIFTOFF_FADE_TIME", "misalignment_onset_effect", "mass_jettison_effect", "throttle_step_effect", "onset_step",
-           "ONSET_STARTS", "temperature_effect", "TEMPERATURE_REALISTIC_K"]
+           "ONSET_STARTS", "temperature_effect", "burn_rate_effect", "TEMPERATURE_REALISTIC_K"]
 
 #: The kinds of effect (``"custom"`` for the user's own).
 KINDS = ("propulsion", "mass", "aero", "environment", "kinematics", "sensor", "custom")
@@ -417,6 +417,68 @@ def _start_mass(m: Model) -> tuple:
     # same propellant (a payload, a ballast, a propellant load off its stated value)
     m.redefine(sym, mass + dm)
     return (dm,)
+
+
+def _explicit_rhs(m: Model, state: sp.Symbol, effect: str) -> sp.Expr:
+    """The right-hand side of an explicit ODE ``d state/dt = f`` (a ModelError for an implicit one)."""
+    eq = m._equations[state]
+    der = next(s.derivative for s in m._states if s.symbol == state)
+    if sp.diff(eq, der) != 1 or der in (eq - der).free_symbols:
+        raise ModelError(f"effect {effect!r} scales the equation of state {state} of model {m.name!r}, which must "
+                         f"be explicit (m.ode); it is the implicit {eq} = 0")
+    return der - eq
+
+
+def _burn_rate(m: Model) -> tuple:
+    """The motor on a clock ``(1 + eps_burn)`` times faster (module notes of :func:`burn_rate_effect`)."""
+    t_sym, thrust = _role_definition(m, "thrust", "burn_rate")
+    m_sym, mass = _role_definition(m, "mass", "burn_rate")
+    thrust_x, mass_x = _expanded(m, thrust), _expanded(m, mass)
+    states = {s.symbol for s in m._states}
+    flows = {s: _expanded(m, _explicit_rhs(m, s, "burn_rate")) for s in mass_x.free_symbols & states}
+    read = thrust_x.free_symbols | mass_x.free_symbols | set().union(*(f.free_symbols for f in flows.values()))
+    motor = [u for u in m._inputs if u.symbol in read]
+    # the motor's clock starts at ignition: where its sampled curve starts (a window cut in flight keeps it),
+    # else at the model's start
+    origin = min([m.t0] + [u.times[0] for u in motor if u.expr is None])
+    eps = m.parameter("eps_burn", 0.0, bounds=(-0.3, 0.3), nominal=0.02)
+    k = 1 + eps
+    clock = origin + k * (m.t - origin)
+    warp = {m.t: clock}
+    for u in motor:
+        warp[u.symbol] = u.expr.xreplace({m.t: clock}) if u.expr is not None else piecewise_linear(clock, u.times,
+                                                                                                    u.values)
+    m.redefine(t_sym, k * thrust_x.xreplace(warp))
+    m.redefine(m_sym, mass_x.xreplace(warp))
+    for state, flow in flows.items():
+        m.ode({state: k * flow.xreplace(warp)})
+    return (eps,)
+
+
+def burn_rate_effect() -> Effect:
+    """The motor burns ``1 + eps_burn`` times faster than stated: thrust and mass flow together.
+
+    A solid motor's burn rate moves with its grain temperature (a hot motor burns faster, a cold one
+    slower, by 0.1-0.3 % per kelvin): its thrust curve is then compressed in time and raised by the
+    same factor, ``P(t) = k P_stated(t_i + k (t - t_i))`` with ``k = 1 + eps_burn`` and ``t_i`` the
+    ignition, and the propellant is consumed on the same faster clock -- the total impulse and the
+    propellant load are those stated, delivered sooner. A liquid engine running at a higher chamber
+    pressure than stated is the same change without the curve's shape (a constant thrust and mass
+    flow scaled together, at the stated specific impulse).
+
+    The edit: every time-dependent part of the ``thrust`` and ``mass`` definitions (an expression of
+    ``t``, a sampled input such as a thrust table, a mass falling linearly in time) is evaluated at
+    the motor's clock ``t_i + k (t - t_i)``, the thrust is multiplied by ``k``, and a mass that is a
+    state has its equation ``dm/dt = f`` replaced by ``k f`` on that clock. ``t_i`` is the first time
+    of a sampled thrust curve (a window cut in flight keeps the motor's ignition) and otherwise the
+    model's start. Unlike ``thrust_level``, which changes the thrust at the stated mass flow (a
+    specific-impulse error), this keeps the specific impulse.
+    """
+    return Effect("burn_rate", "burn-rate error (thrust and mass flow together)", "propulsion", _burn_rate,
+                  "thrust k P(t_i + k (t - t_i)) and the mass consumed on the same clock, k = 1 + eps_burn: "
+                  "the motor's curve run k times faster (a hot or cold solid grain; a liquid engine off its "
+                  "stated chamber pressure), the stated specific impulse and propellant kept",
+                  {"eps_burn": 0.02})
 
 
 TRANSONIC_MACH = 1.1
@@ -1352,7 +1414,7 @@ def _refine_drag(vehicle: "Vehicle | None") -> list[Effect]:
 
 def _refine_thrust(vehicle: "Vehicle | None") -> list[Effect]:
     if vehicle is None or len(vehicle.knot_times) < 3:
-        return []
+        return [burn_rate_effect()]
     bounds = np.asarray(vehicle.knot_times, float)
     out = []
     for n in (3, 5, 9):
@@ -1361,7 +1423,7 @@ def _refine_thrust(vehicle: "Vehicle | None") -> list[Effect]:
         if len(knots) >= 2:
             out.append(thrust_profile_effect(knots))
     w = _onset_width(vehicle)
-    return out + [throttle_step_effect(bounds[0], bounds[-1], w), throttle_window_effect(bounds[0], bounds[-1], w)]
+    return [burn_rate_effect()] + out + [throttle_step_effect(bounds[0], bounds[-1], w), throttle_window_effect(bounds[0], bounds[-1], w)]
 
 
 def _build_catalogue() -> dict[str, Effect]:
