@@ -592,3 +592,63 @@ def test_temperature_offset_follows_the_hydrostatic_equation():
         assert rho1(z) / rho0(z) == pytest.approx(expected, rel=2e-4), z
         assert a1(z) / a0(z) == pytest.approx(math.sqrt((t_std(H) - 10.0) / t_std(H)), rel=1e-9), z
     assert rho1(25e3) / rho0(25e3) < 0.95 < 1.0 < rho1(1e3) / rho0(1e3)     # denser low, thinner aloft
+
+
+def test_burn_rate_scales_thrust_and_mass_flow_together(monkeypatch):
+    """A constant thrust and a mass falling linearly (Stage-30): ``eps_burn`` 0.03 flies as the vehicle
+    declared with its thrust and its mass flow both 3 % higher (the specific impulse kept)."""
+    import sys
+    from pathlib import Path
+    sys.path.insert(0, str(Path(__file__).parent / "vehicles"))
+    import stage30
+
+    from rocketid.diagnostics import burn_rate_effect
+    base = stage30.build_model().freeze()
+    t = stage30.sample_times()
+    p = dict(zip(base.parameter_names, stage30.truth(base)))
+    faster = ri.simulate(with_effects(base, [burn_rate_effect()]), {**p, "eps_burn": 0.03}, t).outputs()
+    monkeypatch.setattr(stage30, "THRUST_SL", stage30.THRUST_SL * 1.03)
+    monkeypatch.setattr(stage30, "MDOT", stage30.MDOT * 1.03)
+    by_hand = stage30.build_model().freeze()
+    expected = ri.simulate(by_hand, dict(zip(by_hand.parameter_names, stage30.truth(by_hand))), t).outputs()
+    for name in ("x", "h", "v"):
+        assert np.max(np.abs(faster[name] - expected[name])) < 1e-3, name
+    assert np.max(np.abs(faster["x"] - ri.simulate(base, p, t).outputs()["x"])) > 100.0
+
+
+def test_burn_rate_keeps_the_motors_ignition_in_a_window():
+    """A thrust table and a mass state (Kestrel-S), cut to a window from 20 s: the motor's clock still
+    starts at the table's first time (ignition), ``P(t) = k P_tab(k t)``, and the mass state's
+    equation burns ``k`` times faster on that clock."""
+    import sys
+    from pathlib import Path
+    sys.path.insert(0, str(Path(__file__).parent / "vehicles"))
+    import kestrel
+
+    from rocketid.diagnostics import burn_rate_effect
+    spec = with_effects(kestrel.build_model().windowed(20.0, 35.0), [burn_rate_effect()])
+    k = 1.04
+    values = {spec.symbol("eps_burn"): k - 1}
+    thrust = sp.lambdify(spec.t, spec.expand(spec.symbol("thrust")).subs(values))
+    for tt in (20.0, 27.3, 33.0):
+        assert thrust(tt) == pytest.approx(k * np.interp(k * tt, kestrel.THRUST_TIMES, kestrel.THRUST_VALUES),
+                                           rel=1e-12)
+    (i,) = [j for j, s in enumerate(spec.states) if str(s.symbol) == "mass_kg"]
+    rate = sp.lambdify(spec.t, spec.expand(spec.states[i].derivative - spec.equations[i]).subs(values))
+    assert rate(27.3) == pytest.approx(-thrust(27.3) / (kestrel.ISP * kestrel.G0), rel=1e-12)
+
+
+def test_burn_rate_needs_an_explicit_mass_equation():
+    m = ri.Model("implicit-mass", 0.0, 10.0)
+    x = m.state("x", 0.0)
+    mass = m.state("mass", 100.0)
+    m.ode({x: 1.0})
+    m.implicit({mass: 2 * m.der(mass) + 1.0})
+    m.define("thrust", sp.Float(10.0))
+    m.define("m", mass)
+    m.declare_role("thrust", m.thrust)
+    m.declare_role("mass", m.m)
+    m.output("x", x, sigma=1.0)
+    from rocketid.diagnostics import burn_rate_effect
+    with pytest.raises(ModelError, match="must be explicit"):
+        with_effects(m.freeze(), [burn_rate_effect()])

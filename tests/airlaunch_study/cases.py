@@ -40,6 +40,9 @@ from study_harness import Case
 from .truth import Hidden
 
 THRUST = frozenset({"thrust_level", "thrust_profile", "mass_flow"})
+# burn_rate (thrust and mass flow together on a faster motor clock, the hot motor's own physics) was added to the
+# catalogue after the study was written (2026-11-26): right for the hot motor, whose truth is that change
+HOT = THRUST | {"burn_rate"}
 JET = (-40.0, 12_000.0, 3_000.0, 4_500.0)
 MIS = math.radians(0.3)
 DM0 = 292.5
@@ -48,7 +51,7 @@ DM0 = 292.5
 CASES = (
     Case("hot-motor", Hidden(hot_motor=1.03), 401,
          "thrust curve 3 % faster and higher, P(t) = 1.03 P_tab(1.03 t), mass flow with it",
-         right=THRUST, needed=frozenset({"thrust_level", "thrust_profile"})),
+         right=HOT, needed=frozenset({"thrust_level", "thrust_profile", "burn_rate"}), sizes=(("eps_burn", 0.03),)),
     Case("back-pressure", Hidden(A_e=0.9), 402,
          "sea-level thrust table, truth P_tab + A_e (p_sl - p_a(h)), A_e 0.9 m^2 (+73 kN at 11.8 km)",
          right=frozenset({"back_pressure", "thrust_level", "thrust_profile"}),
@@ -86,9 +89,10 @@ CASES = (
          needed_each=(frozenset({"wind"}), frozenset({"bias_h"})), sizes=(("b_h", 15.0),)),
     Case("hot-motor+misalignment", Hidden(hot_motor=1.03, delta=MIS), 413,
          "hot motor (k 1.03) + misalignment 0.3 deg",
-         right=THRUST | {"misalignment"}, needed=frozenset({"thrust_level", "thrust_profile", "misalignment"}),
-         needed_each=(frozenset({"thrust_level", "thrust_profile"}), frozenset({"misalignment"})),
-         sizes=(("delta_thrust", MIS),)),
+         right=HOT | {"misalignment"},
+         needed=frozenset({"thrust_level", "thrust_profile", "burn_rate", "misalignment"}),
+         needed_each=(frozenset({"thrust_level", "thrust_profile", "burn_rate"}), frozenset({"misalignment"})),
+         sizes=(("eps_burn", 0.03), ("delta_thrust", MIS))),
     Case("cold-column+v-scale", Hidden(dT=-10.0, scale_v=0.003), 414,
          "atmosphere 10 K colder + speed channel 0.3 % long",
          right=frozenset({"density", "scale_v"}), needed=frozenset({"density", "scale_v"}),

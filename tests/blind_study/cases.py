@@ -44,6 +44,10 @@ DRAG = {"transonic_drag", "drag_mach_", "drag_bump"}
 HSENS = {"bias_h", "bias_h_drift", "scale_h"}
 VSENS = {"bias_v", "bias_v_drift", "scale_v"}
 WIND = {"wind", "wind_pl_"}
+# burn_rate, the thrust family's shape that scales thrust and mass flow together on a faster motor clock, was
+# added after the study was written (2026-11-26, for the air-launch study's hot motor); it is right where the
+# truth changes both (the throttle bucket), not for a thrust error at the stated mass flow (isp_shortfall)
+BURN = {"burn_rate"}
 # temperature, the atmosphere's temperature offset (density and speed of sound), was added to the catalogue
 # after the study was written (2026-11-26, because an air-launch study's cold day was explained by a wind)
 DENS = {"density", "density_pl_", "temperature"}
@@ -63,7 +67,7 @@ CASES = {
     "v_lag": ("speed sensor first-order lag tau 80 ms", {"v_lag": 0.080}, 104, [VSENS]),
     "dropped_mass": ("150 kg released at 55 s", {"drop": {"t": 55.0, "dm": 150.0}}, 105, [MASS]),
     "throttle_bucket": ("thrust and mass flow -20 % 30-45 s (3 s ramps)", {"throttle": THROTTLE}, 106,
-                        [THRUST | MASS]),
+                        [THRUST | MASS | BURN]),
     "misalign_late": ("thrust misalignment 0.2 deg from t = 20 s", {"misalign": {"delta": 0.2 * 3.141592653589793 / 180,
                                                                                  "t_on": 20.0}}, 107, [MISAL]),
     "cold_day": ("hydrostatic atmosphere 10 K colder (rho and a)", {"dT": -10.0}, 108, [DENS]),

@@ -31,6 +31,9 @@ from study_harness import Case
 from .truth import Hidden
 
 THRUST = frozenset({"thrust_level", "thrust_profile", "mass_flow"})
+# burn_rate (thrust and mass flow together on a faster motor clock, the hot motor's own physics) was added to the
+# catalogue after the study was written (2026-11-26): right for the hot motor, whose truth is that change
+HOT = THRUST | {"burn_rate"}
 
 
 MIS = math.radians(0.3)
@@ -38,7 +41,7 @@ MIS = math.radians(0.3)
 CASES = (
     Case("hot-motor", Hidden(hot_motor=1.03), 301,
          "thrust curve 3 % faster and higher, P(t) = 1.03 P_tab(1.03 t), mass flow with it",
-         right=THRUST, needed=frozenset({"thrust_level", "thrust_profile"})),
+         right=HOT, needed=frozenset({"thrust_level", "thrust_profile", "burn_rate"}), sizes=(("eps_burn", 0.03),)),
     Case("back-pressure", Hidden(A_e=0.05), 302,
          "back-pressure A_e 0.05 m^2 from the sea-level thrust table, pressure table",
          right=frozenset({"back_pressure"}), needed=frozenset({"back_pressure"}), sizes=(("A_e", 0.05),)),
@@ -84,7 +87,7 @@ SEALED = (
          right=frozenset({"transonic_drag", "drag_mach"}), needed=frozenset({"transonic_drag", "drag_mach"})),
     Case("sliver-tailoff", Hidden(tailoff=(0.06, 30.0, 36.0)), 313,
          "thrust and mass flow sag 6 % from 30 s to 36 s (early sliver burn-out)",
-         right=THRUST, needed=frozenset({"thrust_level", "thrust_profile"})),
+         right=HOT, needed=frozenset({"thrust_level", "thrust_profile", "burn_rate"}), sizes=(("eps_burn", 0.03),)),
     Case("tailwind-jet+time-offset", Hidden(jet=(3.0, 30.0, 9000.0, 2500.0), tau=0.02), 314,
          "tailwind 3 m/s surface + sech^2 jet 30 m/s at 9 km, and time tags 20 ms late",
          right=frozenset({"wind", "time_offset"}), needed=frozenset({"wind", "time_offset"}),

@@ -555,7 +555,8 @@ def _family(name: str) -> str:
     from .effects import CATALOGUE
     parents = {"thrust_profile": "thrust_level", "drag_mach": "transonic_drag", "back_pressure": "back_pressure",
                "mass_jettison": "start_mass", "throttle_step": "thrust_level",
-               "throttle_window": "thrust_level", "drag_bump": "transonic_drag", "temperature": "density"}
+               "throttle_window": "thrust_level", "drag_bump": "transonic_drag", "temperature": "density",
+               "burn_rate": "thrust_level"}
     for stem, parent in parents.items():
         if name.startswith(stem):
             return parent
