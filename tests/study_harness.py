@@ -35,8 +35,18 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Callable
 
+import numpy as np
+
 TESTS = Path(__file__).resolve().parent
 REPO = TESTS.parent
+
+
+def with_noise(exact: dict, times, sigma: dict, seed: int):
+    """Measurements of x, h, v: the exact outputs plus seeded N(0, sigma) noise, the sigmas declared."""
+    import rocketid as ri
+    rng = np.random.default_rng(seed)
+    values = {name: exact[name] + sigma[name] * rng.standard_normal(len(times)) for name in ("x", "h", "v")}
+    return ri.Measurements.from_arrays(times, values, sigma=dict(sigma))
 
 
 @dataclass(frozen=True)

@@ -39,6 +39,7 @@ if str(_VEHICLES) not in sys.path:
     sys.path.insert(0, str(_VEHICLES))
 
 import osprey as O  # noqa: E402
+from study_harness import with_noise  # noqa: E402
 
 import rocketid as ri  # noqa: E402
 
@@ -264,7 +265,4 @@ def exact_outputs(hidden: Hidden, times) -> dict:
 def measurements(hidden: Hidden, seed: int, times=None) -> "ri.Measurements":
     """The case's data: exact outputs plus N(0, sigma) noise (seeded), the vehicle's sigmas."""
     times = O.sample_times() if times is None else np.asarray(times, float)
-    exact = exact_outputs(hidden, times)
-    rng = np.random.default_rng(seed)
-    values = {name: exact[name] + O.SIGMA[name] * rng.standard_normal(times.size) for name in ("x", "h", "v")}
-    return ri.Measurements.from_arrays(times, values, sigma=dict(O.SIGMA))
+    return with_noise(exact_outputs(hidden, times), times, O.SIGMA, seed)

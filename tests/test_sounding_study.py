@@ -1,0 +1,283 @@
+"""``rocketid diagnose`` on a fin-stabilized sounding rocket: a short solid burn, then a long coast.
+
+Tern-2 (``tests/vehicles/tern.py``) is declared from the user documentation: rail exit at 0.5 s
+after ignition, 37.6 m/s and 84 deg; a solid motor's sea-level static-firing table every 0.25 s,
+the mass as a state, zero attack angle (no lift), CD as a Mach table from 0.11 to 3.8; burn-out at
+10.25 s near Mach 3.9, then the coast to 45.6 km by 60 s; radar x, h, v at 20 Hz. Its truth
+(``tests/sounding_study/truth.py``) flies three-dimensional position and velocity about the Earth's
+centre with vector forces and its own 1976 atmosphere, every hidden effect in its own shape (the
+wind with the airframe's weathercock response).
+
+The normal suite checks the instruments: the truth without effects reproduces the estimation
+model, the flight is the one the vehicle's docstring states, the truth's atmosphere is the 1976
+standard, the vehicle fits clean data to the noise, every hidden effect changes the flight by a
+stated amount, and the outcome classes score as the cases say. The diagnoses run ``rocketid
+diagnose`` from the command line, one per case, and are ``slow``:
+``pytest -m slow tests/test_sounding_study.py``; the whole study with its table is
+``python tests/sounding_study/run.py --json sounding.json``.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+HERE = Path(__file__).resolve().parent
+for extra in (HERE, HERE / "vehicles"):
+    if str(extra) not in sys.path:
+        sys.path.insert(0, str(extra))
+
+import tern as V  # noqa: E402
+
+import rocketid as ri  # noqa: E402
+from sounding_study import run, truth  # noqa: E402
+from sounding_study.cases import (A_EXIT, ALL, BASE_DRAG, BIAS_H, BY_NAME, DM0, DRAG_STEP, DT_COLD,  # noqa: E402
+                                  K_COLD, K_V, TAU, WALLOPS, WIND, Hidden)
+
+#: Cases measured not to meet the bar (``run.acceptable``), with the measured reason.
+KNOWN_FAILURES: dict[str, str] = {}
+
+
+@pytest.fixture(scope="module")
+def tern_spec():
+    return V.build_model()
+
+
+@pytest.fixture(scope="module")
+def clean_outputs():
+    return truth.exact_outputs(Hidden(), V.sample_times())
+
+
+def test_truth_reproduces_the_vehicle_model(tern_spec, clean_outputs):
+    """Three-dimensional position and velocity with vector forces (truth) against speed and path angle
+    (rocketid's model, ``simulate``): < 1 mm, < 1 mm/s."""
+    model = ri.simulate(tern_spec, V.truth(tern_spec), V.sample_times()).outputs()
+    for name in ("x", "h", "v"):
+        assert np.max(np.abs(clean_outputs[name] - model[name])) < 1e-3, name
+
+
+def test_a_calm_wind_leaves_the_body_on_the_path(clean_outputs):
+    """The weathercock branch with a zero wind flies the clean truth (the body stays on the path), to the
+    integrator's tolerance (measured 1.3e-6 m)."""
+    calm = truth.exact_outputs(Hidden(wind=(0.0, 0.0)), V.sample_times())
+    for name in ("x", "h", "v"):
+        assert np.max(np.abs(calm[name] - clean_outputs[name])) < 1e-5, name
+
+
+def test_the_rail_gives_the_declared_start():
+    """The start (37.6 m/s at 0.5 s) is what the thrust table gives along a 7 m rail at 84 deg."""
+    def along_rail(t, y):
+        thrust = float(np.interp(t, V.THRUST_TIMES, V.THRUST_VALUES))
+        mass = V.M_LAUNCH - V.burnt(t)
+        return [y[1], max(thrust / mass - V.G0 * math.sin(V.ELEVATION), 0.0)]
+    sol = solve_ivp(along_rail, (0.0, V.T_RAIL), [0.0, 0.0], rtol=1e-10, atol=1e-10, max_step=0.01)
+    run_m, speed = sol.y[:, -1]
+    assert abs(speed - V.START[2]) < 0.1 and 6.5 < run_m < 7.5, (speed, run_m)
+    assert abs(V.M_START - 795.67) < 0.01 and abs(V.M_LAUNCH - V.burnt(V.TF) - 423.02) < 0.01
+
+
+def test_the_flight_is_a_short_burn_and_a_long_coast(tern_spec):
+    """Burn-out at 10.25 s, peak Mach 3.9 near it, the coast climbing to 45.6 km by 60 s, far from level;
+    every Mach knot of the drag table flown."""
+    t = np.concatenate([[V.T_RAIL], V.sample_times()])            # rail exit and the radar's tags
+    tr = ri.simulate(tern_spec, V.truth(tern_spec), t)
+    x, h, v, theta, mass = tr.states.T
+    mach, q = tr.value("mach"), tr.value("qbar")
+    thrust = np.interp(t, V.THRUST_TIMES, V.THRUST_VALUES, right=0.0)
+    assert t[thrust > 0].max() < V.T_BURNOUT <= t[thrust == 0][t[thrust == 0] > 1].min()
+    assert np.ptp(mass[t >= V.T_BURNOUT]) < 1e-9 and abs(mass[-1] - 423.02) < 0.01
+    assert 3.85 < mach.max() < 3.95 and 9.0 < t[mach.argmax()] < 10.0
+    assert mach.max() > V.CD_KNOTS[-1] and abs(mach[0] - V.CD_KNOTS[0]) < 0.005
+    assert 1.55 < mach[-1] < 1.7                                   # the coast crosses Mach 2 again
+    assert 45_000 < h[-1] < 46_500 and 7_500 < x[-1] < 8_100 and 525 < v[-1] < 540
+    assert 5_500 < h[t <= V.T_BURNOUT][-1] < 7_500
+    assert np.all(np.diff(h) > 0) and 74.0 < math.degrees(theta[-1]) < 76.5 and np.all(np.diff(theta) < 0)
+    assert 540e3 < q.max() < 560e3
+
+
+#: US Standard Atmosphere 1976 (NOAA-S/T 76-1562): layer base pressures at geopotential altitude,
+#: and the tabulated temperature (K), pressure (Pa) and density (kg/m^3) at geometric altitude.
+BASE_PRESSURES = ((11_000.0, 22_632.06), (20_000.0, 5_474.889), (32_000.0, 868.0187),
+                  (47_000.0, 110.9063), (51_000.0, 66.93887))
+GEOMETRIC = ((0.0, 288.150, 101_325.0, 1.2250), (5_000.0, 255.676, 54_048.0, 0.73643),
+             (10_000.0, 223.252, 26_499.9, 0.41351), (20_000.0, 216.650, 5_529.3, 0.088910),
+             (30_000.0, 226.509, 1_197.0, 0.018410), (45_000.0, 264.164, 149.10, 0.0019663))
+
+
+def test_the_truth_atmosphere_is_the_1976_standard():
+    """The truth's own hydrostatic layers against the standard's published values."""
+    std, r0 = truth.air(0.0), truth.GEOPOTENTIAL_RADIUS
+    for H, p in BASE_PRESSURES:
+        assert abs(std.at(r0 * H / (r0 - H))[1] / p - 1) < 1e-6, H
+    for z, T, p, rho in GEOMETRIC:
+        Tt, pt, rt, _ = std.at(z)
+        assert abs(Tt - T) < 2e-3 and abs(pt / p - 1) < 5e-5 and abs(rt / rho - 1) < 5e-5, z
+    assert abs(std.at(0.0)[3] - 340.29) < 0.01 and abs(std.at(10_000.0)[3] - 299.53) < 0.01
+
+
+def test_the_cold_day_is_hydrostatic():
+    """15 K colder over the column at the standard ground pressure: the densities the case states, and the
+    pressure falling faster with height (the hydrostatic equation at the colder temperature)."""
+    std, cold = truth.air(0.0), truth.air(DT_COLD)
+    for z, ratio in ((0.0, 0.055), (4_000.0, 0.031), (10_000.0, -0.015), (20_000.0, -0.121), (35_000.0, -0.258)):
+        assert abs(cold.at(z)[2] / std.at(z)[2] - 1 - ratio) < 1e-3, z
+    z, dz = 8_000.0, 1.0
+    (T0, p0, rho0, a0), (_, p1, _, _) = cold.at(z), cold.at(z + dz)
+    g = truth.STD_GRAVITY * (truth.GEOPOTENTIAL_RADIUS / (truth.GEOPOTENTIAL_RADIUS + z)) ** 2
+    assert abs((p1 - p0) / dz / (-rho0 * g) - 1) < 1e-3
+    assert abs(a0 / std.at(z)[3] - math.sqrt(T0 / std.at(z)[0])) < 1e-12
+
+
+def test_the_back_pressure_thrust_is_the_stated_one():
+    """A 0.30 m nozzle exit: +2.8 kN at 4 km, nothing at the rail, nothing after burn-out."""
+    flight = truth.Flight(Hidden(A_e=A_EXIT))
+    std = truth.air(0.0)
+    t = 7.0
+    extra = flight.motor(t, std.at(4_000.0)[1])[0] - truth.table_thrust(t)
+    assert 2_790 < extra < 2_820, extra
+    assert abs(flight.motor(t, truth.SEA_LEVEL_PRESSURE)[0] - truth.table_thrust(t)) < 1e-9
+    assert flight.motor(12.0, 100.0) == (0.0, 0.0)
+    assert abs(math.pi * 0.15 ** 2 - A_EXIT) < 1e-4
+
+
+def test_vehicle_fits_clean_data_to_the_noise(tern_spec):
+    """The base model on the truth's clean data, from the declared guesses: chi2/dof at the noise,
+    every coefficient within 4 standard errors of the truth."""
+    from rocketid.estimability import uncertainty
+    data = truth.measurements(Hidden(), seed=7)
+    fit = ri.estimate(tern_spec, data)
+    assert fit.success, fit.message
+    dof = fit.n_data - fit.n_estimated                     # n_data counts every value of every channel
+    assert dof == 3 * V.sample_times().size - len(tern_spec.parameter_names)
+    assert abs(fit.chi2_per_dof - 1) < 4 * math.sqrt(2 / dof)
+    se = uncertainty(fit).standard_errors
+    p_true = tern_spec.parameter_vector(V.truth(tern_spec))
+    z = (fit.p - p_true) / se
+    assert np.max(np.abs(z)) < 4, dict(zip(tern_spec.parameter_names, np.round(z, 2)))
+
+
+@pytest.mark.parametrize("hidden, absorbed", [
+    (Hidden(drag_step=DRAG_STEP), True),          # measured 2J 2.9 on 3559 degrees of freedom
+    (Hidden(base_drag=BASE_DRAG), False),         # measured 2J 7.4e4
+])
+def test_what_the_drag_table_absorbs(tern_spec, hidden, absorbed):
+    """Noise-free data of the two drag cases, fitted by the base model: the free Mach table takes a CD error
+    above Mach 2 almost exactly (the case's "nothing found" passes), but not a drag that changes with the
+    motor's state at the same Mach numbers (boost and coast both fly Mach 1.6-3.9)."""
+    t = V.sample_times()
+    data = ri.Measurements.from_arrays(t, truth.exact_outputs(hidden, t), sigma=dict(V.SIGMA))
+    fit = ri.estimate(tern_spec, data)
+    assert fit.success, fit.message
+    two_j = 2.0 * fit.data_objective
+    assert (two_j < 20.0) if absorbed else (two_j > 1e4), two_j
+
+
+@pytest.mark.parametrize("hidden, channel, low, high", [          # measured: the largest change
+    (Hidden(motor_clock=K_COLD), "v", 35.0, 46.0),                  # 40.3 m/s
+    (Hidden(A_e=A_EXIT), "h", 950.0, 1300.0),                       # 1116 m
+    (Hidden(wind=WIND), "x", 3500.0, 4700.0),                       # 4065 m
+    (Hidden(dT=DT_COLD), "h", 270.0, 370.0),                        # 319 m
+    (Hidden(dm0=DM0), "h", 1450.0, 1950.0),                         # 1679 m
+    (Hidden(bias_h=BIAS_H), "h", 9.99, 10.01),                      # 10 m
+    (Hidden(scale_v=K_V), "v", 2.4, 2.56),                          # 2.48 m/s (0.2 % of 1240 m/s)
+    (Hidden(tau=TAU), "v", 2.8, 3.6),                               # 3.20 m/s (20 ms of 160 m/s^2)
+    (Hidden(drag_step=DRAG_STEP), "h", 1200.0, 1600.0),             # 1389 m
+    (Hidden(base_drag=BASE_DRAG), "h", 1500.0, 2000.0),             # 1742 m
+    (Hidden(rotation=WALLOPS), "x", 115.0, 165.0),                  # 139 m
+])
+def test_each_hidden_effect_changes_the_flight(clean_outputs, hidden, channel, low, high):
+    """Every hidden effect moves the outputs by a realistic amount (largest change in range), many sigma
+    over the flight (the root sum of squares of the changes in sigma over all samples and channels)."""
+    moved = truth.exact_outputs(hidden, V.sample_times())
+    change = float(np.max(np.abs(moved[channel] - clean_outputs[channel])))
+    assert low < change < high, change
+    significance = math.sqrt(sum(float(np.sum(((moved[n] - clean_outputs[n]) / V.SIGMA[n]) ** 2))
+                                 for n in ("x", "h", "v")))
+    assert significance > 50.0, significance
+
+
+def test_the_cases_are_consistent():
+    """Names and seeds unique, every needed family a right one, pairs with one set per effect, six clean
+    seeds, one out-of-catalogue case with nothing right."""
+    assert len(BY_NAME) == len(ALL) == 20 and len({c.seed for c in ALL}) == len(ALL)
+    for case in ALL:
+        assert case.needed <= case.right, case.name
+        assert all(group <= case.right for group in case.needed_each), case.name
+        assert ("+" in case.name) == bool(case.needed_each), case.name
+    assert sum(c.name.startswith("clean-") for c in ALL) == 6
+    assert [c.name for c in ALL if c.out_of_catalogue] == ["base-drag"] and not BY_NAME["base-drag"].right
+    assert set(run.COEFFICIENTS) == {f"CD_{j}" for j in range(len(V.CD_KNOTS))}
+
+
+def test_classification_rules():
+    """The outcome classes: a wrong family called explained is the worst outcome; a pair needs both; the
+    out-of-catalogue case passes on anything but "explained"."""
+    final = {"effects": ["back_pressure"], "verdict": "explained", "parameters": {}}
+    case = BY_NAME["back-pressure"]
+    assert run.classify(case, {"final": final}) == "right & explained"
+    assert run.classify(case, {"final": {**final, "effects": ["thrust_profile_5"]}}) == "right & explained"
+    assert run.classify(case, {"final": {**final, "effects": ["burn_rate"]}}) == "WRONG called explained"
+    assert run.classify(case, {"final": {**final, "effects": ["wind"], "verdict": "partly explained"}}) \
+        == "wrong, not called explained"
+    assert run.classify(case, {"final": {**final, "effects": []}}) == "nothing found"
+    assert run.classify(case, {"final": {**final, "verdict": "partly explained"}}) == "right but partly"
+    cold = BY_NAME["cold-motor"]
+    assert run.classify(cold, {"final": {**final, "effects": ["burn_rate"]}}) == "right & explained"
+    assert run.classify(cold, {"final": {**final, "effects": ["start_mass"]}}) == "WRONG called explained"
+    assert run.classify(BY_NAME["cold-day"], {"final": {**final, "effects": ["temperature"]}}) \
+        == "right & explained"
+    winter = BY_NAME["cold-motor+cold-day"]
+    assert run.classify(winter, {"final": {**final, "effects": ["burn_rate"]}}) == "right but partly"
+    assert run.classify(winter, {"final": {**final, "effects": ["burn_rate", "density_pl_6"]}}) \
+        == "right & explained"
+    pair = BY_NAME["headwind+h-bias"]
+    assert run.classify(pair, {"final": {**final, "effects": ["wind_pl_4"]}}) == "right but partly"
+    assert run.classify(pair, {"final": {**final, "effects": ["wind_pl_4", "bias_h"]}}) == "right & explained"
+    drag = BY_NAME["supersonic-drag"]
+    assert run.classify(drag, {"final": {**final, "effects": ["drag_mach_8"]}}) == "right & explained"
+    assert run.classify(drag, {"final": {**final, "effects": ["drag_bump"]}}) == "right & explained"
+    assert run.acceptable(drag, {"final": {**final, "effects": []}, "base_chi2": 1.01, "band": 1.05})
+    assert not run.acceptable(drag, {"final": {**final, "effects": []}, "base_chi2": 1.3, "band": 1.05})
+    base = BY_NAME["base-drag"]
+    assert run.classify(base, {"final": {**final, "effects": ["drag_mach_8"]}}) == "WRONG called explained"
+    assert not run.acceptable(base, {"final": {**final, "effects": ["drag_mach_8"]}})
+    assert run.acceptable(base, {"final": {**final, "effects": ["drag_mach_8"], "verdict": "partly explained"}})
+    assert run.acceptable(base, {"final": {**final, "effects": [], "verdict": "unexplained"}})
+    clean = BY_NAME["clean-700"]
+    assert not run.acceptable(clean, {"final": {**final}})
+    assert run.acceptable(clean, {"final": {**final, "effects": []}})
+
+
+def test_a_case_makes_its_csv(tmp_path, monkeypatch):
+    """The harness writes the case's data where ``ROCKETID_SOUNDING_DIR`` says, readable by ``read_csv``: the
+    radar's tags, three channels, the hidden bias in the altitude."""
+    monkeypatch.setenv("ROCKETID_SOUNDING_DIR", str(tmp_path))
+    path = run.make_data(BY_NAME["h-bias"])
+    assert path.parent == tmp_path and path.exists()
+    data = ri.read_csv(path, ("x", "h", "v"))
+    t = V.sample_times()
+    assert data.names == ("x", "h", "v") and data.n_samples == 3 * t.size
+    clean = truth.exact_outputs(Hidden(), t)
+    h = {c.name: c for c in data.channels}["h"]
+    assert np.allclose(h.times, t)
+    assert abs(float(np.mean(h.values - clean["h"])) - BIAS_H) < 4 * V.SIGMA["h"] / math.sqrt(t.size)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case", ALL, ids=[c.name for c in ALL])
+def test_diagnose_on_sounding_case(case, tmp_path, monkeypatch, request):
+    """``rocketid diagnose`` (CLI) on the case: clean data add nothing, an effect the base fit does
+    not show may go unfound, a visible one is found and explained, an out-of-catalogue one is not
+    called explained, and a wrong family is never reported as explained."""
+    if case.name in KNOWN_FAILURES:
+        request.node.add_marker(pytest.mark.xfail(reason=KNOWN_FAILURES[case.name], strict=False))
+    monkeypatch.setenv("ROCKETID_SOUNDING_DIR", str(tmp_path))
+    record = run.diagnose_cli(case)
+    assert record["exit"] in (0, 1), record["stderr"]
+    assert run.classify(case, record) != "WRONG called explained", run.row(case, record)
+    assert run.acceptable(case, record), run.row(case, record)
