@@ -652,3 +652,34 @@ def test_burn_rate_needs_an_explicit_mass_equation():
     from rocketid.diagnostics import burn_rate_effect
     with pytest.raises(ModelError, match="must be explicit"):
         with_effects(m.freeze(), [burn_rate_effect()])
+
+
+def test_back_pressure_stops_with_the_motor():
+    """A motor that burns out inside the horizon (Tern-2: a 10 s burn, then a coast): the back-pressure
+    correction acts while the nozzle flows full, shrinks with the thrust below 40 % of its peak (the
+    tail-off) and is zero in the coast -- not ``A_e p0`` of thrust from nothing. A motor that runs
+    through the horizon (Osprey-A: its thrust stays above 42 % of its peak) keeps the plain correction."""
+    import sys
+    from pathlib import Path
+    sys.path.insert(0, str(Path(__file__).parent / "vehicles"))
+    import osprey
+    import tern
+
+    from rocketid.physics.atmosphere import us76_pressure
+    spec = with_effects(tern.build_model(), ["back_pressure"])
+    area, h = 0.07, 5000.0
+    table = sp.lambdify((spec.symbol("thrust_table"), spec.symbol("h")),
+                        spec.expand(spec.symbol("thrust")).subs({spec.symbol("A_e"): area}))
+
+    def thrust(t, h):
+        return table(float(np.interp(t, tern.THRUST_TIMES, tern.THRUST_VALUES)), h)
+    p_a = float(us76_pressure(sp.Float(h)))
+    peak = max(tern.THRUST_VALUES)
+    for t in (2.0, 5.0, 9.6, 10.1, 30.0):
+        stated = float(np.interp(t, tern.THRUST_TIMES, tern.THRUST_VALUES))
+        share = min(1.0, stated / (0.4 * peak))
+        assert thrust(t, h) == pytest.approx(stated + area * (101325.0 - p_a) * share, rel=1e-9, abs=1e-6), t
+    assert thrust(30.0, h) == 0.0
+    assert 0 < float(np.interp(10.1, tern.THRUST_TIMES, tern.THRUST_VALUES)) < 0.4 * peak    # in the tail-off
+    plain = with_effects(osprey.build_model(), ["back_pressure"])
+    assert "Max" not in str(plain.definitions[[str(d) for d, _ in plain.definitions].index("thrust")][1])

@@ -342,6 +342,42 @@ SEA_LEVEL_PRESSURE = 101325.0
 """p0 of the 1976 standard atmosphere, Pa."""
 
 
+NOZZLE_FULL_SHARE = 0.4
+"""The share of its peak above which a motor's stated thrust is taken to come from a nozzle flowing full
+(:func:`_nozzle_flowing`)."""
+
+
+def _nozzle_flowing(m: Model, thrust: sp.Expr) -> sp.Expr:
+    """How much of the back-pressure correction applies: 1 while the nozzle flows full, ``P / (0.4 P_max)``
+    below 40 % of the stated thrust's peak ``P_max`` (the tail-off), 0 when the motor is off.
+
+    The correction ``A_e (p0 - p_a)`` is the difference between the thrust in flight and at the
+    pressure the stated figure holds at, for the same flow. When the motor stops the jet stops and
+    the correction with it (a constant ``A_e p0`` through a coast would be thrust from nothing); in
+    the tail-off the exit pressure falls with the chamber pressure, and a nozzle expanded near
+    sea-level pressure separates when its exit pressure falls below about 0.4 of the ambient
+    (Summerfield's criterion): below 40 % of the running thrust the static firing's figure no longer
+    comes from a nozzle flowing full, and the correction shrinks with the thrust. The factor is 1
+    (exactly, not a gate that rounds to it) when the stated thrust does not change in time, when it
+    depends on anything but time and known inputs, or when it stays above 40 % of its peak over the
+    horizon.
+    """
+    x = _expanded(m, thrust).xreplace({c: sp.Float(v) for c, v in m._constants})
+    inputs = {u.symbol: u for u in m._inputs if u.symbol in x.free_symbols}
+    if x.free_symbols - {m.t} - set(inputs) or not x.free_symbols:
+        return sp.S.One
+    samples = [t for u in inputs.values() for t in u.times if m.t0 <= t <= m.tf]
+    tt = np.union1d(np.linspace(m.t0, m.tf, 801), samples)       # a sampled curve's peak is at a sample
+    values = [np.interp(tt, u.times, u.values) if u.expr is None
+              else np.broadcast_to(sp.lambdify(m.t, u.expr, "numpy")(tt), tt.shape) for u in inputs.values()]
+    level = np.abs(np.broadcast_to(sp.lambdify([m.t, *inputs], x, "numpy")(tt, *values), tt.shape))
+    peak = float(level.max())
+    if not peak > 0 or level.min() >= NOZZLE_FULL_SHARE * peak:
+        return sp.S.One
+    share = thrust / (NOZZLE_FULL_SHARE * peak)
+    return share - sp.Max(share - 1, 0)          # min(share, 1)
+
+
 def back_pressure_effect(reference: str = "sea_level", *, name: str | None = None) -> Effect:
     """Nozzle back-pressure: the thrust changes with the ambient pressure ``p_a(h)``.
 
@@ -377,7 +413,7 @@ def back_pressure_effect(reference: str = "sea_level", *, name: str | None = Non
             area = m.parameter("A_e" + suffix, 0.0, bounds=(0.0, math.inf), nominal=0.4)   # an area: not negative
         pa = _define(m, "p_ambient", us76_pressure(h), name)
         change = area * (SEA_LEVEL_PRESSURE - pa) if reference == "sea_level" else -area * pa
-        m.redefine(sym, thrust + change)
+        m.redefine(sym, thrust + change * _nozzle_flowing(m, thrust))
         return (area,)
 
     what = ("P + A_e (p0 - p_a(h)): the stated thrust P holds at sea level (p0 = 101325 Pa) and rises as the "
