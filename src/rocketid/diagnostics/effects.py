@@ -484,8 +484,14 @@ def _burn_rate(m: Model) -> tuple:
     for u in motor:
         warp[u.symbol] = u.expr.xreplace({m.t: clock}) if u.expr is not None else piecewise_linear(clock, u.times,
                                                                                                     u.values)
+    # a mass state starts at its declared value, which is what the stated curve leaves at t0; on the faster
+    # clock the motor has burnt for (1 + eps)(t0 - t_i) by then: eps (t0 - t_i) dm/dt(t0) more (to first order)
+    at_start = {m.t: sp.Float(m.t0), **{u.symbol: (u.expr.xreplace({m.t: m.t0}) if u.expr is not None
+                                                    else sp.Float(np.interp(m.t0, u.times, u.values)))
+                                         for u in motor}}
+    burnt_before = sum((flow.xreplace(at_start) for flow in flows.values()), sp.S.Zero) * (m.t0 - origin)
     m.redefine(t_sym, k * thrust_x.xreplace(warp))
-    m.redefine(m_sym, mass_x.xreplace(warp))
+    m.redefine(m_sym, mass_x.xreplace(warp) + eps * burnt_before)
     for state, flow in flows.items():
         m.ode({state: k * flow.xreplace(warp)})
     return (eps,)
@@ -507,7 +513,9 @@ def burn_rate_effect() -> Effect:
     the motor's clock ``t_i + k (t - t_i)``, the thrust is multiplied by ``k``, and a mass that is a
     state has its equation ``dm/dt = f`` replaced by ``k f`` on that clock. ``t_i`` is the first time
     of a sampled thrust curve (a window cut in flight keeps the motor's ignition) and otherwise the
-    model's start. Unlike ``thrust_level``, which changes the thrust at the stated mass flow (a
+    model's start. When the data start after ignition (``t0 > t_i``: a rail exit, a window), a mass
+    state's declared start value is what the stated curve leaves at ``t0``; the faster clock has burnt
+    ``eps_burn (t0 - t_i) |f(t0)|`` more by then (to first order), which the ``mass`` definition takes off. Unlike ``thrust_level``, which changes the thrust at the stated mass flow (a
     specific-impulse error), this keeps the specific impulse.
     """
     return Effect("burn_rate", "burn-rate error (thrust and mass flow together)", "propulsion", _burn_rate,
