@@ -125,6 +125,28 @@ def test_meshes(ra66_spec):
     np.testing.assert_array_equal(default.boundaries, ri.ra66_mesh().boundaries)
 
 
+
+def test_the_default_mesh_puts_a_thrust_tables_sharp_corners_on_boundaries():
+    """A thrust table sampled every 0.25 s with a tail-off starting at 7.75 s and ending at 10.25 s: those
+    corners become element boundaries; the gentle corners of the burn and of an attitude program sampled
+    every 0.5 s do not (the mesh is not made as fine as the samples)."""
+    m = ri.Model("corners", 0.0, 20.0)
+    y = m.state("y", 0.0)
+    times = np.arange(0.0, 12.01, 0.25)
+    thrust = np.interp(times, [0.0, 0.25, 4.0, 7.75, 10.25, 12.0], [0.0, 88.0, 114.0, 98.0, 0.0, 0.0])
+    u = m.input("thrust", times=times, values=thrust)
+    tt = np.arange(0.0, 20.01, 0.5)
+    phi = m.input("phi", times=tt, values=np.radians(80 - 2 * np.sin(tt / 3)))
+    m.ode({y: u + phi})
+    m.output("y", y, sigma=1.0)
+    from rocketid.solve import _sharp_corners
+    bounds = ri.default_mesh(m.freeze()).boundaries
+    assert {0.25, 7.75, 10.25} <= set(np.round(bounds, 9))
+    assert not {0.5, 1.5, 4.25, 11.5} & set(np.round(bounds, 9))
+    assert sorted(_sharp_corners(m.freeze(), 1.0)) == [0.25, 7.75, 10.25]   # not 4.0, a gentle corner (9.8 %)
+    assert np.diff(bounds).max() <= 1.0 and bounds.size - 1 == 22          # 1 + 8 + 3 + 10 elements
+
+
 # ---------------------------------------------------------------------------
 # Generated code: deterministic, inspectable, cached
 # ---------------------------------------------------------------------------
