@@ -102,6 +102,38 @@ def test_implausible_base_coefficients_block_acceptance():
     assert _choose([c, b])[0] == 1
 
 
+def test_a_refit_without_standard_errors_does_not_explain():
+    """A refit at the noise whose reduced Hessian is singular (no standard errors: on Tern-2 with a drag rise at
+    burn-out, a 7-knot density profile reached chi2/dof 1.023 with every rho_j +- nan, and was called
+    explained) is not an explanation: its estimates are one point of a set that fits as well."""
+    from dataclasses import replace
+    good = refit("density_pl_7", 1.02)
+    singular = replace(good, std=np.array([np.nan, np.nan]), plausible_coefficients=None,
+                       notes=("no standard errors: the reduced Hessian restricted to the estimated directions is "
+                              "singular",))
+    assert accept(good, BAND).accepted
+    a = accept(singular, BAND)
+    assert not a.accepted and a.admissible and a.failed == ["coefficients"]
+    assert "not determined" in a.reason() and "singular" in a.reason()
+
+
+def test_an_event_the_data_do_not_place_does_not_explain():
+    """A located shape whose event time's standard error exceeds the step of the scan that located it (Tern-2's
+    drag rise at burn-out "explained" by 9.9 kg released at 2.3 +- 3.1 s, scan step 1.86 s) is not an event the
+    data show; one placed within it (a throttle step at 33.11 +- 0.036 s) is."""
+    from dataclasses import replace
+    base = refit("mass_jettison", 1.02, value=9.9, size=8.0)
+    names = base.parameter_names + ("t_jettison",)
+
+    def located(t_std):
+        return replace(base, parameter_names=names, p=np.append(base.p, 2.27), std=np.append(base.std, t_std),
+                       location_steps={"t_jettison": 1.86})
+
+    loose, placed = accept(located(3.1), BAND), accept(located(0.036), BAND)
+    assert placed.accepted, placed.reason()
+    assert not loose.accepted and loose.failed == ["coefficients"] and "not placed" in loose.reason()
+
+
 def test_the_lr_test_is_corrected_for_the_contenders_refitted():
     """A small improvement that is significant alone (p = 0.01) is not with 10 contenders."""
     lr = stats.chi2.isf(0.01, 1)
@@ -427,10 +459,12 @@ def test_an_event_shape_is_a_ladder_of_its_own():
     ladders = S._ladders([CATALOGUE["misalignment"].refinements(veh), CATALOGUE["thrust_level"].refinements(veh),
                           CATALOGUE["start_mass"].refinements(veh)])
     assert [[v.name for v in f] for f in ladders] == [["misalignment_fade"], ["misalignment_onset"],
-                                                       ["thrust_profile_3", "thrust_profile_5", "thrust_profile_9"],
+                                                       ["burn_rate", "thrust_profile_3", "thrust_profile_5",
+                                                        "thrust_profile_9"],
                                                        ["throttle_step"], ["throttle_window"], ["mass_jettison"]]
     assert S._family("mass_jettison") == "start_mass" and S._family("misalignment_onset") == "misalignment"
     assert S._family("throttle_step") == "thrust_level" and S._family("throttle_window") == "thrust_level"
+    assert S._family("burn_rate") == "thrust_level"
 
 
 def test_event_shapes_of_two_families_within_bic_tie_are_rivals():

@@ -20,7 +20,12 @@ answer comes from taking the best helper for the explanation. An effect is
    every channel, Holm-corrected over the channels, above :data:`WHITE_LEVEL`
    (at 100 Hz a correct model's residuals pass it; a single channel's uncorrected
    p = 0.012 does not fail a clean fit);
-5. keeps the **base coefficients plausible** (the plausibility checks; and when the fit
+5. is **determined** and keeps the **base coefficients plausible**: its standard errors exist (a
+   refit whose reduced Hessian is singular has estimates that are one point of a set that fits as
+   well -- on a sounding rocket whose drag rises at burn-out, a 7-knot density profile reached the
+   noise that way), a located shape's location is placed (each event time's or hump's standard error
+   within the step of the scan that located it: the same rocket's drag rise was explained by 9.9 kg
+   released at 2.3 +- 3.1 s), the plausibility checks pass, and when the fit
    before it was already inside the noise band, no coefficient moves by more than
    :data:`SHIFT_LIMIT` unless chi2/dof falls by at least :data:`SHIFT_GAIN` of its standard
    deviation -- a small improvement bought by redrawing the drag table is not an explanation);
@@ -266,7 +271,17 @@ def accept(refit: Refit, band: NoiseBand, *, level: float = 0.05, n_tests: int =
     settled = band.contains(refit.base_chi2_per_dof)
     gain = refit.base_chi2_per_dof - refit.chi2_per_dof
     small_gain = not gain >= SHIFT_GAIN * math.sqrt(2.0 / max(1, band.dof))
-    if refit.plausible_coefficients is False:
+    if refit.success and refit.std.size and not np.all(np.isfinite(refit.std)):
+        why = next((n for n in refit.notes if n.startswith("no standard errors")), "no standard errors")
+        checks.append(Check("coefficients", False, f"not determined by these data ({why}): the estimates are one "
+                                                   "point of a set that fits as well, not a measurement"))
+    elif unplaced := [n for n, step in refit.location_steps.items() if refit.success
+                      and not refit.estimate(n)[1] <= step]:
+        checks.append(Check("coefficients", False, "; ".join(
+            f"{n} = {refit.estimate(n)[0]:.4g} +- {refit.estimate(n)[1]:.2g} is not placed by these data (its "
+            f"standard error exceeds the {refit.location_steps[n]:.3g} step of the scan that located it): what "
+            "explains the data is not an event there" for n in unplaced)))
+    elif refit.plausible_coefficients is False:
         checks.append(Check("coefficients", False, "; ".join(refit.implausible[:3])))
     elif settled and shift > SHIFT_LIMIT and small_gain:
         checks.append(Check("coefficients", False, f"{moved} moves by {100 * shift:.0f} % from a fit that was already "

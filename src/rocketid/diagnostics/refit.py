@@ -710,6 +710,10 @@ class Refit:
         combination that is.
     seconds : float
     notes : tuple of str
+    location_steps : dict
+        ``{parameter: step}`` for the locations of an added located shape (an event time, a drag hump's
+        Mach number): the spacing of the scan that located it, the yardstick its standard error is
+        judged by (:func:`~rocketid.diagnostics.accept.accept`).
     """
 
     effects: tuple
@@ -738,6 +742,7 @@ class Refit:
     least: dict = field(default_factory=dict)
     base_values: dict = field(default_factory=dict)
     base_chi2_per_dof: float = float("nan")
+    location_steps: dict = field(default_factory=dict)
 
     @property
     def name(self) -> str:
@@ -962,7 +967,11 @@ def summarize_refit(new: EstimationResult, base_objective: float, base_n_estimat
                  plausible_coefficients=plaus, implausible=failing, identifiability=ident, seconds=float(seconds),
                  notes=tuple(notes), least={k: float(v) for k, v in (least or {}).items() if k in eff_params},
                  base_values={k: float(v) for k, v in (base_values or {}).items()},
-                 base_chi2_per_dof=float(base_chi2_per_dof))
+                 base_chi2_per_dof=float(base_chi2_per_dof),
+                 location_steps={n: step for e in effects if e.name in added_set and e.scan is not None
+                                 and len(e.scan.times) > 1 for n, step in
+                                 ((n, float(e.scan.times[1] - e.scan.times[0])) for n in e.locations)
+                                 if n in names})
 
 
 #: IPOPT's return status when its maximum CPU or wall time was exceeded.
