@@ -13,6 +13,7 @@ import os
 import shutil
 import subprocess
 import sys
+import textwrap
 from pathlib import Path
 
 import click
@@ -387,3 +388,31 @@ def test_estimate_coloured_errors(ra66_csv, tmp_path):
     assert "coloured residuals" in result.output
     result = invoke("estimate", ra66_csv, ra66_csv, "--errors", "coloured")
     assert result.exit_code != 0 and "fit each flight alone" in (result.output + result.stderr)
+
+
+def test_a_model_file_states_its_candidates(tmp_path):
+    """``candidates()`` in a model file: the effects ``rocketid diagnose`` tries (an Earth rotation at the
+    vehicle's own launch site; a user's effect); a bad return names the file and the function."""
+    from rocketid.commands.diagnose import _file_candidates
+    body = textwrap.dedent('''
+        import rocketid as ri
+
+        def build_model():
+            return ri.ra66()
+
+        def candidates():
+            from rocketid.diagnostics import earth_rotation_effect
+            return ["bias_h", earth_rotation_effect(37.84, 120.0)]
+    ''')
+    good = tmp_path / "wallops.py"
+    good.write_text(body)
+    found = _file_candidates(str(good))
+    assert [e.name for e in found] == ["bias_h", "earth_rotation"] and "37.84" in found[1].description
+    plain = tmp_path / "plain.py"
+    plain.write_text(body.split("def candidates")[0])
+    assert _file_candidates(str(plain)) is None and _file_candidates("ra66") is None
+    bad = tmp_path / "bad.py"
+    bad.write_text(body.replace('return ["bias_h", earth_rotation_effect(37.84, 120.0)]', "return [1]"))
+    from rocketid.errors import ModelError
+    with pytest.raises(ModelError, match=r"bad\.py.*candidates\(\)"):
+        _file_candidates(str(bad))

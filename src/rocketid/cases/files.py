@@ -15,11 +15,15 @@ from types import ModuleType
 from ..errors import ModelError, RocketidError
 from ..model import Model, ModelSpec
 
-__all__ = ["load_model_file", "call_hook"]
+__all__ = ["load_model_file", "call_hook", "optional_hook"]
+
+
+def _module_name(path: Path) -> str:
+    return "rocketid_user_model_" + hashlib.sha256(str(path.resolve()).encode()).hexdigest()[:12]
 
 
 def _import(path: Path) -> ModuleType:
-    name = "rocketid_user_model_" + hashlib.sha256(str(path.resolve()).encode()).hexdigest()[:12]
+    name = _module_name(path)
     spec = importlib.util.spec_from_file_location(name, path)
     if spec is None or spec.loader is None:
         raise ModelError(f"model file {str(path)!r} cannot be imported; it must be a Python file (.py)")
@@ -95,3 +99,13 @@ def load_model_file(path: str | Path) -> tuple[ModelSpec, ModuleType]:
         raise ModelError(f"model file {key!r}: build_model() returned {type(spec).__name__}, not a ModelSpec; "
                          "return Model(...).freeze()")
     return spec, module
+
+
+
+def optional_hook(path: str | Path, name: str):
+    """The value of the model file's optional function ``name()`` (:func:`call_hook`), None when the file
+    does not define it. The file is imported once (the module :func:`load_model_file` made is reused)."""
+    module = sys.modules.get(_module_name(Path(path))) or _import(Path(path))
+    if not callable(getattr(module, name, None)):
+        return None
+    return call_hook(path, module, name)

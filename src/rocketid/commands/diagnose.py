@@ -36,7 +36,7 @@ import click
 from ..cli import (EXIT_NOT_CONVERGED, NameValue, assignments, flight_window, given_sigmas, model_option, read_data,
                    sigma_argument, sigma_column_option_decl, sigma_option_decl, status, unmeasured_option_decl,
                    verbose_option)
-from ..errors import SettingsError
+from ..errors import ModelError, RocketidError, SettingsError
 from ..output import check_folder, folder_lock
 
 __all__ = ["command"]
@@ -113,12 +113,14 @@ def command(data_files, out, model, level, confirm_top, holdout, max_effects, wo
     holdout = _holdout(holdout)
     check_folder(out, "--out")  # before the work: a bad --out fails at once, not after the fits
     spec, label = resolve_model(model)
+    candidates = _file_candidates(model)
     sigma = sigma_argument(sigmas, spec)
     if len(data_files) > 1:
         _several(data_files, out, spec, label, sigma, flight, columns=columns, time_column=time_column,
                  sigma_columns=sigma_columns, unmeasured=unmeasured,
                  settings=dict(level=level, confirm_top=confirm_top, window=window, holdout=holdout,
-                               max_effects=max_effects, workers=workers, refit_timeout=refit_timeout))
+                               max_effects=max_effects, workers=workers, refit_timeout=refit_timeout,
+                               candidates=candidates))
         return
     data_file = data_files[0]
     data = read_data(data_file, spec, time_column=time_column, columns=assignments(columns, "--column"),
@@ -130,7 +132,7 @@ def command(data_files, out, model, level, confirm_top, holdout, max_effects, wo
         t0 = time.perf_counter()
         report = diagnose(data, spec, level=level, confirm_top=confirm_top, window=window, holdout=holdout,
                           max_effects=max_effects, workers=workers, refit_timeout=refit_timeout, sigma=sigma,
-                          flight_window=flight)
+                          flight_window=flight, candidates=candidates)
         report = _relabel(report, label, str(data_file))
         path = report.write(out)
     for line in report.verdict():
@@ -167,6 +169,34 @@ def _several(data_files, out, spec, model_label, sigma, flight, *, columns, time
                f"{Path(out)}/<flight>/ ({time.perf_counter() - t0:.1f} s)")
     if not result.success:
         click.get_current_context().exit(EXIT_NOT_CONVERGED)
+
+
+def _file_candidates(model: str):
+    """The model file's ``candidates()``: the effects ``diagnose`` tries (None: the whole catalogue).
+
+    A vehicle launched elsewhere than RA-66's site states its own Earth rotation this way, and a user's
+    ``custom_effect`` reaches the command line::
+
+        def candidates():
+            from rocketid.diagnostics import CATALOGUE, earth_rotation_effect
+            return [e for n, e in CATALOGUE.items() if n != "earth_rotation"] + [earth_rotation_effect(37.84, 120.0)]
+    """
+    from ..cases.files import optional_hook
+    from ..diagnostics.effects import resolve_effects
+    if not str(model).endswith(".py"):
+        return None
+    value = optional_hook(model, "candidates")
+    if value is None:
+        return None
+    try:
+        out = resolve_effects(list(value))
+    except (TypeError, RocketidError) as exc:
+        raise ModelError(f"model file {model!r}: candidates() must return effects (rocketid.diagnostics.Effect) or "
+                         f"catalogue names: {exc}") from None
+    if not out:
+        raise ModelError(f"model file {model!r}: candidates() returned no effect; return the effects to try, or "
+                         "remove the function to try the whole catalogue")
+    return out
 
 
 def _holdout(text: str):
