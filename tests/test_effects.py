@@ -60,7 +60,11 @@ def _values(spec: ri.ModelSpec, exprs, point: dict) -> np.ndarray:
     return np.array(out)
 
 
-@pytest.mark.parametrize("name", sorted(CATALOGUE))
+#: Catalogue effects for a motor that stops inside the horizon (RA-66's burns throughout): tested on Tern-2.
+NEEDS_BURN_OUT = {"base_drag"}
+
+
+@pytest.mark.parametrize("name", sorted(set(CATALOGUE) - NEEDS_BURN_OUT))
 @pytest.mark.parametrize("case", ["ra66m", "ra66"])
 def test_zero_gives_back_the_base_model(name, case, ra66m_spec, ra66_spec):
     base = ra66m_spec if case == "ra66m" else ra66_spec
@@ -683,3 +687,25 @@ def test_back_pressure_stops_with_the_motor():
     assert 0 < float(np.interp(10.1, tern.THRUST_TIMES, tern.THRUST_VALUES)) < 0.4 * peak    # in the tail-off
     plain = with_effects(osprey.build_model(), ["back_pressure"])
     assert "Max" not in str(plain.definitions[[str(d) for d, _ in plain.definitions].index("thrust")][1])
+
+
+def test_base_drag_acts_once_the_motor_stops(ra66_spec):
+    """Power-off base drag on Tern-2 (burn-out at 10.25 s, then a coast): zero gives back the base model; the
+    increment is absent while the nozzle flows full, grows through the tail-off and is whole in the coast. A
+    motor that burns through the horizon (RA-66) has no power-off phase: the effect says so."""
+    import sys
+    from pathlib import Path
+    sys.path.insert(0, str(Path(__file__).parent / "vehicles"))
+    import tern
+
+    base = tern.build_model()
+    spec = with_effects(base, ["base_drag"])
+    expr = dict(spec.definitions)[spec.symbol("cd")].xreplace(
+        {spec.symbol(n): sp.Float(v) for n, v in tern.truth(base).items()})
+    cd = sp.lambdify((spec.symbol("thrust_table"), spec.symbol("mach"), spec.symbol("dCD_base")), expr)
+    peak = max(tern.THRUST_VALUES)
+    running, tail, off = cd(peak * 0.9, 2.0, 0.1), cd(peak * 0.2, 2.0, 0.1), cd(0.0, 2.0, 0.1)
+    assert cd(0.0, 2.0, 0.0) == pytest.approx(running) == pytest.approx(cd(peak * 0.9, 2.0, 0.0))
+    assert off - cd(0.0, 2.0, 0.0) == pytest.approx(0.1) and tail - running == pytest.approx(0.05)
+    with pytest.raises(ModelError, match="stops inside the horizon"):
+        with_effects(ra66_spec, ["base_drag"])

@@ -224,13 +224,15 @@ def test_the_cases_are_consistent():
         assert all(group <= case.right for group in case.needed_each), case.name
         assert ("+" in case.name) == bool(case.needed_each), case.name
     assert sum(c.name.startswith("clean-") for c in ALL) == 6
-    assert [c.name for c in ALL if c.out_of_catalogue] == ["base-drag"] and not BY_NAME["base-drag"].right
+    # the base drag was out of the catalogue until the study's runs called it explained by a density profile;
+    # base_drag (2026-11-26) is its family since
+    assert not [c.name for c in ALL if c.out_of_catalogue] and BY_NAME["base-drag"].right == {"base_drag"}
     assert set(run.COEFFICIENTS) == {f"CD_{j}" for j in range(len(V.CD_KNOTS))}
 
 
 def test_classification_rules():
-    """The outcome classes: a wrong family called explained is the worst outcome; a pair needs both; the
-    out-of-catalogue case passes on anything but "explained"."""
+    """The outcome classes: a wrong family called explained is the worst outcome; a pair needs both; a drag
+    shape in Mach or a density profile is not a power-off base drag."""
     final = {"effects": ["back_pressure"], "verdict": "explained", "parameters": {}}
     case = BY_NAME["back-pressure"]
     assert run.classify(case, {"final": final}) == "right & explained"
@@ -259,9 +261,9 @@ def test_classification_rules():
     assert not run.acceptable(drag, {"final": {**final, "effects": []}, "base_chi2": 1.3, "band": 1.05})
     base = BY_NAME["base-drag"]
     assert run.classify(base, {"final": {**final, "effects": ["drag_mach_8"]}}) == "WRONG called explained"
+    assert run.classify(base, {"final": {**final, "effects": ["density_pl_7"]}}) == "WRONG called explained"
+    assert run.classify(base, {"final": {**final, "effects": ["base_drag_mach_2"]}}) == "right & explained"
     assert not run.acceptable(base, {"final": {**final, "effects": ["drag_mach_8"]}})
-    assert run.acceptable(base, {"final": {**final, "effects": ["drag_mach_8"], "verdict": "partly explained"}})
-    assert run.acceptable(base, {"final": {**final, "effects": [], "verdict": "unexplained"}})
     clean = BY_NAME["clean-700"]
     assert not run.acceptable(clean, {"final": {**final}})
     assert run.acceptable(clean, {"final": {**final, "effects": []}})

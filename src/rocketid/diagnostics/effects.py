@@ -362,20 +362,83 @@ def _nozzle_flowing(m: Model, thrust: sp.Expr) -> sp.Expr:
     depends on anything but time and known inputs, or when it stays above 40 % of its peak over the
     horizon.
     """
-    x = _expanded(m, thrust).xreplace({c: sp.Float(v) for c, v in m._constants})
+    level = _stated_thrust_levels(m, thrust)
+    if level is None or level.min() >= NOZZLE_FULL_SHARE * level.max():
+        return sp.S.One
+    share = thrust / (NOZZLE_FULL_SHARE * float(level.max()))
+    return share - sp.Max(share - 1, 0)          # min(share, 1)
+
+
+def _stated_thrust_levels(m: Model, thrust: sp.Expr) -> np.ndarray | None:
+    """``|P(t)|`` of the stated thrust on a grid over the horizon (every sample of a sampled input on it), or
+    None when it is constant or depends on more than time, known inputs, the states and the parameters (or is
+    never positive). States are held at their start values and parameters at their guesses (an effect applied
+    before, a nozzle term in altitude: the level judged is whether the motor runs, not its exact value)."""
+    held = {c: sp.Float(v) for c, v in m._constants}
+    held.update({st.symbol: sp.Float(st.initial) for st in m._states})
+    held.update({ps.symbol: sp.Float(ps.guess) for ps in m._parameters})
+    x = _expanded(m, thrust).xreplace(held)
     inputs = {u.symbol: u for u in m._inputs if u.symbol in x.free_symbols}
     if x.free_symbols - {m.t} - set(inputs) or not x.free_symbols:
-        return sp.S.One
+        return None
     samples = [t for u in inputs.values() for t in u.times if m.t0 <= t <= m.tf]
     tt = np.union1d(np.linspace(m.t0, m.tf, 801), samples)       # a sampled curve's peak is at a sample
     values = [np.interp(tt, u.times, u.values) if u.expr is None
               else np.broadcast_to(sp.lambdify(m.t, u.expr, "numpy")(tt), tt.shape) for u in inputs.values()]
     level = np.abs(np.broadcast_to(sp.lambdify([m.t, *inputs], x, "numpy")(tt, *values), tt.shape))
-    peak = float(level.max())
-    if not peak > 0 or level.min() >= NOZZLE_FULL_SHARE * peak:
-        return sp.S.One
-    share = thrust / (NOZZLE_FULL_SHARE * peak)
-    return share - sp.Max(share - 1, 0)          # min(share, 1)
+    return level if level.max() > 0 else None
+
+
+MOTOR_OFF_SHARE = 0.01
+"""A stated thrust below this share of its peak is a motor that has stopped (:func:`_base_drag`)."""
+
+
+def _base_drag_applies(m: Model, effect: str) -> None:
+    """A ModelError unless the model's motor stops inside the horizon (a power-off phase to act in)."""
+    level = _stated_thrust_levels(m, _role_definition(m, "thrust", effect)[1])
+    if level is None or level.min() > MOTOR_OFF_SHARE * level.max():
+        raise ModelError(f"effect {effect!r} needs a motor that stops inside the horizon (a burn-out, then a "
+                         f"coast); the stated thrust of model {m.name!r} does not fall below "
+                         f"{100 * MOTOR_OFF_SHARE:g} % of its peak")
+
+
+def _base_drag(m: Model) -> tuple:
+    """Power-off drag: ``cd + dCD_base (1 - f_noz)`` once the motor stops (module notes of the catalogue)."""
+    _base_drag_applies(m, "base_drag")
+    t_sym, thrust = _role_definition(m, "thrust", "base_drag")
+    sym, cd = _role_definition(m, "drag_coefficient", "base_drag")
+    dcd = m.parameter("dCD_base", 0.0, nominal=0.1)
+    m.redefine(sym, cd + dcd * (1 - _nozzle_flowing(m, thrust)))
+    return (dcd,)
+
+
+def base_drag_mach_effect(knots: Sequence[float]) -> Effect:
+    """Power-off base drag that changes with the Mach number: ``cd + c(M) (1 - f_noz)``, ``c`` piecewise linear
+    through ``dCD_base_j`` at ``knots`` (the base pressure of a blunt base falls with Mach: the increment
+    is largest transonic and shrinks supersonic)."""
+    kn = tuple(float(k) for k in knots)
+    name = f"base_drag_mach_{len(kn)}"
+    names = tuple(f"dCD_base_{j}" for j in range(len(kn)))
+
+    def apply(m: Model) -> tuple:
+        _base_drag_applies(m, name)
+        t_sym, thrust = _role_definition(m, "thrust", name)
+        sym, cd = _role_definition(m, "drag_coefficient", name)
+        mach = _role(m, "mach", name)
+        ps = tuple(m.parameter(n, 0.0, nominal=0.1) for n in names)
+        m.redefine(sym, cd + piecewise_linear(mach, kn, ps) * (1 - _nozzle_flowing(m, thrust)))
+        return ps
+
+    return Effect(name, f"power-off base drag in Mach ({len(kn)} knots)", "aero", apply,
+                  f"cd + c(M) (1 - f_noz), c piecewise linear in Mach through {', '.join(f'{k:.3g}' for k in kn)}",
+                  {n: 0.1 for n in names})
+
+
+def _refine_base_drag(vehicle: "Vehicle | None") -> list[Effect]:
+    if vehicle is None or vehicle.mach is None or not vehicle.mach[1] > vehicle.mach[0]:
+        return []
+    lo, hi = vehicle.mach
+    return [base_drag_mach_effect(np.linspace(lo, hi, n)) for n in (2, 3, 5)]
 
 
 def back_pressure_effect(reference: str = "sea_level", *, name: str | None = None) -> Effect:
@@ -1487,6 +1550,10 @@ def _build_catalogue() -> dict[str, Effect]:
         Effect("start_mass", "start-mass error", "mass", _start_mass,
                "mass m(t) + dm_start, kg: the vehicle heavier (or lighter) than stated by a constant amount",
                {"dm_start": 200.0}, relative=lambda veh: {"dm_start": 0.01 * veh.mass}, refine=_refine_start_mass),
+        Effect("base_drag", "power-off base drag", "aero", _base_drag,
+               "cd + dCD_base (1 - f_noz): the drag coefficient higher (or lower) once the motor stops and its jet "
+               "no longer fills the base, faded in over the tail-off as the back-pressure fades out (f_noz); for a "
+               "motor that stops inside the horizon", {"dCD_base": 0.1}, refine=_refine_base_drag),
         Effect("transonic_drag", "transonic drag rise", "aero", _transonic_drag,
                f"cd + dCD_transonic exp(-((M - {TRANSONIC_MACH:g})/{TRANSONIC_WIDTH:g})^2/2)", {"dCD_transonic": 0.2},
                refine=_refine_drag),

@@ -23,7 +23,10 @@ and the fitted trajectory, and flag:
                     fitted trajectory, whatever its parameterization and the
                     effects added to it) rising with the Mach number above
                     Mach 1.5 by more than ``supersonic_tolerance`` plus two
-                    standard errors (below)
+                    standard errors (below), within each piece of the flight
+                    where the Mach number climbs or falls (a coast after
+                    burn-out is judged apart from the burn: the drag with the
+                    motor off may differ at the same Mach number)
 ==================  ==========================================================
 
 The supersonic check. Past the transonic peak (Mach 1.0-1.3 for a launch
@@ -601,6 +604,19 @@ SUPERSONIC_SPAN = 0.3
 """The supersonic check needs at least this span of Mach numbers flown above :data:`SUPERSONIC_MACH`."""
 
 
+def _monotonic_pieces(mach: np.ndarray, keep: np.ndarray) -> list[np.ndarray]:
+    """The kept node indices, in time order, split where the Mach number turns (it climbs under thrust and
+    falls in a coast): the drag coefficient is judged against the Mach number within each piece, so that a
+    drag that differs with the motor on and off at the same Mach number (power-off base drag) is not read
+    as a rise with Mach."""
+    idx = np.flatnonzero(keep)
+    if idx.size < 2:
+        return [idx]
+    step = np.sign(np.diff(mach[idx]))
+    turns = [k + 1 for k in range(1, step.size) if step[k] != 0 and step[k - 1] != 0 and step[k] != step[k - 1]]
+    return np.split(idx, turns)
+
+
 def _supersonic_rise(fit: EstimationResult, cov, tolerance: float) -> Flag | None:
     """The ``supersonic-rise`` flag of ``fit`` (module notes), or None (no rise, or no roles, or too little
     supersonic flight to tell)."""
@@ -616,16 +632,19 @@ def _supersonic_rise(fit: EstimationResult, cov, tolerance: float) -> Flag | Non
         mach = evaluate_along(spec, mach_sym, times, states, p)
         cd = evaluate_along(spec, cd_expr, times, states, p)
     keep = np.isfinite(mach) & np.isfinite(cd) & (mach >= SUPERSONIC_MACH)
-    if keep.sum() < 3 or np.ptp(mach[keep]) < SUPERSONIC_SPAN:
+    best = None
+    for piece in _monotonic_pieces(mach, keep):
+        if piece.size < 3 or np.ptp(mach[piece]) < SUPERSONIC_SPAN:
+            continue
+        idx = piece[np.argsort(mach[piece], kind="stable")]
+        rises = cd[idx] - np.minimum.accumulate(cd[idx])
+        b = int(np.argmax(rises))
+        if best is None or rises[b] > best[2][best[1]]:
+            best = (idx, b, rises)
+    if best is None or best[2][best[1]] <= tolerance:
         return None
-    order = np.argsort(mach[keep], kind="stable")
-    idx = np.flatnonzero(keep)[order]
+    idx, b, rises = best
     m, c = mach[idx], cd[idx]
-    low = np.minimum.accumulate(c)
-    rises = c - low
-    b = int(np.argmax(rises))
-    if rises[b] <= tolerance:
-        return None
     a = int(np.argmin(c[:b + 1]))
     names = spec.parameter_names
     used = {str(x) for x in cd_expr.free_symbols}

@@ -556,7 +556,7 @@ def _family(name: str) -> str:
     parents = {"thrust_profile": "thrust_level", "drag_mach": "transonic_drag", "back_pressure": "back_pressure",
                "mass_jettison": "start_mass", "throttle_step": "thrust_level",
                "throttle_window": "thrust_level", "drag_bump": "transonic_drag", "temperature": "density",
-               "burn_rate": "thrust_level"}
+               "burn_rate": "thrust_level", "base_drag_mach": "base_drag"}
     for stem, parent in parents.items():
         if name.startswith(stem):
             return parent
