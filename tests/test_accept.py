@@ -117,24 +117,6 @@ def test_a_refit_without_standard_errors_does_not_explain():
     assert "not determined" in a.reason() and "singular" in a.reason()
 
 
-def test_a_profile_with_a_loose_direction_does_not_explain():
-    """A wind profile at the noise with one direction whose standard error is 1.3 realistic sizes (Tern-2's Earth
-    rotation with a wind alternating +-15-40 m/s knot to knot) is not an explanation; the identifiability
-    analysis counts the directions (its refit records them)."""
-    from dataclasses import replace
-
-    from rocketid.diagnostics.refit import loose_directions
-    names = ("CL", "W_0", "W_1")
-    cov = np.array([[1e-4, 0.0, 0.0], [0.0, 900.0 * 0.8, 900.0 * 0.79], [0.0, 900.0 * 0.79, 900.0 * 0.8]])
-    sizes = {"W_0": 30.0, "W_1": 30.0}
-    assert loose_directions(names, cov, ("W_0", "W_1"), sizes) == 1            # sd 1.26 along W_0 + W_1
-    assert loose_directions(names, cov / 4, ("W_0", "W_1"), sizes) == 0
-    good = refit("wind_pl_6", 1.02)
-    a = accept(replace(good, loose=1, identifiability="1 of 2 directions of W_0, W_1 are not identifiable"), BAND)
-    assert accept(good, BAND).accepted and not a.accepted and a.admissible
-    assert a.failed == ["coefficients"] and "not determined" in a.reason()
-
-
 def test_an_event_the_data_do_not_place_does_not_explain():
     """A located shape whose event time's standard error exceeds the step of the scan that located it (Tern-2's
     drag rise at burn-out "explained" by 9.9 kg released at 2.3 +- 3.1 s, scan step 1.86 s) is not an event the

@@ -710,9 +710,6 @@ class Refit:
         combination that is.
     seconds : float
     notes : tuple of str
-    loose : int
-        Directions of the added parameters whose standard error exceeds one realistic size
-        (:func:`loose_directions`).
     location_steps : dict
         ``{parameter: step}`` for the locations of an added located shape (an event time, a drag hump's
         Mach number): the spacing of the scan that located it, the yardstick its standard error is
@@ -746,7 +743,6 @@ class Refit:
     base_values: dict = field(default_factory=dict)
     base_chi2_per_dof: float = float("nan")
     location_steps: dict = field(default_factory=dict)
-    loose: int = 0
 
     @property
     def name(self) -> str:
@@ -821,27 +817,6 @@ LOOSE = 0.05
 no longer pin the coefficient (a lift slope known to 0.1 % before and 2 % after is still pinned)."""
 
 
-def _effect_directions(names: Sequence[str], cov: np.ndarray, effect_parameters: Sequence[str],
-                       sizes: Mapping[str, float]) -> tuple | None:
-    """``(sd, V)``: the eigen-directions ``V`` of the effect parameters' covariance in units of their realistic
-    sizes and the standard error ``sd`` along each (ascending); None without a finite covariance or a size
-    for every parameter."""
-    idx = [names.index(n) for n in effect_parameters if n in names]
-    scale = np.array([sizes.get(n) or 0.0 for n in effect_parameters if n in names])
-    if not idx or not np.all(np.isfinite(cov[np.ix_(idx, idx)])) or not np.all(scale > 0):
-        return None
-    w, V = np.linalg.eigh(cov[np.ix_(idx, idx)] / np.outer(scale, scale))
-    return np.sqrt(np.clip(w, 0.0, None)), V
-
-
-def loose_directions(names: Sequence[str], cov: np.ndarray, effect_parameters: Sequence[str],
-                     sizes: Mapping[str, float]) -> int:
-    """How many eigen-directions of the added effect's parameters have a standard error above one realistic
-    size (:func:`identifiability`): the data fit as well anywhere along them."""
-    directions = _effect_directions(names, cov, effect_parameters, sizes)
-    return 0 if directions is None else int(np.sum(directions[0] > 1.0))
-
-
 def identifiability(names: Sequence[str], cov: np.ndarray, effect_parameters: Sequence[str],
                     sizes: Mapping[str, float], values: Sequence[float] | None = None) -> str:
     """What of an added effect the data do not pin down, in the estimability analysis' terms.
@@ -868,9 +843,10 @@ def identifiability(names: Sequence[str], cov: np.ndarray, effect_parameters: Se
     scale = np.array([sizes.get(n) or 0.0 for n in effect_parameters])
     d = np.sqrt(np.clip(np.diag(cov), 1e-300, None))
     others = [i for i in range(len(names)) if i not in idx]
-    directions = _effect_directions(names, cov, effect_parameters, sizes)
-    if directions is not None:
-        sd, V = directions
+    if np.all(scale > 0):
+        C = cov[np.ix_(idx, idx)] / np.outer(scale, scale)
+        w, V = np.linalg.eigh(C)
+        sd = np.sqrt(np.clip(w, 0.0, None))
         if sd[-1] > 1.0:
             worst = V[:, -1]
             trade = ""
@@ -958,13 +934,12 @@ def summarize_refit(new: EstimationResult, base_objective: float, base_n_estimat
     if not eff_params:
         eff_params = declared
     std = np.full(len(names), np.nan)
-    ident, plaus, failing, loose = "", None, (), 0
+    ident, plaus, failing = "", None, ()
     try:
         unc = uncertainty(new)
         std = np.asarray(unc.standard_errors, float)
         ident = identifiability(list(names), np.asarray(unc.parameter_covariance), eff_params, sizes,
                                 values=np.asarray(new.p, float))
-        loose = loose_directions(list(names), np.asarray(unc.parameter_covariance), eff_params, sizes)
         try:
             own = base_parameters if model_parameters is None else model_parameters
             pl = check_plausibility(new, uncertainty=unc, level=level,
@@ -992,7 +967,7 @@ def summarize_refit(new: EstimationResult, base_objective: float, base_n_estimat
                  plausible_coefficients=plaus, implausible=failing, identifiability=ident, seconds=float(seconds),
                  notes=tuple(notes), least={k: float(v) for k, v in (least or {}).items() if k in eff_params},
                  base_values={k: float(v) for k, v in (base_values or {}).items()},
-                 base_chi2_per_dof=float(base_chi2_per_dof), loose=int(loose),
+                 base_chi2_per_dof=float(base_chi2_per_dof),
                  location_steps={n: step for e in effects if e.name in added_set and e.scan is not None
                                  and len(e.scan.times) > 1 for n, step in
                                  ((n, float(e.scan.times[1] - e.scan.times[0])) for n in e.locations)
