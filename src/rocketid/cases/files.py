@@ -101,7 +101,6 @@ def load_model_file(path: str | Path) -> tuple[ModelSpec, ModuleType]:
     return spec, module
 
 
-
 def optional_hook(path: str | Path, name: str):
     """The value of the model file's optional function ``name()`` (:func:`call_hook`), None when the file
     does not define it. The file is imported once (the module :func:`load_model_file` made is reused)."""

@@ -271,7 +271,7 @@ def accept(refit: Refit, band: NoiseBand, *, level: float = 0.05, n_tests: int =
     settled = band.contains(refit.base_chi2_per_dof)
     gain = refit.base_chi2_per_dof - refit.chi2_per_dof
     small_gain = not gain >= SHIFT_GAIN * math.sqrt(2.0 / max(1, band.dof))
-    if refit.success and refit.std.size and not np.all(np.isfinite(refit.std)):
+    if refit.success and not all(np.isfinite(refit.estimate(n)[1]) for n in refit.effect_parameters):
         why = next((n for n in refit.notes if n.startswith("no standard errors")), "no standard errors")
         checks.append(Check("coefficients", False, f"not determined by these data ({why}): the estimates are one "
                                                    "point of a set that fits as well, not a measurement"))

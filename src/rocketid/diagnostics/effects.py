@@ -60,7 +60,7 @@ __all__ = ["Effect", "Vehicle", "back_pressure_effect", "thrust_profile_effect",
            "density_profile_effect", "drag_mach_effect", "piecewise_linear", "CATALOGUE", "KINDS", "custom_effect", "with_effects", "apply_effect", "resolve_effects",
            "is_present", "check_effect_parameters", "effect_parameter_problems", "wind_effect", "density_effect", "earth_rotation_effect",
            "liftoff_fade", "EARTH_RATE", "LIFTOFF_FADE_TIME", "misalignment_onset_effect", "mass_jettison_effect", "throttle_step_effect", "onset_step",
-           "ONSET_STARTS", "temperature_effect", "burn_rate_effect", "TEMPERATURE_REALISTIC_K"]
+           "ONSET_STARTS", "temperature_effect", "burn_rate_effect", "base_drag_mach_effect", "TEMPERATURE_REALISTIC_K"]
 
 #: The kinds of effect (``"custom"`` for the user's own).
 KINDS = ("propulsion", "mass", "aero", "environment", "kinematics", "sensor", "custom")
@@ -358,9 +358,9 @@ def _nozzle_flowing(m: Model, thrust: sp.Expr) -> sp.Expr:
     sea-level pressure separates when its exit pressure falls below about 0.4 of the ambient
     (Summerfield's criterion): below 40 % of the running thrust the static firing's figure no longer
     comes from a nozzle flowing full, and the correction shrinks with the thrust. The factor is 1
-    (exactly, not a gate that rounds to it) when the stated thrust does not change in time, when it
-    depends on anything but time and known inputs, or when it stays above 40 % of its peak over the
-    horizon.
+    (exactly, not a gate that rounds to it) when the stated thrust does not change in time or stays
+    above 40 % of its peak over the horizon (judged with the states at their start values and the
+    parameters at their guesses: :func:`_stated_thrust_levels`).
     """
     level = _stated_thrust_levels(m, thrust)
     if level is None or level.min() >= NOZZLE_FULL_SHARE * level.max():
