@@ -347,7 +347,7 @@ NOZZLE_FULL_SHARE = 0.4
 (:func:`_nozzle_flowing`)."""
 
 
-def _nozzle_flowing(m: Model, thrust: sp.Expr) -> sp.Expr:
+def _nozzle_flowing(m: Model, thrust: sp.Expr, level: np.ndarray | None = None) -> sp.Expr:
     """How much of the back-pressure correction applies: 1 while the nozzle flows full, ``P / (0.4 P_max)``
     below 40 % of the stated thrust's peak ``P_max`` (the tail-off), 0 when the motor is off.
 
@@ -360,9 +360,9 @@ def _nozzle_flowing(m: Model, thrust: sp.Expr) -> sp.Expr:
     comes from a nozzle flowing full, and the correction shrinks with the thrust. The factor is 1
     (exactly, not a gate that rounds to it) when the stated thrust does not change in time or stays
     above 40 % of its peak over the horizon (judged with the states at their start values and the
-    parameters at their guesses: :func:`_stated_thrust_levels`).
+    parameters at their guesses: :func:`_stated_thrust_levels`, or ``level`` when already computed).
     """
-    level = _stated_thrust_levels(m, thrust)
+    level = _stated_thrust_levels(m, thrust) if level is None else level
     if level is None or level.min() >= NOZZLE_FULL_SHARE * level.max():
         return sp.S.One
     share = thrust / (NOZZLE_FULL_SHARE * float(level.max()))
@@ -393,22 +393,24 @@ MOTOR_OFF_SHARE = 0.01
 """A stated thrust below this share of its peak is a motor that has stopped (:func:`_base_drag`)."""
 
 
-def _base_drag_applies(m: Model, effect: str) -> None:
-    """A ModelError unless the model's motor stops inside the horizon (a power-off phase to act in)."""
-    level = _stated_thrust_levels(m, _role_definition(m, "thrust", effect)[1])
+def _power_off(m: Model, effect: str) -> sp.Expr:
+    """``1 - f_noz``: 0 while the nozzle flows full, 1 once the motor has stopped; a ModelError unless the
+    model's motor stops inside the horizon (a power-off phase to act in)."""
+    thrust = _role_definition(m, "thrust", effect)[1]
+    level = _stated_thrust_levels(m, thrust)
     if level is None or level.min() > MOTOR_OFF_SHARE * level.max():
         raise ModelError(f"effect {effect!r} needs a motor that stops inside the horizon (a burn-out, then a "
                          f"coast); the stated thrust of model {m.name!r} does not fall below "
                          f"{100 * MOTOR_OFF_SHARE:g} % of its peak")
+    return 1 - _nozzle_flowing(m, thrust, level)
 
 
 def _base_drag(m: Model) -> tuple:
     """Power-off drag: ``cd + dCD_base (1 - f_noz)`` once the motor stops (module notes of the catalogue)."""
-    _base_drag_applies(m, "base_drag")
-    t_sym, thrust = _role_definition(m, "thrust", "base_drag")
+    off = _power_off(m, "base_drag")
     sym, cd = _role_definition(m, "drag_coefficient", "base_drag")
     dcd = m.parameter("dCD_base", 0.0, nominal=0.1)
-    m.redefine(sym, cd + dcd * (1 - _nozzle_flowing(m, thrust)))
+    m.redefine(sym, cd + dcd * off)
     return (dcd,)
 
 
@@ -421,12 +423,11 @@ def base_drag_mach_effect(knots: Sequence[float]) -> Effect:
     names = tuple(f"dCD_base_{j}" for j in range(len(kn)))
 
     def apply(m: Model) -> tuple:
-        _base_drag_applies(m, name)
-        t_sym, thrust = _role_definition(m, "thrust", name)
+        off = _power_off(m, name)
         sym, cd = _role_definition(m, "drag_coefficient", name)
         mach = _role(m, "mach", name)
         ps = tuple(m.parameter(n, 0.0, nominal=0.1) for n in names)
-        m.redefine(sym, cd + piecewise_linear(mach, kn, ps) * (1 - _nozzle_flowing(m, thrust)))
+        m.redefine(sym, cd + piecewise_linear(mach, kn, ps) * off)
         return ps
 
     return Effect(name, f"power-off base drag in Mach ({len(kn)} knots)", "aero", apply,
