@@ -314,6 +314,26 @@ def test_refined_profiles_give_back_the_base_model_at_zero(family, ra66m_spec):
         assert np.max(np.abs(_values(spec, spec.equations, moved) - _values(spec, spec.equations, point))) > 0, e.name
 
 
+def test_the_site_shape_is_the_catalogues_rotation_at_its_site(ra66m_spec):
+    """``earth_rotation_site`` is the catalogue's ``earth_rotation`` refined: zero gives the base model, the
+    stated site with ``k_rot`` gives the catalogue's equations, and another site is the fixed-site effect
+    declared there (``earth_rotation_effect(lat, az)``)."""
+    from rocketid.diagnostics import earth_rotation_effect, earth_rotation_site_effect
+    shapes = _refined(ra66m_spec, "earth_rotation")
+    assert [e.name for e in shapes] == ["earth_rotation_site"]
+    site = with_effects(ra66m_spec, [earth_rotation_site_effect()])
+    point = _random_point(site, np.random.default_rng(11))
+    n = len(ra66m_spec.states)
+    np.testing.assert_allclose(_values(site, site.equations[:n], point), _values(ra66m_spec, ra66m_spec.equations, point),
+                               rtol=1e-12, atol=1e-9)
+    for (lat, az), k in (((28.5, 90.0), 1.0), ((69.3, 45.0), 0.9), ((-12.0, 200.0), 1.1)):
+        fixed = with_effects(ra66m_spec, [earth_rotation_effect(lat, az)])
+        at = dict(point)
+        at.update({site.symbol("k_rot"): k, site.symbol("dlat_rot"): lat - 28.5, site.symbol("daz_rot"): az - 90.0})
+        np.testing.assert_allclose(_values(site, site.equations[:n], at), _values(fixed, fixed.equations[:n], at),
+                                   rtol=1e-10, atol=1e-9)
+
+
 def test_wind_profile_has_a_surface_value_and_hat_knots(ra66m_spec):
     from rocketid.diagnostics.effects import wind_profile_effect
     e = wind_profile_effect([0.0, 4.0, 8.0])

@@ -83,6 +83,26 @@ def test_burn_rate_is_the_cold_motor(tern_spec):
         assert np.max(np.abs(cold[name] - expected[name])) < tol, name
 
 
+def test_the_site_shape_finds_the_launch_site(tern_spec):
+    """The catalogue's Earth rotation is at 28.5 N toward the east; Tern-2 flew from 37.84 N toward 120 deg in
+    the truth's three-dimensional Earth-fixed frame (Coriolis and centrifugal as vectors, out of the plane
+    too). ``earth_rotation`` alone cannot reach the noise there; the shape that estimates the site does,
+    with the real Earth's rate and the truth's latitude and azimuth inside three standard errors."""
+    from rocketid.diagnostics import earth_rotation_effect, earth_rotation_site_effect, with_effects
+    from rocketid.estimability import uncertainty
+    data = truth.measurements(Hidden(rotation=WALLOPS), 611)
+    fixed = ri.estimate(with_effects(tern_spec, [earth_rotation_effect()]).with_guess({"k_rot": 1.0}), data)
+    spec = with_effects(tern_spec, [earth_rotation_site_effect()]).with_guess({"k_rot": 1.0})
+    fit = ri.estimate(spec, data)
+    se = dict(zip(spec.parameter_names, uncertainty(fit).standard_errors))
+    got = dict(zip(spec.parameter_names, fit.p))
+    assert fixed.chi2_per_dof > 1.06 and fit.chi2_per_dof < 1.04, (fixed.chi2_per_dof, fit.chi2_per_dof)
+    lat, az = WALLOPS
+    for name, want in (("k_rot", 1.0), ("dlat_rot", lat - 28.5), ("daz_rot", az - 90.0)):
+        assert np.isfinite(se[name]) and abs(got[name] - want) < 3 * se[name], (name, got[name], se[name])
+    assert se["k_rot"] < 0.1 and se["daz_rot"] < 5.0 and se["dlat_rot"] < 8.0
+
+
 def test_a_calm_wind_leaves_the_body_on_the_path(clean_outputs):
     """The weathercock branch with a zero wind flies the clean truth (the body stays on the path), to the
     integrator's tolerance (measured 1.3e-6 m)."""

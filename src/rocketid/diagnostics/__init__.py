@@ -24,7 +24,7 @@ from .effects import (CATALOGUE, KINDS, Effect, Vehicle, apply_effect, back_pres
                       density_effect, density_profile_effect, drag_mach_effect, earth_rotation_effect, is_present,
                       liftoff_fade, mass_jettison_effect, misalignment_onset_effect, resolve_effects, throttle_step_effect, throttle_window_effect, drag_bump_effect, thrust_profile_effect, throttle_effect, wind_effect,
                       wind_profile_effect, with_effects, temperature_effect,
-                      burn_rate_effect)
+                      burn_rate_effect, base_drag_mach_effect, earth_rotation_site_effect)
 from .history import ModelHistory, Revision
 from .refit import Confirmation, confirm, ljung_box
 from .score import AugmentedModel, CandidateRanking, CandidateScore, augment, rank_candidates
@@ -35,7 +35,7 @@ __all__ = [
     "is_present", "wind_effect", "density_effect", "earth_rotation_effect", "liftoff_fade", "Vehicle",
     "back_pressure_effect", "thrust_profile_effect", "throttle_effect", "wind_profile_effect", "density_profile_effect",
     "drag_mach_effect", "misalignment_onset_effect", "mass_jettison_effect", "throttle_step_effect", "throttle_window_effect", "drag_bump_effect",
-    "temperature_effect", "burn_rate_effect", "rank_candidates", "CandidateRanking", "CandidateScore", "augment", "AugmentedModel",
+    "temperature_effect", "burn_rate_effect", "base_drag_mach_effect", "earth_rotation_site_effect", "rank_candidates", "CandidateRanking", "CandidateScore", "augment", "AugmentedModel",
     "confirm", "Confirmation", "ljung_box",
     "ModelHistory", "Revision",
 ]
