@@ -4,6 +4,7 @@ the base model exactly, its parameter enters the model, and bad effects are refu
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -332,6 +333,31 @@ def test_the_site_shape_is_the_catalogues_rotation_at_its_site(ra66m_spec):
         at.update({site.symbol("k_rot"): k, site.symbol("dlat_rot"): lat - 28.5, site.symbol("daz_rot"): az - 90.0})
         np.testing.assert_allclose(_values(site, site.equations[:n], at), _values(fixed, fixed.equations[:n], at),
                                    rtol=1e-10, atol=1e-9)
+
+
+def test_a_wind_turns_the_thrust_of_a_vehicle_without_lift(ra66m_spec):
+    """A vehicle declared without lift flies at its attack angle to the air: the wind turns its thrust by the
+    airflow's angle to the path (``atan2(W sin theta, v - W cos theta)``) and leaves the lift coefficient at
+    zero; a lifting vehicle holds its attitude (the thrust as declared, the lift at the air-relative angle)."""
+    import sys
+    sys.path.insert(0, str(Path(__file__).parent / "vehicles"))
+    import tern
+    from rocketid.diagnostics import wind_profile_effect
+    finned = tern.build_model()
+    for spec, turns in ((finned, True), (ra66m_spec, False)):
+        windy = with_effects(spec, [wind_profile_effect((0.0, 5.0), name="w")], {"W_0": -8.0, "W_1": -20.0})
+        th, v = windy.symbol("theta"), windy.symbol("v")
+        point = {p.symbol: p.guess for p in windy.parameters}
+        point.update({th: 1.2, v: 300.0, windy.symbol("w_speed"): 0.0, windy.symbol("W_0"): -8.0, windy.symbol("W_1"): -20.0})
+
+        def at(s, expr):
+            expr = s.expand(expr)
+            return float(expr.xreplace({k: point.get(k, 0.0) for k in expr.free_symbols}))
+        base, got = at(spec, spec.role("thrust_direction")), at(windy, windy.role("thrust_direction"))
+        lift_moves = at(windy, windy.role("lift_coefficient")) != at(spec, spec.role("lift_coefficient"))
+        assert lift_moves is not turns, spec.name
+        expected = math.atan2(-8.0 * math.sin(1.2), 300.0 + 8.0 * math.cos(1.2)) if turns else 0.0
+        assert got - base == pytest.approx(expected, abs=1e-12), spec.name
 
 
 def test_wind_profile_has_a_surface_value_and_hat_knots(ra66m_spec):

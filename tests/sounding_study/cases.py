@@ -96,7 +96,7 @@ CASES = (
          right=frozenset({"back_pressure", "thrust_level", "thrust_profile"}),
          needed=frozenset({"back_pressure", "thrust_level", "thrust_profile"}), sizes=(("A_e", A_EXIT),)),
     Case("headwind", Hidden(wind=WIND), 603,
-         "headwind 6 m/s at 10 m, 11.6 m/s at 1 km, 22 m/s at 11 km; the rocket weathercocks into it",
+         "headwind 5 m/s at 10 m, 9.7 m/s at 1 km, 20 m/s at 11 km; the rocket weathercocks into it",
          right=frozenset({"wind"}), needed=frozenset({"wind"})),
     Case("cold-day", Hidden(dT=DT_COLD), 604,
          "atmosphere 15 K colder over the column, hydrostatic (density +5.5 % at the ground, -9 % at 20 km; "
@@ -131,7 +131,7 @@ CASES = (
          right=MOTOR | {"density"}, needed=MOTOR_NEEDED | {"density"},
          needed_each=(MOTOR_NEEDED, frozenset({"density"})), sizes=(("eps_burn", K_COLD - 1.0),)),
     Case("headwind+h-bias", Hidden(wind=WIND, bias_h=BIAS_H), 613,
-         "headwind (6 m/s at 10 m, 22 m/s at 11 km) + radar altitude 10 m high",
+         "headwind (5 m/s at 10 m, 20 m/s at 11 km) + radar altitude 10 m high",
          right=frozenset({"wind", "bias_h"}), needed=frozenset({"wind", "bias_h"}),
          needed_each=(frozenset({"wind"}), frozenset({"bias_h"})), sizes=(("b_h", BIAS_H),)),
     Case("heavy-payload+time-offset", Hidden(dm0=DM0, tau=TAU), 614,

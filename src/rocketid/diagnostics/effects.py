@@ -971,6 +971,9 @@ def _air_relative(m: Model, name: str, wind: Callable, air_mach: bool = True, ai
     if air_alpha and alpha is None:
         raise ModelError(missing_role_message(m.name, "attack_angle", f"effect {name!r} (the lift coefficient at "
                                               "the air-relative attack angle)"))
+    # a vehicle declared without lift flies at its attack angle to the air: in a wind its body, and the thrust
+    # along it, turn into the airflow (a fin-stabilized rocket weathercocks); one with lift holds its attitude
+    weathercock = sp.simplify(_expanded(m, cl)) == 0
     W, params = wind(m, h, v, th)
     # air-relative velocity (u, w) = (v cos theta - W, v sin theta); its norm V_a written so that
     # W = 0 gives V_a = v exactly and derivatives exist at v = 0:
@@ -982,9 +985,12 @@ def _air_relative(m: Model, name: str, wind: Callable, air_mach: bool = True, ai
     m.redefine(qbar, qdef.xreplace({v: Va}))
     if air_mach:
         m.redefine(mach, mdef.xreplace({v: Va}))
-    if air_alpha:
+    delta = sp.atan2(across, along)      # Delta = theta_air - theta, the airflow's angle to the flight path
+    if weathercock:
+        tsym, tdir = _role_definition(m, "thrust_direction", name)
+        m.redefine(tsym, tdir + delta)
+    elif air_alpha:
         # alpha_air = alpha + (theta - theta_air) = alpha - Delta
-        delta = sp.atan2(across, along)
         new_cl = cl.xreplace({alpha: alpha - delta})
         if new_cl == cl and not isinstance(alpha, sp.Symbol):
             new_cl = cl.subs(alpha, alpha - delta)
@@ -1034,6 +1040,12 @@ def wind_effect(centres_km: Sequence[float] = WIND_CENTRES_KM, width_km: float =
     attack angle (role ``attack_angle``, a symbol or an expression) is replaced in the
     lift coefficient; a model whose lift coefficient does not contain it is refused,
     with the reason, rather than silently keeping the ground-relative angle.
+
+    A model whose lift coefficient is zero (a vehicle declared without lift) flies at its attack
+    angle to the air: in a wind its body, and the thrust along it, turn into the airflow
+    (the thrust direction, role ``thrust_direction``, gains ``Delta = theta_air - theta``;
+    a fin-stabilized rocket weathercocks), and its lift stays zero. A model with lift holds its
+    attitude: the thrust as declared, the lift at the air-relative attack angle.
     """
     centres = tuple(float(c) * 1000.0 for c in centres_km)
     width = float(width_km) * 1000.0
