@@ -322,6 +322,8 @@ def test_the_site_shape_is_the_catalogues_rotation_at_its_site(ra66m_spec):
     from rocketid.diagnostics import earth_rotation_effect, earth_rotation_site_effect
     shapes = _refined(ra66m_spec, "earth_rotation")
     assert [e.name for e in shapes] == ["earth_rotation_site"]
+    said = shapes[0].reading({"k_rot": (1.02, 0.06), "dlat_rot": (10.04, 5.0), "daz_rot": (30.46, 2.8)})
+    assert "latitude 38.5 +- 5 deg N, azimuth 120.5 +- 2.8 deg" in said and "38.5 deg S toward 59.5 deg" in said
     site = with_effects(ra66m_spec, [earth_rotation_site_effect()])
     point = _random_point(site, np.random.default_rng(11))
     n = len(ra66m_spec.states)

@@ -505,6 +505,9 @@ def _final(disc, ranking, level, window) -> FinalModel | None:
         est = "; ".join(f"{n} = {v:.4g} +- {s:.2g}{size_note(n)}" for n, (v, s) in params.items()
                         if n not in base_names)
         text = f"the model with {names} reaches the noise (chi2/dof {fit.chi2_per_dof:.4g}): {est}."
+        for e in disc.effects:
+            if e.reading is not None and all(n in params for n in e.parameter_names):
+                text += f" That is {e.reading(params)}."
         if r is not None and r.identifiability:
             text += f" Caution: {r.identifiability}."
         if any(e.kind == "mass" or e.name == "thrust_level" or e.name.startswith("thrust_profile") for e in disc.effects):

@@ -111,6 +111,10 @@ class Effect:
     scan : OnsetScan, optional
         For an event shape: the bank that scores its onset at many times at once, where its
         refits start (the starts above when the scan cannot be made).
+    reading : callable, optional
+        ``reading({parameter: (estimate, standard error)}) -> str``: what the estimates say in the
+        field's own terms (a launch site's latitude and azimuth from their offsets), added to the
+        explanation; None for most effects.
     """
 
     name: str
@@ -124,6 +128,7 @@ class Effect:
     least: Mapping[str, float] = field(default_factory=dict, compare=False)
     starts: tuple = field(default=(), compare=False)
     scan: "OnsetScan | None" = field(default=None, compare=False, repr=False)
+    reading: Callable | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self):
         if not isinstance(self.name, str) or not self.name.isidentifier():
@@ -1432,9 +1437,16 @@ def earth_rotation_site_effect(latitude_deg: float = 28.5, azimuth_deg: float = 
     desc = (f"Earth rotation at an estimated site: latitude {lat0:g} + dlat_rot deg, azimuth {az0:g} + daz_rot deg, "
             "Omega = k_rot * 7.292e-5 rad/s (the accelerations of earth_rotation; the mirror site -lat, "
             "180 - az gives the same in the vertical plane)")
+    def reading(est: Mapping[str, tuple]) -> str:
+        (dlat, s_lat), (daz, s_az) = est["dlat_rot"], est["daz_rot"]
+        lat, az = lat0 + dlat, (az0 + daz) % 360.0
+        hemi, mirror = ("N", "S") if lat >= 0 else ("S", "N")
+        return (f"the launch site: latitude {abs(lat):.1f} +- {s_lat:.2g} deg {hemi}, azimuth {az:.1f} +- {s_az:.2g} deg "
+                f"(or {abs(lat):.1f} deg {mirror} toward {(180.0 - az) % 360.0:.1f} deg: the same in the vertical plane)")
+
     # started from the real Earth at the stated site (from k_rot = 0 the site angles have no gradient)
     return Effect(name, "Earth rotation, site estimated", "kinematics", apply, desc, dict(SITE_REALISTIC),
-                  least={"k_rot": SITE_RATE[0]}, starts=({"k_rot": 1.0},))
+                  least={"k_rot": SITE_RATE[0]}, starts=({"k_rot": 1.0},), reading=reading)
 
 
 def thrust_profile_effect(knot_times: Sequence[float], *, name: str | None = None) -> Effect:
