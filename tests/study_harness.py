@@ -63,6 +63,10 @@ class Case:
     needed_each: tuple = ()                     # pairs: one family of EACH of these sets must be in it
     sizes: tuple = ()                           # (parameter, true value) pairs to compare
     out_of_catalogue: bool = False              # no catalogue family is right: only an honest verdict passes
+    visible: bool | None = None                 # may "nothing found" pass? None: judged by the base fit's chi2/dof
+                                                # against the noise band; True: no (the effect shows in the data,
+                                                # measured with the truth's sigmas); False: yes. For data whose
+                                                # sigma is estimated (chi2/dof is then ~1 by construction)
 
 
 #: Located and refined shapes added to the catalogue after the studies were written, with their family
@@ -98,6 +102,7 @@ class Study:
     default_dir: str
     marker: str                     # the docs table's markers
     timeout: float = 3600.0
+    extra_args: tuple = ()          # more arguments of ``rocketid diagnose`` (e.g. ``--sigma estimate``)
 
     @property
     def by_name(self) -> dict:
@@ -122,7 +127,7 @@ class Study:
         out = self.data_dir() / f"report-{case.name}"
         command = [sys.executable, "-c", "import sys; from rocketid.cli import main; sys.exit(main())",
                    "diagnose", str(csv), "--model", str(self.model_file), "--out", str(out),
-                   "--workers", str(workers)]
+                   "--workers", str(workers), *self.extra_args]
         start = time.perf_counter()
         try:
             done = subprocess.run(command, capture_output=True, text=True,
@@ -163,13 +168,16 @@ class Study:
 
     def acceptable(self, case, record) -> bool:
         """What the evaluation asks: clean data add nothing; an effect the base fit does not show (base
-        chi2/dof inside the noise band) may go unfound; a visible one is found and explained."""
+        chi2/dof inside the noise band, or ``case.visible`` False when the case states it) may go unfound; a
+        visible one is found and explained."""
         outcome = self.classify(case, record)
         if not case.right:
             if getattr(case, "out_of_catalogue", False):       # honest: anything but "explained"
                 return outcome in ("nothing found", "wrong, not called explained")
             return outcome == "nothing found"                  # clean data
         if outcome == "nothing found":
+            if getattr(case, "visible", None) is not None:
+                return not case.visible
             return record.get("base_chi2") is not None and record["base_chi2"] <= (record.get("band") or 1.0)
         return outcome == "right & explained"
 

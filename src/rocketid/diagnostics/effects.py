@@ -978,7 +978,8 @@ def _air_relative(m: Model, name: str, wind: Callable, air_mach: bool = True, ai
                                               "the air-relative attack angle)"))
     # a vehicle declared without lift flies at its attack angle to the air: in a wind its body, and the thrust
     # along it, turn into the airflow (a fin-stabilized rocket weathercocks); one with lift holds its attitude
-    weathercock = sp.simplify(_expanded(m, cl)) == 0
+    no_lift = _expanded(m, cl)
+    weathercock = no_lift == 0 or no_lift.is_zero is True
     W, params = wind(m, h, v, th)
     # air-relative velocity (u, w) = (v cos theta - W, v sin theta); its norm V_a written so that
     # W = 0 gives V_a = v exactly and derivatives exist at v = 0:
@@ -1437,6 +1438,7 @@ def earth_rotation_site_effect(latitude_deg: float = 28.5, azimuth_deg: float = 
     desc = (f"Earth rotation at an estimated site: latitude {lat0:g} + dlat_rot deg, azimuth {az0:g} + daz_rot deg, "
             "Omega = k_rot * 7.292e-5 rad/s (the accelerations of earth_rotation; the mirror site -lat, "
             "180 - az gives the same in the vertical plane)")
+
     def reading(est: Mapping[str, tuple]) -> str:
         (dlat, s_lat), (daz, s_az) = est["dlat_rot"], est["daz_rot"]
         lat, az = lat0 + dlat, (az0 + daz) % 360.0
