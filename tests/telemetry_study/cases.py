@@ -34,7 +34,8 @@ at 0.72 over 46-62 s, 1098 m/s and 28.9 km at T+100 s; telemetry from T+12 s):
   it meets the air at ``phi - theta_air``. Right: ``wind``;
 - hot day: the column 12 K warmer than the 1976 standard, hydrostatic from the standard ground pressure
   (density -4 % at the ground, +2 % at 12 km, +14 % at 25 km; speed of sound +2-2.7 %). Right:
-  ``density`` (its ``temperature`` shape included);
+  ``density`` (its ``temperature`` shape included). Measured: the free drag table takes it (2J 1.3 on
+  noise-free data), so "nothing found" passes;
 - speed bias: the INS speed reads 1.0 m/s high (a velocity-initialisation error). Right: ``bias_v``;
 - altitude scale: the telemetered altitude 0.4 % long (120 m at 29 km), on the 2 Hz channel whose
   noise nobody states: an estimated sigma can swallow a slow misfit on a sparse channel -- the
@@ -50,7 +51,12 @@ at 0.72 over 46-62 s, 1098 m/s and 28.9 km at T+100 s; telemetry from T+12 s):
 - site gravity: the surface gravity at 69.29 N is 9.8257 m/s^2 (Somigliana), the model's standard
   9.80665 (0.19 % low). **Out of the catalogue** (no catalogue entry changes gravity; ``earth_rotation``'s
   centrifugal term is a part of the latitude dependence but at its own fixed site and with a Coriolis
-  term the truth does not have): only an honest verdict (anything but "explained") passes;
+  term the truth does not have): only an honest verdict (anything but "explained") passes. Measured:
+  2J 2.4 on noise-free data (the drag table at high Mach and the start states take it): nothing to see;
+- radar geometry: the downrange channel is the ground range from a tracking radar 1.5 km abeam the pad,
+  ``sqrt(x^2 + d^2)`` (1.48 km too long at 13 s, 217 m at 60 s, 40 m at 100 s) -- a geometry error of
+  the data's processing. **Out of the catalogue** (``bias_x`` is a constant; there is no downrange
+  shape that decays as ``d^2 / 2x``): only an honest verdict passes;
 - vibration noise: the model is right, but the speed's noise is 4 times larger after 60 s (engine
   vibration after the bucket). One sigma per channel cannot describe it; the right answer is that no
   physical effect is missing: nothing found (the regime's second hard case);
@@ -81,6 +87,7 @@ K_H = 0.004
 TAU = 0.10
 DM0 = -500.0
 VIBRATION = 4.0
+RADAR_OFFSET = 1500.0
 
 CASES = (
     Case("hot-engine", Hidden(eps_thrust=EPS_THRUST), 801,
@@ -98,7 +105,8 @@ CASES = (
          right=frozenset({"wind"}), needed=frozenset({"wind"}), visible=True),
     Case("hot-day", Hidden(dT=DT_HOT), 805,
          "atmosphere 12 K warmer over the column, hydrostatic (density -4 % at the ground, +14 % at 25 km)",
-         right=frozenset({"density"}), needed=frozenset({"density"}), sizes=(("dT_air", DT_HOT),), visible=True),
+         right=frozenset({"density"}), needed=frozenset({"density"}), sizes=(("dT_air", DT_HOT),),
+         visible=False),                                # 2J 1.3: the drag table CD(M) takes it
     Case("v-bias", Hidden(bias_v=BIAS_V), 806,
          "INS speed 1.0 m/s high",
          right=frozenset({"bias_v"}), needed=frozenset({"bias_v"}), sizes=(("b_v", BIAS_V),), visible=True),
@@ -114,6 +122,10 @@ CASES = (
          visible=True),
     Case("site-gravity", Hidden(gravity=SITE_GRAVITY), 810,
          "gravity 9.8257 m/s^2 at 69.29 N (model: standard 9.80665); no catalogue effect changes gravity",
+         out_of_catalogue=True, visible=False),         # 2J 2.4: the drag table and the start states take it
+    Case("radar-geometry", Hidden(radar_offset=RADAR_OFFSET), 815,
+         "downrange is the ground range from a radar 1.5 km abeam the pad, sqrt(x^2 + 1.5 km^2): 1.48 km at "
+         "13 s, 40 m at 100 s",
          out_of_catalogue=True, visible=True),
     Case("vibration-noise", Hidden(v_noise_late=VIBRATION), 811,
          "model right; speed noise 4x larger after 60 s (engine vibration): nothing is missing",
@@ -130,8 +142,17 @@ CASES = (
     Case("hot-engine+hot-day", Hidden(eps_thrust=EPS_THRUST, dT=DT_HOT), 814,
          "thrust 2.5 % high at the stated mass flow + atmosphere 12 K warmer",
          right=THRUST | {"density"}, needed=THRUST | {"density"},
-         needed_each=(THRUST, frozenset({"density"})), sizes=(("eps_thrust", EPS_THRUST),), visible=True),
+         needed_each=(THRUST,), sizes=(("eps_thrust", EPS_THRUST),), visible=True),
+         # the hot day alone is absorbed by the drag table (2J 1.3): density is right but not needed
 ) + tuple(Case(f"clean-{seed}", Hidden(), seed, f"clean (seed {seed})") for seed in range(900, 905))
+
+#: 2J of the base model fitted over the window 12:100 to each case's noise-free telemetry with the truth's
+#: sigmas (measured when the cases were written, before any diagnosis; ``visible`` is 2J >= 25).
+MEASURED_2J = {"hot-engine": 8425.0, "deep-bucket": 1265.0, "back-pressure": 9.133e5, "jet-stream": 5865.0,
+               "hot-day": 1.263, "v-bias": 486.7, "h-scale": 604.0, "frame-delay": 100.9, "light-load": 79.66,
+               "site-gravity": 2.398, "vibration-noise": 0.0, "radar-geometry": 4.428e4,
+               "deep-bucket+v-bias": 1727.0, "jet-stream+h-scale": 7202.0, "hot-engine+hot-day": 7251.0}
+VISIBLE_2J = 25.0
 
 ALL = CASES
 BY_NAME = {c.name: c for c in ALL}

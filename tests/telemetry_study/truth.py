@@ -68,6 +68,8 @@ class Hidden:
     tau: float = 0.0                    # every channel's time tags late by tau, s
     gravity: float | None = None        # surface gravity instead of the standard one, m/s^2
     v_noise_late: float = 1.0           # the speed's noise times this after T_VIBRATION
+    radar_offset: float = 0.0           # the downrange channel is the ground range from a radar this far (m)
+                                        # to the side of the ground track, abeam the pad
 
 
 class Air:
@@ -204,6 +206,8 @@ def exact_outputs(hidden: Hidden, times, per_channel: dict | None = None) -> dic
             y = y + hidden.bias_v
         if name == "h":
             y = y * (1.0 + hidden.scale_h)
+        if name == "x" and hidden.radar_offset:
+            y = np.hypot(y, hidden.radar_offset)
         result[name] = y
     return result
 

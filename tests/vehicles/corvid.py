@@ -34,7 +34,7 @@ drag            CD(M) piecewise linear on 9 knots from Mach 0.21 (the window's
                 0.55 at Mach 1.2, 0.28 at Mach 3.6
 lift            CL = CL_alpha alpha on the cross-section, CL_alpha 2.6 /rad
 horizon         0 .. 100 s: Mach 1 at 42 s, max q 35.7 kPa at 45 s (in the
-                bucket); at 100 s 28.9 km, 28.4 km downrange, 1098 m/s, Mach
+                bucket's ramp-down); at 100 s 28.9 km, 28.4 km downrange, 1098 m/s, Mach
                 3.65, flight-path angle 29.2 deg
 atmosphere      US Standard Atmosphere 1976 (density and speed of sound)
 measurements    telemetry from T+12 s: speed (INS) at 10 Hz, 0.1 m/s steps;
