@@ -378,16 +378,14 @@ def test_every_command_knows_the_same_builtin_models(tmp_path):
 
 
 def test_estimate_coloured_errors(ra66_csv, tmp_path):
-    """--errors coloured prints and stores the standard errors corrected for correlated residuals; a joint fit
-    refuses it with the fix."""
+    """--errors coloured prints and stores the standard errors corrected for correlated residuals (a joint
+    fit's too: tests/test_joint.py)."""
     out = tmp_path / "fit.json"
     result = invoke("estimate", ra66_csv, "--errors", "coloured", "--out", out)
     assert result.exit_code == 0, result.output + result.stderr
     payload = json.loads(out.read_text())
     assert payload["std_err_residuals"] == "coloured" and set(payload["std_err"]) >= {"CL"}
     assert "coloured residuals" in result.output
-    result = invoke("estimate", ra66_csv, ra66_csv, "--errors", "coloured")
-    assert result.exit_code != 0 and "fit each flight alone" in (result.output + result.stderr)
 
 
 def test_a_model_file_states_its_candidates(tmp_path):

@@ -134,8 +134,52 @@ def test_cli_estimates_several_files_jointly(two_flights, tmp_path):
     assert fit["flights"] == ["f1", "f2"] and set(fit["parameters"]) == set(spec_a.parameter_names)
     assert all(abs(fit["parameters"][n] - v) < 4 * fit["standard_errors"][n]
                for n, v in zip(spec_a.parameter_names, truth))
+    col = CliRunner().invoke(main, ["estimate", str(f1), str(f2), "--model", "ra66m", "--errors", "coloured",
+                                    "--out", str(out)])
+    assert col.exit_code == 0, col.output
+    assert "corrected for coloured residuals" in col.output
+    fit = json.loads(out.read_text())
+    assert fit["std_err_residuals"] == "coloured"
+    assert set(fit["standard_errors_coloured"]) == set(spec_a.parameter_names)
+    assert all(0.7 < fit["standard_errors_coloured"][n] / fit["standard_errors"][n] < 1.4 for n in spec_a.parameter_names)
     bad = CliRunner().invoke(main, ["estimate", str(f1), "--per-flight", "CL_alpha"])
     assert bad.exit_code == 2 and "several data files" in bad.output
+
+
+def _ar1_flight(spec, truth, seed, rho):
+    """Exact outputs of ``spec`` plus AR(1) errors of lag-1 correlation ``rho`` and each output's sigma as
+    their marginal standard deviation (a filtered sensor, a readout whose errors last ~1/(1 - rho) samples)."""
+    clean = ri.simulate_measurements(spec, truth, ra66_times(), noise=False)
+    rng = np.random.default_rng(seed)
+    values = {}
+    for ch in clean.channels:
+        sigma = float(ch.sigma_array()[0])
+        e = np.empty(ch.values.size)
+        e[0] = rng.normal(0.0, sigma)
+        drive = rng.normal(0.0, sigma * np.sqrt(1 - rho ** 2), ch.values.size)
+        for i in range(1, e.size):
+            e[i] = rho * e[i - 1] + drive[i]
+        values[ch.name] = ch.values + e
+    return ri.Measurements.from_arrays(clean.channels[0].times, values, sigma={c.name: float(c.sigma_array()[0])
+                                                                               for c in clean.channels})
+
+
+def test_joint_coloured_errors_follow_the_residuals_correlation(two_flights):
+    """The joint sandwich: with white noise it gives the white standard errors (to sampling error); with
+    AR(1) errors of lag-1 correlation 0.9 in both flights, the standard errors of parameters whose
+    sensitivities vary slowly grow by about sqrt((1 + rho) / (1 - rho)) = 4.4 (the long-run variance of an
+    AR(1) mean), and the truth lies within their intervals where the white ones would miss it."""
+    spec_a, spec_b, data_a, data_b, truth = two_flights
+    white = joint_estimate([Flight("A", spec_a, data_a), Flight("B", spec_b, data_b)])
+    ratio = white.coloured_standard_errors / white.standard_errors
+    assert np.all((0.75 < ratio) & (ratio < 1.3)), ratio
+    rho = 0.9
+    red = joint_estimate([Flight("A", spec_a, _ar1_flight(spec_a, truth, 21, rho)),
+                          Flight("B", spec_b, _ar1_flight(spec_b, truth, 22, rho))])
+    assert red.success, red.message
+    ratio = red.coloured_standard_errors / red.standard_errors
+    assert np.all((2.5 < ratio) & (ratio < 6.0)), (ratio, np.sqrt((1 + rho) / (1 - rho)))
+    assert np.all(np.abs(red.theta - truth) < 4 * red.coloured_standard_errors)
 
 
 def test_cli_estimability_of_several_files(two_flights, tmp_path):

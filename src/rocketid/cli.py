@@ -65,6 +65,7 @@ from .collocation.radau import MAX_DEGREE
 from .data import Measurements, read_csv
 from .errors import RocketidError, SettingsError
 from .model import ModelSpec, check_guess
+from .summary import Section, Summary, Table
 
 __all__ = [
     "main", "simulate_command", "estimate_command",
@@ -939,9 +940,6 @@ def estimate_command(data_files, model, columns, time_column, sigmas, sigma_colu
     if len(data_files) > 1:
         from .joint import joint_estimate
 
-        if errors != "white":
-            raise SettingsError("--errors coloured is available for one flight: fit each flight alone with it "
-                                "(the joint fit's standard errors assume white residuals)")
         guess = assignments(guesses, "--guess")
         flights = read_flights(data_files, spec, columns=columns, time_column=time_column, sigmas=sigmas,
                                n_elements=n_elements, K=K, unmeasured=unmeasured, window=window,
@@ -949,8 +947,12 @@ def estimate_command(data_files, model, columns, time_column, sigmas, sigma_colu
         status(f"fitting {len(flights)} flights jointly")
         result = joint_estimate(flights, per_flight=per_flight, guess=guess, options=options, sigma=sigma)
         click.echo(result.summary().text())
+        payload = result.to_dict()
+        if errors == "coloured" and result.success:
+            payload["standard_errors_coloured"] = _print_joint_coloured(result)
+        payload["std_err_residuals"] = errors
         if out is not None:
-            write_json(out, result.to_dict())
+            write_json(out, payload)
         if not result.success:
             click.get_current_context().exit(EXIT_NOT_CONVERGED)
         return
@@ -978,6 +980,23 @@ def estimate_command(data_files, model, columns, time_column, sigmas, sigma_colu
         status(f"wrote {path}")
     if not result.success or result.sanity:
         click.get_current_context().exit(EXIT_NOT_CONVERGED)
+
+
+def _print_joint_coloured(result) -> dict:
+    """Print a joint fit's standard errors corrected for coloured residuals beside the white ones;
+    ``{name: std err}`` for FIT.json (empty, with the reason printed, when they cannot be formed)."""
+    try:
+        white, col = result.standard_errors, result.coloured_standard_errors
+    except RocketidError as exc:
+        click.echo(f"\nCorrected standard errors: not available ({_one_line(exc)})")
+        return {}
+    rows = [(n, float(v), float(w), float(c)) for n, v, w, c in zip(result.names, result.theta, white, col)]
+    table = Table(("name", "estimate", "std error (white)", "std error (coloured)"), rows, (None, ".6g", ".3g", ".3g"))
+    click.echo("")
+    click.echo(Summary("Standard errors corrected for coloured residuals (sandwich H^-1 B H^-1, each flight's "
+                       "score with Bartlett weights over its channels' lags; flights independent)",
+                       (Section("", (table,)),), (), rule=False).text())
+    return {str(n): output.finite_or_none(float(c)) for n, c in zip(result.names, col)}
 
 
 def _print_standard_errors(result, coloured: bool = False) -> dict:

@@ -616,6 +616,30 @@ class JointResult:
     def standard_errors(self) -> np.ndarray:
         return np.sqrt(np.clip(np.diag(self.covariance), 0, None))
 
+    @cached_property
+    def coloured_covariance(self) -> np.ndarray:
+        """The covariance corrected for residuals correlated in time: the sandwich ``H^-1 B H^-1`` with
+        ``B = sum_f A_f^T B_f A_f + H_prior``, ``B_f`` the long-run covariance of flight ``f``'s score
+        (:func:`~rocketid.estimability.coloured_score_covariance`: Bartlett weights over each channel's
+        lags). Flights are independent of each other (their errors do not correlate across flights), as
+        channels are within a flight. With white residuals at the fitted sigmas it gives
+        :attr:`covariance` to sampling error."""
+        from .estimability import coloured_score_covariance
+        lay = self.layout
+        B = np.diag(lay.prior_weight).astype(float)
+        for f, r in enumerate(self.flights):
+            sens = sensitivity_of(r)
+            Bf, _ = coloured_score_covariance(r, sens)
+            A = lay.selection(f)
+            B += A.T @ (Bf - sens.H_prior) @ A              # the priors are the joint's, counted once above
+        C = self.covariance @ B @ self.covariance
+        return 0.5 * (C + C.T)
+
+    @property
+    def coloured_standard_errors(self) -> np.ndarray:
+        """Standard errors from :attr:`coloured_covariance`."""
+        return np.sqrt(np.clip(np.diag(self.coloured_covariance), 0, None))
+
     def estimability(self, scaling: str = "nominal") -> JointEstimability:
         """Which directions of the shared parameters each flight adds (at the joint estimate)."""
         return joint_estimability(self.layout, self.information, scaling=scaling)
