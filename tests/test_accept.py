@@ -373,8 +373,11 @@ def test_a_snug_choice_still_tries_the_shapes_of_a_near_rival():
     names = ("wind", "misalignment", "density", "earth_rotation")
     scr = Screen(None, tuple(Contender(CATALOGUE[n], "") for n in names), ())
     band = NoiseBand(upper=1.092, dof=2391, discretization=0.0)
-    accs = [accept(refit(n, c, base_chi2=3.84), band) for n, c in zip(names, (0.984, 1.141, 1.90, 1.15))]
-    assert S._near_rivals(accs, scr, veh, 0, band) == [1]       # earth_rotation has no other shape
+    accs = [accept(refit(n, c, base_chi2=3.84), band) for n, c in zip(names, (0.984, 1.141, 1.90, 1.25))]
+    assert S._near_rivals(accs, scr, veh, 0, band) == [1]       # earth_rotation (1.25) is beyond 1 + 2 x 0.092
+    near_rotation = list(accs)
+    near_rotation[3] = accept(refit("earth_rotation", 1.15, base_chi2=3.84), band)
+    assert S._near_rivals(near_rotation, scr, veh, 0, band) == [1, 3]   # its site shape is then tried too
     assert [e.name for e in CATALOGUE["misalignment"].refinements(veh)] == ["misalignment_onset"]
     # far above the band (Stage-30's density at chi2/dof 56 after a base of 23 209) is no near rival
     accs[1] = accept(refit("misalignment", 1.19, base_chi2=3.84), band)

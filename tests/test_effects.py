@@ -757,3 +757,33 @@ def test_base_drag_acts_once_the_motor_stops(ra66_spec):
     assert off - cd(0.0, 2.0, 0.0) == pytest.approx(0.1) and tail - running == pytest.approx(0.05)
     with pytest.raises(ModelError, match="stops inside the horizon"):
         with_effects(ra66_spec, ["base_drag"])
+
+
+def test_a_throttle_shape_on_a_mass_that_is_a_state():
+    """A mass flow that is not constant (Tern-2's mass is a state burnt at its thrust table's rate): the
+    throttle window carries the propellant not burnt as a state. Simulated against the same vehicle with
+    the throttle written into its own equations by hand -- thrust and the mass equation's right-hand side
+    both times ``1 - d s(t)`` -- the outputs agree to the integrator's tolerance."""
+    import sys
+    sys.path.insert(0, str(Path(__file__).parent / "vehicles"))
+    import tern
+    from rocketid.diagnostics.effects import throttle_window_effect
+    base = tern.build_model()
+    effect = throttle_window_effect(base.t0, base.tf, 0.5)
+    spec = with_effects(base, [effect])
+    assert any(str(s.symbol).endswith("_unburnt") for s in spec.states)
+    d, on, off, w = 0.1, 3.0, 6.0, 0.5
+    hand = base.to_model()
+    t = hand.t
+    switch = (sp.tanh((t - base.t0 - on) / w) - sp.tanh((t - base.t0 - off) / w)) / 2
+    thrust_sym = base.role("thrust")
+    hand.redefine(thrust_sym, hand.definition(thrust_sym) * (1 - d * switch))
+    hand.ode({hand.mass_kg: -hand.thrust_table * (1 - d * switch) / (tern.ISP * tern.G0)})
+    hand = hand.freeze()
+    times = tern.sample_times()
+    got = ri.simulate(spec, {**tern.truth(base), "d_window": d, "t_win_on": on, "t_win_off": off}, times).outputs()
+    want = ri.simulate(hand, tern.truth(base), times).outputs()
+    plain = ri.simulate(base, tern.truth(base), times).outputs()
+    assert np.max(np.abs(want["h"] - plain["h"])) > 100.0          # the throttle matters
+    for name in ("x", "h", "v"):
+        np.testing.assert_allclose(got[name], want[name], rtol=0, atol=1e-3 * (1 if name == "v" else 10))

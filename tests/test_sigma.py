@@ -208,13 +208,48 @@ def test_cli_estimability_at_fit_with_sigma_estimate(tmp_path, ra66_unequal):
 
 def test_cli_diagnose_with_sigma_estimate(tmp_path, ra66_unequal):
     """A quick diagnosis (no refits, no hold-out) of RA-66 data with unstated noise: the sigmas are
-    estimated from the base fit and recorded in diagnosis.json."""
+    estimated from the data alone (fourth differences, not the base fit's residuals), recorded in
+    diagnosis.json, and the base fit is judged against them."""
     data = ra66_unequal.to_csv(tmp_path / "d.csv")
     out = tmp_path / "rep"
     r = CliRunner().invoke(main, ["diagnose", str(data), "--out", str(out), "--sigma", "estimate",
                                   "--confirm", "0", "--holdout", "none"])
     assert r.exit_code == 0, r.output
     d = json.loads((out / "diagnosis.json").read_text())
-    assert d["fit"]["sigma_estimated"] == ["x", "h", "v"]
-    assert all(abs(d["fit"]["sigma"][k] / s - 1) < 0.02 for k, s in SIGMA.items()), d["fit"]["sigma"]
+    noise = d["noise_from_data"]
+    assert set(noise) == {"x", "h", "v"} and all(noise[k]["differences"] > 6000 for k in noise)
+    assert all(abs(noise[k]["sigma"] / s - 1) < 0.05 for k, s in SIGMA.items()), noise
+    assert all(d["fit"]["sigma"][k] == pytest.approx(noise[k]["sigma"]) for k in SIGMA)
+    assert any("noise estimated from the data alone" in n for n in d["notes"])
     assert (out / "report.html").is_file()
+
+
+def test_difference_noise_follows_the_sensor_not_the_flight():
+    """The noise from the data alone, against the noise that made the data (an independent truth): RA-66M
+    at 100 Hz within 3 %; a channel thinned to 2 Hz with drop-outs (steady runs only) within 20 %; a channel
+    rounded to a step of 2 sigma: the rounding's q^2/12 adds to sigma^2; a flight that is pure signal
+    (no noise) gives centimetres, not the trajectory's size."""
+    from rocketid.cases.ra66m import ra66m, ra66m_truth
+    from rocketid.data import difference_noise
+    spec = ra66m()
+    truth = ra66m_truth(spec)
+    clean = ri.simulate_measurements(spec, truth, ri.ra66_times(), noise=False)
+    rng = np.random.default_rng(4)
+    for ch in clean.channels:
+        noisy = ri.Channel(ch.name, ch.times, ch.values + 3.0 * rng.standard_normal(ch.values.size))
+        sigma, n = difference_noise(noisy)
+        assert abs(sigma / 3.0 - 1) < 0.03 and n == ch.values.size - 4, (ch.name, sigma)
+        assert difference_noise(ch)[0] < 0.05, ch.name                  # the trajectory itself: no noise
+    h = clean["h"]
+    keep = np.zeros(h.times.size, bool)
+    keep[::50] = True                                                 # 2 Hz
+    keep[(h.times > 20) & (h.times < 24)] = False                     # a drop-out
+    t2 = h.times[keep]
+    thinned = ri.Channel("h", t2, h.values[keep] + 3.0 * rng.standard_normal(t2.size))
+    sigma, n = difference_noise(thinned)
+    assert abs(sigma / 3.0 - 1) < 0.2 and n == t2.size - 2 * 4, sigma  # two runs, 4 differences lost in each
+    v = clean["v"]
+    rounded = ri.Channel("v", v.times, np.round((v.values + 0.5 * rng.standard_normal(v.times.size)) / 1.0) * 1.0)
+    assert difference_noise(rounded)[0] == pytest.approx(np.sqrt(0.25 + 1.0 / 12), rel=0.05)
+    with pytest.raises(DataError, match="give its sigma"):
+        difference_noise(ri.Channel("x", np.arange(8.0), np.arange(8.0)))

@@ -110,13 +110,39 @@ class NoiseBand:
                 "note": self.note}
 
 
-def noise_band(fit: EstimationResult, *, timeout: float = 60.0) -> NoiseBand:
+def difference_variance_factor(order: int) -> float:
+    """``sum_l rho_l^2`` over the lags of the ``order``-th differences of white noise (``rho_l =
+    C(2k, k + l) / C(2k, k)``): how much the overlap of the differences inflates the variance of a mean of
+    their squares (2.63 for k = 4)."""
+    k = int(order)
+    return float(sum((math.comb(2 * k, k + l) / math.comb(2 * k, k)) ** 2 for l in range(-k, k + 1)))
+
+
+def noise_band(fit: EstimationResult, *, timeout: float = 60.0,
+               estimated: Mapping[str, int] | None = None) -> NoiseBand:
     """The noise band of ``fit``'s data, with the discretization error measured by simulating the
-    fitted model at its estimate with the high-accuracy integrator (under a time limit)."""
+    fitted model at its estimate with the high-accuracy integrator (under a time limit).
+
+    ``estimated``: ``{channel: number of differences}`` for channels whose sigma was estimated from the
+    data alone (:func:`rocketid.data.difference_noise`). Their sigmas are uncertain, and chi2/dof with
+    them scatters more than with known ones: the band is widened by the variance their estimates add,
+    ``sum_c (n_c / N)^2 2 F / m_c`` (``n_c`` the channel's samples, ``m_c`` its differences, ``F``
+    :func:`difference_variance_factor`), at the band's tail probability."""
+    from ..data import DIFFERENCE_ORDER
     from ..simulate import simulate
 
     dof = max(1, fit.n_data - fit.n_estimated)
     base = float(stats.chi2.isf(BAND_LEVEL, dof) / dof)
+    widened = ""
+    if estimated:
+        counts = {c.name: c.values.size for c in fit.prepared.measurements.channels}
+        n_all = max(1, sum(counts.values()))
+        F = difference_variance_factor(DIFFERENCE_ORDER)
+        v_est = sum((counts.get(c, 0) / n_all) ** 2 * 2.0 * F / max(1, m) for c, m in estimated.items())
+        z = float(stats.norm.isf(BAND_LEVEL))
+        base += z * (math.sqrt(2.0 / dof + v_est) - math.sqrt(2.0 / dof))
+        widened = (f"widened for the noise of {', '.join(estimated)} estimated from the data (its uncertainty adds "
+                   f"{math.sqrt(v_est):.2g} to chi2/dof's standard deviation)")
     meas = fit.prepared.measurements
     times = np.unique(np.concatenate([c.times for c in meas.channels]))
     note = ""
@@ -143,6 +169,7 @@ def noise_band(fit: EstimationResult, *, timeout: float = 60.0) -> NoiseBand:
         note = (f"the collocation differs from the simulation of the fitted model by {extra:.3g} in chi2/dof, more "
                 f"than a discretization error (<= {DISCRETIZATION_LIMIT:g}): a finer mesh is needed; the band holds none")
         extra = 0.0
+    note = "; ".join(x for x in (note, widened) if x)
     return NoiseBand(base + extra, dof, D, note)
 
 

@@ -120,6 +120,9 @@ class DiagnosisReport:
         For a model with time-knot drag: the same discovery on its Mach-indexed variant.
     ranking_failed : str
         Why the score test could not be made at the base fit (empty when it was).
+    noise_from_data : dict
+        ``{channel: (sigma, number of differences)}`` of the channels whose noise was estimated from the
+        data alone (``sigma="estimate"``; :func:`rocketid.data.difference_noise`); empty otherwise.
     """
 
     model: str
@@ -141,6 +144,7 @@ class DiagnosisReport:
     final: FinalModel | None = None
     variant: Any = None
     ranking_failed: str = ""
+    noise_from_data: dict = field(default_factory=dict)
 
     # ---- verdicts
     @property
@@ -299,6 +303,8 @@ class DiagnosisReport:
                    "model": self.variant.fit.spec.name,
                    "final": None if self.variant.final is None else self.variant.final.to_dict(),
                    "steps": [s.to_dict() for s in self.variant.steps]},
+               "noise_from_data": {c: {"sigma": float(v), "differences": int(n)}
+                                   for c, (v, n) in self.noise_from_data.items()},
                "timings": dict(self.timings), "notes": list(self.notes)}
         return out
 
@@ -355,6 +361,31 @@ def _check_settings(level, confirm_top, max_effects, refit_timeout) -> None:
         raise SettingsError(f"max_effects must be a positive integer, got {max_effects!r}")
     if isinstance(refit_timeout, bool) or not isinstance(refit_timeout, (int, float)) or not refit_timeout > 0:
         raise SettingsError(f"refit_timeout must be a positive number of seconds, got {refit_timeout!r}")
+
+
+def _noise_from_data(sigma, meas, notes: list, from_data: dict) -> tuple:
+    """The diagnosis's noise levels when some are to be estimated: from the data alone (the scatter of
+    each channel's fourth differences, :func:`rocketid.data.difference_noise`), not from the base model's
+    residuals -- those hold the misfit the diagnosis looks for, and a model judged against its own
+    residuals always "reaches the noise". Returns the ``sigma`` request with numbers in place of
+    ``"estimate"`` and ``{channel: number of differences}`` of the channels estimated so."""
+    from ..data import DIFFERENCE_ORDER, difference_noise, resolve_quantized, sigma_request
+
+    if sigma is None:
+        return None, {}
+    sigma = resolve_quantized(sigma, meas)
+    given, wanted = sigma_request(sigma, meas.names)
+    if not wanted:
+        return sigma, {}
+    values, counts = dict(given), {}
+    for name in wanted:
+        values[name], counts[name] = difference_noise(meas[name])
+    from_data.update({n: (values[n], counts[n]) for n in wanted})
+    notes.append(f"noise estimated from the data alone (the scatter of each channel's {DIFFERENCE_ORDER}th differences, "
+                 "not the model's residuals): " + ", ".join(f"{n} {values[n]:.4g} ({counts[n]} differences)"
+                                                            for n in wanted)
+                 + "; the models are judged against it, and the noise band is widened for its uncertainty")
+    return values, counts
 
 
 def _fit_base(spec, meas, guess, mesh, options, notes: list, sigma=None) -> EstimationResult:
@@ -620,11 +651,13 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
         itself is explained (the time-knot drag absorbs most force effects, so "nothing
         missing" or a partial answer on it needs the variant's word); True always.
     sigma : "estimate" or mapping, optional
-        Noise levels of the base fit (:func:`rocketid.estimate`'s ``sigma``). Estimated
-        sigmas are then held fixed: every refit, score test and hold-out check uses them.
-        They are estimated from the base model's residuals, so a missing effect inflates
-        them and "reaches the noise" means "reaches the base fit's residual level": give
-        the sensor's sigma when it is known.
+        Noise levels (:func:`rocketid.estimate`'s ``sigma``: numbers, ``"quantized"``, ``"estimate"``).
+        A channel to estimate gets its noise from the data alone -- the scatter of its fourth
+        differences (:func:`rocketid.data.difference_noise`), not the base model's residuals,
+        which hold the misfit the diagnosis looks for -- and it is then held: every fit, refit,
+        score test and hold-out check uses it, and the noise band is widened for its
+        uncertainty. Errors correlated from sample to sample are partly cancelled in the
+        differences: give the sensor's sigma when it is known.
     flight_window : (float, float), optional
         Diagnose only the flight window ``(T0, T1)`` (s): the model and the data are cut to
         it (:func:`rocketid.start.apply_window`; a window that starts in flight estimates the
@@ -662,16 +695,20 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
         timings[key] = time.perf_counter() - t0
         return value
 
+    from_data: dict = {}
+    sigma, counts = _noise_from_data(sigma, meas, notes, from_data)
     fit = timed("fit_s", _fit_base, spec, meas, guess, mesh, options, notes, sigma)
-    meas = fit.prepared.measurements  # with the estimated sigmas, if any
+    meas = fit.prepared.measurements  # with the sigmas of the fit
     comp, loc, plaus = timed("describe_s", _describe, fit, level, window, notes)
     effects = _candidate_effects(candidates)
     disc, ranking, failed = None, None, ""
     if confirm_top > 0:
         try:
+            from .accept import noise_band
+            band = noise_band(fit, estimated=counts) if counts else None
             disc = timed("discover_s", discover, fit, effects, level=level, max_effects=int(max_effects),
                          workers=workers, timeout=float(refit_timeout), options=options, refine=refine,
-                         holdout=holdout)
+                         holdout=holdout, band=band)
         except RocketidError as exc:
             notes.append(f"the discovery failed: {exc}")
         if disc is not None:
@@ -698,7 +735,7 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
                              plausibility=plaus, ranking=ranking, confirmations=confs, confirmed=names,
                              refit_plausibility=pls, after=after, history=history, level=float(level),
                              timings=timings, notes=tuple(notes), discovery=disc, final=final, variant=var,
-                             ranking_failed=failed)
+                             ranking_failed=failed, noise_from_data=from_data)
     if out is not None:
         report.write(out)
     return report

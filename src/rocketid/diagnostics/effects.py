@@ -779,29 +779,47 @@ def mass_jettison_effect(t0: float, tf: float, width: float) -> Effect:
 
 def _throttle_edit(name: str, size_name: str, w: float) -> Callable:
     """``edit(m, d, t_on[, t_off])``: thrust and mass flow scaled by ``1 - d s(t)``, ``s`` the switch
-    :func:`onset_step` at ``t_on`` (minus the switch at ``t_off`` for a window); the mass follows in closed
-    form (the integral of ``s``, with log cosh). The base model's mass flow must be constant."""
+    :func:`onset_step` at ``t_on`` (minus the switch at ``t_off`` for a window); the mass follows
+    (:func:`_throttled_mass`: in closed form, the integral of ``s`` with log cosh, for a constant mass flow;
+    as a state otherwise)."""
 
     def integral(tau, t_on):
         return (tau + w * (sp.log(sp.cosh((tau - t_on) / w)) - sp.log(sp.cosh(t_on / w)))) / 2
 
     def edit(m: Model, d, t_on, t_off=None) -> None:
         t_sym, thrust = _role_definition(m, "thrust", name)
-        m_sym, mass = _role_definition(m, "mass", name)
-        mdot = -sp.diff(_expanded(m, mass), m.t)
-        # the base model's mass flow: a scan's earlier copies of this change vanish at zero size
-        mdot = mdot.subs({q: 0 for q in mdot.free_symbols if str(q).startswith(size_name)})
-        if mdot.free_symbols - {c for c, _ in m._constants} - {p.symbol for p in m._parameters}:
-            raise ModelError(f"effect {name!r} needs a mass that falls linearly in time (a constant mass "
-                             f"flow); the mass of model {m.name!r} has mass flow {mdot}")
         tau = m.t - m.t0
         switch, S = onset_step(tau, t_on, w), integral(tau, t_on)
         if t_off is not None:
             switch, S = switch - onset_step(tau, t_off, w), S - integral(tau, t_off)
         m.redefine(t_sym, thrust * (1 - d * switch))
-        m.redefine(m_sym, mass + mdot * d * S)
+        _throttled_mass(m, name, size_name, d * switch, d * S, f"{d}_unburnt")
 
     return edit
+
+
+def _throttled_mass(m: Model, effect: str, size_prefix: str, reduction: sp.Expr, integral: sp.Expr | None,
+                    state_name: str) -> None:
+    """The mass when the mass flow is scaled by ``1 - reduction(t)`` with the thrust: ``m(t) + int mdot
+    reduction dt`` from the start, ``mdot = -dm/dt`` of the base model (a mass state's equation taken in).
+    A constant mass flow uses the closed form ``m + mdot integral`` (``integral``: the integral of
+    ``reduction`` from ``t0``); any other (a commanded throttle schedule's mass, a mass state whose flow follows
+    a thrust table) carries the propellant not burnt as a new state ``state_name`` from 0. ``size_prefix``:
+    the parameters of earlier copies of the change (a scan's), which vanish in the base flow."""
+    m_sym, mass = _role_definition(m, "mass", effect)
+    mass_x = _expanded(m, mass)
+    states = {s.symbol for s in m._states}
+    rate = sp.diff(mass_x, m.t) + sum((sp.diff(mass_x, st) * _expanded(m, _explicit_rhs(m, st, effect))
+                                       for st in mass_x.free_symbols & states), sp.S.Zero)
+    mdot = -rate
+    mdot = mdot.xreplace({q: 0 for q in mdot.free_symbols if str(q).startswith(size_prefix)})
+    constant = not (mdot.free_symbols - {c for c, _ in m._constants} - {p.symbol for p in m._parameters})
+    if constant and integral is not None:
+        m.redefine(m_sym, mass + mdot * integral)
+        return
+    unburnt = m.state(state_name, 0.0)
+    m.ode({unburnt: mdot * reduction})
+    m.redefine(m_sym, mass + unburnt)
 
 
 def _throttle_width(t0: float, tf: float, width: float) -> float:
@@ -817,8 +835,9 @@ def throttle_step_effect(t0: float, tf: float, width: float) -> Effect:
     ``[-3 width, tf - t0]``): an early tail-off of a solid motor's last sliver, a throttle-down that lasts
     to the end of the data, an engine running at another setting from an event on. Thrust becomes
     ``P (1 - d s)`` and mass ``m + mdot d S``, ``S(t) = (tau + w (L((tau - t_step)/w) - L(t_step/w))) / 2``
-    the integral of ``s`` from t0 (``tau = t - t0``, ``L = log cosh``), ``mdot = -dm/dt`` of the base model,
-    which must be constant. ``d_step`` > 0 is a throttle-down (realistic 0.05, bounded to (-1, 1)). The
+    the integral of ``s`` from t0 (``tau = t - t0``, ``L = log cosh``), ``mdot = -dm/dt`` of the base model
+    when it is constant (a commanded schedule's or a mass state's flow: the propellant not burnt carried as
+    a state, :func:`_throttled_mass`). ``d_step`` > 0 is a throttle-down (realistic 0.05, bounded to (-1, 1)). The
     refits start where its scan (:class:`OnsetScan`) puts them.
     """
     w = _throttle_width(t0, tf, width)
@@ -1479,7 +1498,8 @@ def throttle_effect(times: Sequence[float], *, name: str = "throttle", open_ends
     at its nominal setting outside the window) unless ``open_ends``, and an estimated value
     ``d_throttle_j`` (guess 0: the base model) at every time in between. Thrust becomes
     ``P (1 - d(t))`` and mass ``m(t) + mdot integral d``, with ``mdot = -dm/dt`` of the base model,
-    which must be constant (a mass linear in time). See :func:`rocketid.physics.propulsion.throttle_schedule`.
+    whatever its form (constant: in closed form; a commanded schedule's or a mass state's: the propellant not
+    burnt carried as a state). See :func:`rocketid.physics.propulsion.throttle_schedule`.
 
     Parameters
     ----------
@@ -1499,16 +1519,11 @@ def throttle_effect(times: Sequence[float], *, name: str = "throttle", open_ends
     def apply(m: Model) -> tuple:
         from ..physics.propulsion import throttle_schedule
         t_sym, thrust = _role_definition(m, "thrust", name)
-        m_sym, mass = _role_definition(m, "mass", name)
-        mdot = -sp.diff(_expanded(m, mass), m.t)
-        if mdot.free_symbols - {c for c, _ in m._constants} - {p.symbol for p in m._parameters}:
-            raise ModelError(f"effect {name!r} needs a mass that falls linearly in time (a constant mass flow); the "
-                             f"mass of model {m.name!r} has mass flow {mdot}")
         params = {j: m.parameter(f"d_{name}_{j}", 0.0, bounds=(-1.0, 1.0), nominal=0.1) for j in free}
         levels = [params.get(j, 0.0) for j in range(len(knots))]
         sched = throttle_schedule(m, knots, levels, name=f"{name}_reduction")
         m.redefine(t_sym, thrust * (1 - sched.setting))
-        m.redefine(m_sym, mass + mdot * sched.integral)
+        _throttled_mass(m, name, f"d_{name}_", sched.setting, sched.integral, f"{name}_unburnt")
         return tuple(params.values())
 
     return Effect(name, f"throttle change ({len(names)} levels)", "propulsion", apply,

@@ -879,7 +879,7 @@ def identifiability(names: Sequence[str], cov: np.ndarray, effect_parameters: Se
             cond = np.diag(cov)[others] - np.einsum("ij,ij->j", Ceb, np.linalg.solve(Cee, Ceb))
         except np.linalg.LinAlgError:
             cond = np.full(len(others), np.nan)
-        with np.errstate(invalid="ignore", divide="ignore"):
+        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
             infl = np.sqrt(np.diag(cov)[others] / np.clip(cond, 1e-300, None))
         loose = [values is None or d[i] > LOOSE * abs(float(values[i])) for i in others]
         hit = [(float(infl[k]), names[others[k]]) for k in range(len(others))
