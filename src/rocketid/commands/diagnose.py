@@ -54,8 +54,9 @@ __all__ = ["command"]
               help="0: rank the candidates only. Otherwise every significant contender (each confounded group's "
                    "leader, every candidate whose predicted fall is within 10x of the leader's) is refitted.")
 @click.option("--holdout", default="auto", show_default=True, metavar="auto|none|START:END",
-              help="Hold-out check of the final model: 'auto' fits the first 45/66 of the model's horizon and "
-                   "predicts the rest; START:END sets the fit window (s); 'none' skips it.")
+              help="Hold-out check of the final model: 'auto' fits the first 45/66 of the fitted span (the model's "
+                   "horizon, or the --window) and predicts the rest; START:END sets the fit window (s); 'none' "
+                   "skips it.")
 @click.option("--max-effects", type=click.IntRange(min=1), default=3, show_default=True, metavar="N",
               help="Add at most N effects (stepwise).")
 @click.option("--workers", type=click.IntRange(min=1), default=None, metavar="N",
