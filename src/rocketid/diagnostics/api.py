@@ -696,6 +696,7 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
         return value
 
     from_data: dict = {}
+    asked = sigma
     sigma, counts = _noise_from_data(sigma, meas, notes, from_data)
     fit = timed("fit_s", _fit_base, spec, meas, guess, mesh, options, notes, sigma)
     meas = fit.prepared.measurements  # with the sigmas of the fit
@@ -729,7 +730,8 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
     var = None
     if confirm_top > 0 and (variant is True or (variant == "auto" and (final is None or final.verdict != "explained"))):
         settings = dict(level=level, confirm_top=confirm_top, window=window, options=options,
-                        max_effects=max_effects, workers=workers, refit_timeout=refit_timeout, refine=refine)
+                        max_effects=max_effects, workers=workers, refit_timeout=refit_timeout, refine=refine,
+                        sigma=asked if counts else None)     # the same data, the same noise (and a widened band)
         var = timed("variant_s", _variant, fit, meas, effects, settings, notes)
     report = DiagnosisReport(model=label, data_label=data_label, fit=fit, comparison=comp, location=loc,
                              plausibility=plaus, ranking=ranking, confirmations=confs, confirmed=names,
