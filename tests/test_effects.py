@@ -772,6 +772,8 @@ def test_a_throttle_shape_on_a_mass_that_is_a_state():
     effect = throttle_window_effect(base.t0, base.tf, 0.5)
     spec = with_effects(base, [effect])
     assert any(str(s.symbol).endswith("_unburnt") for s in spec.states)
+    bank = with_effects(base, [effect.scan.bank])               # the onset scan's copies: no state each
+    assert not any(str(s.symbol).endswith("_unburnt") for s in bank.states)
     d, on, off, w = 0.1, 3.0, 6.0, 0.5
     hand = base.to_model()
     t = hand.t

@@ -705,8 +705,9 @@ def _event_shape(name: str, time_name: str, title: str, kind: str, edit: Callabl
     def bank(m: Model) -> tuple:
         sizes = tuple(m.parameter(f"{size_name}_{k}", 0.0, bounds=bounds, nominal=realistic)
                       for k in range(len(times)))
+        screen = {"screen": True} if getattr(edit, "screens", False) else {}
         for a, t in zip(sizes, times):
-            edit(m, a, sp.Float(t))
+            edit(m, a, sp.Float(t), **screen)
         return sizes
 
     scan = OnsetScan(Effect(f"{name}_scan", f"{title} (scan)", kind, bank, "", {}), times, size_name, time_name,
@@ -786,26 +787,32 @@ def _throttle_edit(name: str, size_name: str, w: float) -> Callable:
     def integral(tau, t_on):
         return (tau + w * (sp.log(sp.cosh((tau - t_on) / w)) - sp.log(sp.cosh(t_on / w)))) / 2
 
-    def edit(m: Model, d, t_on, t_off=None) -> None:
+    def edit(m: Model, d, t_on, t_off=None, *, screen: bool = False) -> None:
         t_sym, thrust = _role_definition(m, "thrust", name)
         tau = m.t - m.t0
         switch, S = onset_step(tau, t_on, w), integral(tau, t_on)
         if t_off is not None:
             switch, S = switch - onset_step(tau, t_off, w), S - integral(tau, t_off)
         m.redefine(t_sym, thrust * (1 - d * switch))
-        _throttled_mass(m, name, size_name, d * switch, d * S, f"{d}_unburnt")
+        _throttled_mass(m, name, size_name, d * switch, d * S, f"{d}_unburnt", screen=screen)
 
+    edit.screens = True
     return edit
 
 
 def _throttled_mass(m: Model, effect: str, size_prefix: str, reduction: sp.Expr, integral: sp.Expr | None,
-                    state_name: str) -> None:
+                    state_name: str, *, screen: bool = False) -> None:
     """The mass when the mass flow is scaled by ``1 - reduction(t)`` with the thrust: ``m(t) + int mdot
     reduction dt`` from the start, ``mdot = -dm/dt`` of the base model (a mass state's equation taken in).
     A constant mass flow uses the closed form ``m + mdot integral`` (``integral``: the integral of
     ``reduction`` from ``t0``); any other (a commanded throttle schedule's mass, a mass state whose flow follows
     a thrust table) carries the propellant not burnt as a new state ``state_name`` from 0. ``size_prefix``:
-    the parameters of earlier copies of the change (a scan's), which vanish in the base flow."""
+    the parameters of earlier copies of the change (a scan's), which vanish in the base flow. ``screen``: for
+    an onset scan's bank (many copies at once, scored at zero size), ``m + mdot(t) integral`` also when the
+    flow varies -- its rate is off by ``mdot' integral``, small where the flow varies slowly, and the scan
+    only places the refits' starts; a state per copy would make the bank's model many times larger
+    (measured: Tern-2's cold-motor diagnosis still running after 11 CPU minutes, against 2-3 before); the
+    refits use the state."""
     m_sym, mass = _role_definition(m, "mass", effect)
     mass_x = _expanded(m, mass)
     states = {s.symbol for s in m._states}
@@ -814,7 +821,7 @@ def _throttled_mass(m: Model, effect: str, size_prefix: str, reduction: sp.Expr,
     mdot = -rate
     mdot = mdot.xreplace({q: 0 for q in mdot.free_symbols if str(q).startswith(size_prefix)})
     constant = not (mdot.free_symbols - {c for c, _ in m._constants} - {p.symbol for p in m._parameters})
-    if constant and integral is not None:
+    if integral is not None and (constant or screen):
         m.redefine(m_sym, mass + mdot * integral)
         return
     unburnt = m.state(state_name, 0.0)
