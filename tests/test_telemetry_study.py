@@ -39,7 +39,12 @@ from telemetry_study.cases import (A_EXIT, ALL, BIAS_V, BY_NAME, DM0, EPS_THRUST
                                    RADAR_OFFSET, TAU, VISIBLE_2J, Hidden)
 
 #: Cases measured not to meet the bar (``run.acceptable``), with the measured reason.
-KNOWN_FAILURES: dict[str, str] = {}
+KNOWN_FAILURES: dict[str, str] = {
+    "light-load": "588676e: start_mass (dm_start -492 kg for -500) and thrust_level (eps 0.0103) reach the noise "
+                  "within BIC 10 and the hold-out (fitted on 12-72 s) predicts neither (mean squared error / "
+                  "sigma^2 23.8 and 69.2): 'not explained by the catalogue', the tie named -- x, h and v see "
+                  "thrust and mass only through their ratio",
+}
 
 WINDOW = (V.T_ACQUIRE, V.TF)
 
