@@ -761,9 +761,10 @@ def test_base_drag_acts_once_the_motor_stops(ra66_spec):
 
 def test_a_throttle_shape_on_a_mass_that_is_a_state():
     """A mass flow that is not constant (Tern-2's mass is a state burnt at its thrust table's rate): the
-    throttle window carries the propellant not burnt as a state. Simulated against the same vehicle with
-    the throttle written into its own equations by hand -- thrust and the mass equation's right-hand side
-    both times ``1 - d s(t)`` -- the outputs agree to the integrator's tolerance."""
+    throttle window scales the mass state's equation. Simulated against the same vehicle with the throttle
+    written into its own equations by hand -- thrust and the mass equation's right-hand side both times
+    ``1 - d s(t)``, the switch written out here -- the outputs agree to the integrator's tolerance. A mass
+    written in time whose flow is not constant carries the propellant not burnt as a new state."""
     import sys
     sys.path.insert(0, str(Path(__file__).parent / "vehicles"))
     import tern
@@ -771,9 +772,7 @@ def test_a_throttle_shape_on_a_mass_that_is_a_state():
     base = tern.build_model()
     effect = throttle_window_effect(base.t0, base.tf, 0.5)
     spec = with_effects(base, [effect])
-    assert any(str(s.symbol).endswith("_unburnt") for s in spec.states)
-    bank = with_effects(base, [effect.scan.bank])               # the onset scan's copies: no state each
-    assert not any(str(s.symbol).endswith("_unburnt") for s in bank.states)
+    assert len(spec.states) == len(base.states)
     d, on, off, w = 0.1, 3.0, 6.0, 0.5
     hand = base.to_model()
     t = hand.t
@@ -789,3 +788,52 @@ def test_a_throttle_shape_on_a_mass_that_is_a_state():
     assert np.max(np.abs(want["h"] - plain["h"])) > 100.0          # the throttle matters
     for name in ("x", "h", "v"):
         np.testing.assert_allclose(got[name], want[name], rtol=0, atol=1e-3 * (1 if name == "v" else 10))
+
+
+def test_a_throttle_shape_on_a_commanded_schedule_carries_the_unburnt_propellant():
+    """A mass written in time whose flow is not constant (a liquid stage's commanded throttle schedule): the
+    throttle window adds the propellant not burnt as a state, ``dq/dt = mdot(t) d s(t)``; against the same
+    vehicle with the mass as a state whose flow is scaled by hand, the outputs agree. An onset scan's copies
+    keep the closed form (no state each)."""
+    from rocketid.diagnostics.effects import throttle_window_effect
+    from rocketid.physics.ascent import ascent_dynamics, ascent_states, flight_conditions
+
+    def vehicle(mass_as_state: bool, factor=None):
+        m = ri.Model("schedule", 0.0, 60.0)
+        st = ascent_states(m, initial=(0.0, 0.0, 0.0, 1.5707963267948966))
+        fc = flight_conditions(m, st, atmosphere="us76")
+        t = m.t
+        setting = 1 - 0.3 * (sp.tanh((t - 25.0) / 2.0) - sp.tanh((t - 40.0) / 2.0)) / 2       # a bucket
+        flow = 300.0 * setting
+        if mass_as_state:
+            mass = m.state("mass_kg", 30000.0)
+            m.ode({mass: -flow * (factor if factor is not None else 1)})
+        else:                                       # the schedule's closed form: 30 t - int flow dt
+            def bucket_integral(u):                # int (tanh((u - 25)/2) - tanh((u - 40)/2)) / 2 du
+                return sp.log(sp.cosh((u - 25.0) / 2.0)) - sp.log(sp.cosh((u - 40.0) / 2.0))
+            mass = m.define("mass_kg", 30000.0 - 300.0 * (t - 0.3 * (bucket_integral(t) - bucket_integral(sp.S.Zero))))
+        thrust = 8.0e5 * setting * (factor if factor is not None else 1)
+        ascent_dynamics(m, st, fc, thrust=thrust, mass=mass, area=m.constant("S", 3.0),
+                        cd=m.parameter("CD", 0.4), cl=0.0 * m.input("alpha", times=(0.0, 60.0), values=(0.0, 0.0)),
+                        alpha=m.alpha)
+        for s in (st.x, st.h, st.v):
+            m.output(str(s), s, sigma=1.0)
+        return m.freeze()
+
+    closed = vehicle(False)
+    effect = throttle_window_effect(closed.t0, closed.tf, 1.0)
+    spec = with_effects(closed, [effect])
+    assert any(str(s.symbol).endswith("_unburnt") for s in spec.states)
+    bank = with_effects(closed, [effect.scan.bank])
+    assert not any(str(s.symbol).endswith("_unburnt") for s in bank.states)
+    d, on, off, w = 0.1, 10.0, 30.0, 1.0
+    t = sp.Symbol("t")
+    switch = (sp.tanh((t - on) / w) - sp.tanh((t - off) / w)) / 2
+    hand = vehicle(True, factor=1 - d * switch)
+    times = np.linspace(1.0, 60.0, 60)
+    got = ri.simulate(spec, {"CD": 0.4, "d_window": d, "t_win_on": on, "t_win_off": off}, times).outputs()
+    want = ri.simulate(hand, {"CD": 0.4}, times).outputs()
+    plain = ri.simulate(closed, {"CD": 0.4}, times).outputs()
+    assert np.max(np.abs(want["h"] - plain["h"])) > 100.0
+    for name in ("x", "h", "v"):
+        np.testing.assert_allclose(got[name], want[name], rtol=1e-6, atol=1e-3)

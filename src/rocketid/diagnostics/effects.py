@@ -802,11 +802,12 @@ def _throttle_edit(name: str, size_name: str, w: float) -> Callable:
 
 def _throttled_mass(m: Model, effect: str, size_prefix: str, reduction: sp.Expr, integral: sp.Expr | None,
                     state_name: str, *, screen: bool = False) -> None:
-    """The mass when the mass flow is scaled by ``1 - reduction(t)`` with the thrust: ``m(t) + int mdot
-    reduction dt`` from the start, ``mdot = -dm/dt`` of the base model (a mass state's equation taken in).
-    A constant mass flow uses the closed form ``m + mdot integral`` (``integral``: the integral of
-    ``reduction`` from ``t0``); any other (a commanded throttle schedule's mass, a mass state whose flow follows
-    a thrust table) carries the propellant not burnt as a new state ``state_name`` from 0. ``size_prefix``:
+    """The mass when the mass flow is scaled by ``1 - reduction(t)`` with the thrust. A mass that is a state
+    (burnt at a thrust table's rate) has its equation ``dm/dt = f`` replaced by ``f (1 - reduction)``. A mass
+    written in time: ``m(t) + int mdot reduction dt`` from the start, ``mdot = -dm/dt`` of the base model --
+    in closed form ``m + mdot integral`` when ``mdot`` is constant (``integral``: the integral of
+    ``reduction`` from ``t0``); otherwise (a commanded throttle schedule's mass) the propellant not burnt
+    is a new state ``state_name`` from 0. ``size_prefix``:
     the parameters of earlier copies of the change (a scan's), which vanish in the base flow. ``screen``: for
     an onset scan's bank (many copies at once, scored at zero size), ``m + mdot(t) integral`` also when the
     flow varies -- its rate is off by ``mdot' integral``, small where the flow varies slowly, and the scan
@@ -815,10 +816,13 @@ def _throttled_mass(m: Model, effect: str, size_prefix: str, reduction: sp.Expr,
     refits use the state."""
     m_sym, mass = _role_definition(m, "mass", effect)
     mass_x = _expanded(m, mass)
-    states = {s.symbol for s in m._states}
-    rate = sp.diff(mass_x, m.t) + sum((sp.diff(mass_x, st) * _expanded(m, _explicit_rhs(m, st, effect))
-                                       for st in mass_x.free_symbols & states), sp.S.Zero)
-    mdot = -rate
+    held = mass_x.free_symbols & {s.symbol for s in m._states}
+    if held:
+        # a mass state: its own equation takes the factor (as the thrust does), no new state
+        for st in held:
+            m.ode({st: _explicit_rhs(m, st, effect) * (1 - reduction)})
+        return
+    mdot = -sp.diff(mass_x, m.t)
     mdot = mdot.xreplace({q: 0 for q in mdot.free_symbols if str(q).startswith(size_prefix)})
     constant = not (mdot.free_symbols - {c for c, _ in m._constants} - {p.symbol for p in m._parameters})
     if integral is not None and (constant or screen):
