@@ -759,35 +759,38 @@ def test_base_drag_acts_once_the_motor_stops(ra66_spec):
         with_effects(ra66_spec, ["base_drag"])
 
 
-def test_a_throttle_shape_on_a_mass_that_is_a_state():
+def test_a_throttle_on_a_mass_that_is_a_state():
     """A mass flow that is not constant (Tern-2's mass is a state burnt at its thrust table's rate): the
-    throttle window scales the mass state's equation. Simulated against the same vehicle with the throttle
-    written into its own equations by hand -- thrust and the mass equation's right-hand side both times
-    ``1 - d s(t)``, the switch written out here -- the outputs agree to the integrator's tolerance. A mass
-    written in time whose flow is not constant carries the propellant not burnt as a new state."""
+    user's throttle (``throttle_effect``, knots given) scales the mass state's equation. Simulated against the
+    same vehicle with the throttle written into its own equations by hand -- thrust and the mass equation's
+    right-hand side both times ``1 - d(t)``, the piecewise-linear ``d`` written out here -- the outputs agree
+    to the integrator's tolerance. The catalogue's event shapes refuse a mass state, with the reason."""
     import sys
     sys.path.insert(0, str(Path(__file__).parent / "vehicles"))
     import tern
+    from rocketid.diagnostics import throttle_effect
     from rocketid.diagnostics.effects import throttle_window_effect
     base = tern.build_model()
-    effect = throttle_window_effect(base.t0, base.tf, 0.5)
-    spec = with_effects(base, [effect])
+    spec = with_effects(base, [throttle_effect((2.0, 4.0, 7.0, 9.0))])
     assert len(spec.states) == len(base.states)
-    d, on, off, w = 0.1, 3.0, 6.0, 0.5
+    levels = {"d_throttle_1": 0.1, "d_throttle_2": 0.15}
     hand = base.to_model()
     t = hand.t
-    switch = (sp.tanh((t - base.t0 - on) / w) - sp.tanh((t - base.t0 - off) / w)) / 2
+    d = sp.Piecewise((0.0, t < 2.0), (0.1 * (t - 2.0) / 2.0, t < 4.0), (0.1 + 0.05 * (t - 4.0) / 3.0, t < 7.0),
+                     (0.15 * (9.0 - t) / 2.0, t < 9.0), (0.0, True))
     thrust_sym = base.role("thrust")
-    hand.redefine(thrust_sym, hand.definition(thrust_sym) * (1 - d * switch))
-    hand.ode({hand.mass_kg: -hand.thrust_table * (1 - d * switch) / (tern.ISP * tern.G0)})
+    hand.redefine(thrust_sym, hand.definition(thrust_sym) * (1 - d))
+    hand.ode({hand.mass_kg: -hand.thrust_table * (1 - d) / (tern.ISP * tern.G0)})
     hand = hand.freeze()
     times = tern.sample_times()
-    got = ri.simulate(spec, {**tern.truth(base), "d_window": d, "t_win_on": on, "t_win_off": off}, times).outputs()
+    got = ri.simulate(spec, {**tern.truth(base), **levels}, times).outputs()
     want = ri.simulate(hand, tern.truth(base), times).outputs()
     plain = ri.simulate(base, tern.truth(base), times).outputs()
     assert np.max(np.abs(want["h"] - plain["h"])) > 100.0          # the throttle matters
     for name in ("x", "h", "v"):
         np.testing.assert_allclose(got[name], want[name], rtol=0, atol=1e-3 * (1 if name == "v" else 10))
+    with pytest.raises(ModelError, match="not offered for a mass that is a state"):
+        with_effects(base, [throttle_window_effect(base.t0, base.tf, 0.5)])
 
 
 def test_a_throttle_shape_on_a_commanded_schedule_carries_the_unburnt_propellant():
