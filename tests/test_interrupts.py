@@ -253,6 +253,10 @@ def _diagnose_and_signal(ra66_csv: Path, out: Path, sig: int, after_worker: floa
         _wait_for(lambda: bool(_workers(proc)), proc, "a forked worker")
         time.sleep(after_worker)
     else:
+        # the interrupt watchdog starts once the command has imported and set its handlers: a signal before
+        # that is Python's own KeyboardInterrupt in an import (measured: at load average 6 the imports took
+        # longer than 2.5 s and the test saw a traceback from scipy's import)
+        _wait_for(lambda: bool(_family(proc)), proc, "the interrupt watchdog")
         time.sleep(max(0.0, t0 + after_start - time.monotonic()))
     family = _family(proc)
     if proc.poll() is not None:
