@@ -65,8 +65,9 @@ class Case:
     out_of_catalogue: bool = False              # no catalogue family is right: only an honest verdict passes
     visible: bool | None = None                 # may "nothing found" pass? None: judged by the base fit's chi2/dof
                                                 # against the noise band; True: no (the effect shows in the data,
-                                                # measured with the truth's sigmas); False: yes. For data whose
-                                                # sigma is estimated (chi2/dof is then ~1 by construction)
+                                                # measured with the truth's sigmas); False: yes. Written for data
+                                                # whose sigma is estimated (then from the base model's residuals,
+                                                # chi2/dof ~1 by construction; since 588676e from the data alone)
 
 
 #: Located and refined shapes added to the catalogue after the studies were written, with their family
