@@ -35,3 +35,27 @@ def test_a_refit_that_exceeds_its_limit_is_reported_as_given_up():
     # in a worker process too (two tasks: the forked workers run them)
     both = refit_all([task, task], workers=2)
     assert all(r.gave_up and not r.success for r in both)
+
+
+def test_a_refits_time_limit_holds_for_all_its_solves(monkeypatch):
+    """The limit is the refit's, not each solve's: once the first solve has used it up, the solve from the
+    model's own guesses is not started (it used to get a full limit of its own, and a located shape's held
+    first solve a third)."""
+    from rocketid.diagnostics import refit as R
+    base = ra66m()
+    truth = with_effects(base, "thrust_level", {"eps_thrust": 0.02})
+    data = ri.simulate_measurements(truth, ra66m_truth(truth), ri.ra66_times(), seed=0)
+    mesh = ri.default_mesh(base, refine_first=3)
+    task = RefitTask(base_spec=base, data=data, mesh=mesh, effects=(CATALOGUE["thrust_level"],),
+                     added=("thrust_level",), start={}, sizes={"eps_thrust": 0.02}, base_objective=1e6,
+                     base_n_estimated=8, base_parameters=base.parameter_names, options={}, timeout=1e-3)
+    limits = []
+    real = R.estimate
+
+    def counted(*args, **kw):
+        limits.append(kw["options"]["max_wall_time"])
+        return real(*args, **kw)
+
+    monkeypatch.setattr(R, "estimate", counted)
+    refit, _ = run_refit(task)
+    assert refit.gave_up and len(limits) == 1 and limits[0] <= 1e-3
