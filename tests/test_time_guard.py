@@ -22,14 +22,19 @@ def test_a_simulation_gives_up_after_its_wall_time():
         ri.simulate(spec, None, [0.0, 1.0], max_wall_time=0)
 
 
-def test_a_refit_that_exceeds_its_limit_is_reported_as_given_up():
+def _thrust_refit(timeout: float) -> RefitTask:
+    """RA-66M data with a +2 % thrust error, and the refit that adds thrust_level, under ``timeout``."""
     base = ra66m()
     truth = with_effects(base, "thrust_level", {"eps_thrust": 0.02})
     data = ri.simulate_measurements(truth, ra66m_truth(truth), ri.ra66_times(), seed=0)
     mesh = ri.default_mesh(base, refine_first=3)
-    task = RefitTask(base_spec=base, data=data, mesh=mesh, effects=(CATALOGUE["thrust_level"],),
+    return RefitTask(base_spec=base, data=data, mesh=mesh, effects=(CATALOGUE["thrust_level"],),
                      added=("thrust_level",), start={}, sizes={"eps_thrust": 0.02}, base_objective=1e6,
-                     base_n_estimated=8, base_parameters=base.parameter_names, options={}, timeout=1e-3)
+                     base_n_estimated=8, base_parameters=base.parameter_names, options={}, timeout=timeout)
+
+
+def test_a_refit_that_exceeds_its_limit_is_reported_as_given_up():
+    task = _thrust_refit(timeout=1e-3)
     refit, _ = run_refit(task)
     assert not refit.success and refit.gave_up, refit.message
     # in a worker process too (two tasks: the forked workers run them)
@@ -42,13 +47,7 @@ def test_a_refits_time_limit_holds_for_all_its_solves(monkeypatch):
     model's own guesses is not started (it used to get a full limit of its own, and a located shape's held
     first solve a third)."""
     from rocketid.diagnostics import refit as R
-    base = ra66m()
-    truth = with_effects(base, "thrust_level", {"eps_thrust": 0.02})
-    data = ri.simulate_measurements(truth, ra66m_truth(truth), ri.ra66_times(), seed=0)
-    mesh = ri.default_mesh(base, refine_first=3)
-    task = RefitTask(base_spec=base, data=data, mesh=mesh, effects=(CATALOGUE["thrust_level"],),
-                     added=("thrust_level",), start={}, sizes={"eps_thrust": 0.02}, base_objective=1e6,
-                     base_n_estimated=8, base_parameters=base.parameter_names, options={}, timeout=1e-3)
+    task = _thrust_refit(timeout=1e-3)
     limits = []
     real = R.estimate
 
