@@ -593,9 +593,14 @@ class JointResult:
         return 2.0 * data_J / max(1, self.n_data - self.layout.n)
 
     @cached_property
+    def sensitivities(self) -> tuple:
+        """Each flight's sensitivity analysis at the joint estimate (:func:`rocketid.sensitivity.sensitivity_of`)."""
+        return tuple(sensitivity_of(r) for r in self.flights)
+
+    @cached_property
     def information(self) -> tuple:
         """Each flight's data information ``H_f`` on its parameter vector, at the joint estimate."""
-        return tuple(sensitivity_of(r).H_data for r in self.flights)
+        return tuple(sens.H_data for sens in self.sensitivities)
 
     @cached_property
     def covariance(self) -> np.ndarray:
@@ -627,8 +632,7 @@ class JointResult:
         from .estimability import coloured_score_covariance
         lay = self.layout
         B = np.diag(lay.prior_weight).astype(float)
-        for f, r in enumerate(self.flights):
-            sens = sensitivity_of(r)
+        for f, (r, sens) in enumerate(zip(self.flights, self.sensitivities)):
             Bf, _ = coloured_score_covariance(r, sens)
             A = lay.selection(f)
             B += A.T @ (Bf - sens.H_prior) @ A              # the priors are the joint's, counted once above
