@@ -17,8 +17,8 @@ import rocketid as ri
 from rocketid.errors import SensitivityError, SettingsError
 from rocketid.estimability import estimate_q1
 from rocketid.sampling import SamplingSettings, prepare_sampling
-from rocketid.sampling.worker import WorkerContext, evaluate_draw, trial_parameters
-from rocketid.sensitivity import SolutionPredictor
+from rocketid.sampling.worker import WorkerContext, evaluate_draw, learning_offsets, trial_parameters
+from rocketid.sensitivity import SolutionPredictor, SolutionSurface
 
 SEED = 7
 DRAWS = range(1, 9)
@@ -114,7 +114,8 @@ def test_a_prediction_across_a_bound_is_not_used(ctx):
 def test_first_order_prediction(ctx):
     """One step with the reference factors is the first-order change of the solution: its
     error against IPOPT's converged solution falls with the square of the change of q2."""
-    est, pred, ref = ctx.recipe.estimability, ctx.predictor, ctx.reference
+    est, ref = ctx.recipe.estimability, ctx.reference
+    pred = replace(ctx.predictor, surface=None)    # the steps from the reference solution
     q2_ref = ctx.recipe.reference_q2
     direction = est.q2_of(trial_parameters(ctx.recipe, SEED, 1)) - q2_ref
     errors, moves = [], []
@@ -178,3 +179,55 @@ def test_bordered_banded_solve_matches_a_dense_solve():
     np.testing.assert_allclose(solver.solve(b), np.linalg.solve(Ks.toarray(), b), rtol=1e-8, atol=1e-10)
     dense = sps.csc_matrix(rng.normal(size=(60, 60)))
     assert _BorderedBanded.factor(dense, np.array([0])) is None
+
+
+def test_the_learnt_surface_starts_the_steps_near_the_solution(ctx):
+    """Each worker's predictor learns the solution as a polynomial in the offset from 100
+    offsets drawn like the draws' (a stream of its own). Started from the polynomial, the steps
+    reach the same point as from the reference solution (both within IPOPT's tolerances of the
+    one solution) in far fewer back-solves."""
+    est, ref = ctx.recipe.estimability, ctx.reference
+    surface = ctx.predictor.surface
+    assert isinstance(surface, SolutionSurface)
+    assert surface.basis.shape[1] == len(ctx.recipe.reference_q2)      # the offsets move in q2's space
+    assert surface.degree >= 2 and surface.n_learnt >= 90
+    from_reference = replace(ctx.predictor, surface=None)
+    steps_surface, steps_reference = [], []
+    for k in range(1, 21):
+        q2 = est.q2_of(trial_parameters(ctx.recipe, SEED, k))
+        nlp = ref.nlp.with_offset(est.transform(q2).c)
+        a, b = ctx.predictor.predict(nlp), from_reference.predict(nlp)
+        assert a.converged and b.converged and not b.from_surface
+        if a.from_surface:
+            steps_surface.append(a.steps)
+            steps_reference.append(b.steps)
+        D = est.D
+        pa, pb = nlp.layout.parameters(a.x), nlp.layout.parameters(b.x)
+        np.testing.assert_allclose(pa / D, pb / D, rtol=0, atol=1e-8)
+    assert len(steps_surface) >= 15                                  # most draws are inside the learnt range
+    assert np.mean(steps_surface) <= 0.5 * np.mean(steps_reference)  # RA-66: about 2 against 6
+
+
+def test_the_surface_declines_offsets_it_has_not_learnt(ctx):
+    """Outside the learnt offsets' span or range the polynomial is not used (an extrapolated
+    polynomial is a poor start): the steps start from the reference solution."""
+    surface = ctx.predictor.surface
+    inside = learning_offsets(ctx.recipe, 3)[0]
+    assert surface.start(inside) is not None
+    across = surface.c_ref + surface.basis[:, 0] * 3.0 * (surface.hi[0] - surface.lo[0] + 1.0)
+    assert surface.start(across) is None
+    off_span = surface.c_ref.copy()
+    # a direction orthogonal to the learnt span (the offsets of (7.9) never move there)
+    free = np.linalg.svd(surface.basis.T)[2][-1]
+    assert surface.start(off_span + 0.1 * free) is None
+    nlp = ctx.reference.nlp.with_offset(across)
+    got = ctx.predictor.predict(nlp, max_steps=1)
+    assert got is None or not got.from_surface
+
+
+def test_learning_offsets_are_reproducible_and_not_a_runs_draws(ctx):
+    a, b = learning_offsets(ctx.recipe, 5), learning_offsets(ctx.recipe, 5)
+    np.testing.assert_array_equal(a, b)
+    est = ctx.recipe.estimability
+    run = np.array([est.transform(est.q2_of(trial_parameters(ctx.recipe, s, 1))).c for s in range(5)])
+    assert not np.any(np.all(np.isclose(a[:, None, :], run[None, :, :]), axis=2))

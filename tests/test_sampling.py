@@ -325,7 +325,9 @@ def test_process_pool_matches_serial(problem, serial):
     assert par.executor == "processes" and par.workers == 2
     _same_runs(par, serial)
     assert par.n_evaluated == par.n_draws + par.n_wasted
-    assert len(par.worker_setup_s) == 2 and all(t < 30 for t in par.worker_setup_s)
+    # each worker that ran a batch reports its set-up (the NLP, the KKT factors, the learnt
+    # surface: about 1 s); in a run this short the worker set up first may run every batch
+    assert 1 <= len(par.worker_setup_s) <= 2 and all(t < 30 for t in par.worker_setup_s)
 
 
 def test_dask_local_cluster_matches_serial(problem, serial):

@@ -43,7 +43,8 @@ from .errors import SensitivityError
 from .nlp import CollocationNLP, ParameterTransform
 from .solve import EstimationResult, NLPSolution, Prepared
 
-__all__ = ["Sensitivity", "sensitivity_at", "sensitivity_of", "solve_collocation", "SolutionPredictor", "Prediction"]
+__all__ = ["Sensitivity", "sensitivity_at", "sensitivity_of", "solve_collocation", "SolutionPredictor", "Prediction",
+           "SolutionSurface"]
 
 
 @dataclass(frozen=True)
@@ -294,6 +295,9 @@ class Prediction:
         linear rows in (7.9)) within theirs. A prediction that crosses a bound is a poor start:
         IPOPT needed 10-18 iterations from it against 4-8 from the reference solution (RA-66,
         10 of 300 draws), so the sampling starts those draws from the reference instead.
+    from_surface : bool
+        The steps started from the learnt solution surface (:meth:`SolutionPredictor.learn`),
+        not from the reference solution.
     """
 
     x: np.ndarray
@@ -303,6 +307,7 @@ class Prediction:
     dual: float
     converged: bool
     feasible: bool = True
+    from_surface: bool = False
 
 
 @dataclass(frozen=True, eq=False)
@@ -338,12 +343,17 @@ class SolutionPredictor:
         the other unknowns (collocation is: about 50 for RA-66), else SuperLU.
     formed_s : float
         Wall time of forming and factorizing ``K``.
+    surface : SolutionSurface or None
+        The solution as a polynomial in the offset, learnt from solutions at sample offsets
+        (:meth:`learn`): where it applies, the steps start from its value instead of from the
+        reference solution.
     """
 
     nlp: CollocationNLP
     solution: NLPSolution
     lu: object
     formed_s: float
+    surface: "SolutionSurface | None" = None
 
     #: Back-solves at most per prediction.
     MAX_STEPS = 8
@@ -390,7 +400,9 @@ class SolutionPredictor:
     def predict(self, nlp: CollocationNLP, *, tol: float = 1e-8, max_steps: int | None = None) -> Prediction | None:
         """The predicted solution of ``nlp`` (this predictor's NLP at another offset).
 
-        Steps from the reference solution with the reference factors until ``max |c_eq| <=
+        Steps with the reference factors, from the learnt surface's value where it applies
+        (:meth:`learn`; from the reference solution when those steps do not converge) or
+        from the reference solution, until ``max |c_eq| <=
         tol / 10`` and ``max |grad f + J^T lambda| <= min(1, tol * s_d)``, where ``s_d =
         max(1, mean |lambda| / 100)`` is IPOPT's dual scaling (IPOPT's own test uses the
         scaled problem, whose values are at most these), at most ``max_steps`` times (default
@@ -406,12 +418,32 @@ class SolutionPredictor:
         ref = self.nlp
         if nlp.structure is not ref.structure or nlp.n != ref.n or nlp.m != ref.m:
             return None
-        n, meq = nlp.n, nlp.layout.equality_rows.stop
-        x = np.array(self.solution.x, dtype=float)
-        lam = np.array(self.solution.mult_g, dtype=float)
-        s_d = max(1.0, float(np.mean(np.abs(lam))) / 100.0)
-        dual_tol, primal_tol = min(1.0, tol * s_d), tol / 10.0
         max_steps = self.MAX_STEPS if max_steps is None else int(max_steps)
+        if self.surface is not None:
+            z = self.surface.start(nlp.transform.c)
+            if z is not None:
+                lam = np.array(self.solution.mult_g, dtype=float)
+                lam[:nlp.layout.equality_rows.stop] = z[nlp.n:]
+                best = self._steps(nlp, z[:nlp.n], lam, tol, max_steps)
+                if best is not None and best.converged:
+                    return self._finish(nlp, replace(best, from_surface=True))
+        best = self._steps(nlp, np.array(self.solution.x, dtype=float), np.array(self.solution.mult_g, dtype=float),
+                           tol, max_steps)
+        if best is None or best.steps == 0:
+            return None
+        return self._finish(nlp, best)
+
+    def _finish(self, nlp: CollocationNLP, best: Prediction) -> Prediction:
+        return replace(best, mult_g=self._inequality_multipliers(nlp, best.x, best.mult_g),
+                       feasible=self._within_bounds(nlp, best.x))
+
+    def _steps(self, nlp: CollocationNLP, x: np.ndarray, lam: np.ndarray, tol: float,
+               max_steps: int) -> Prediction | None:
+        """Simplified Newton steps from ``(x, lam)`` with the reference factors; the point with
+        the smallest constraint violation (None when the first residual is not finite)."""
+        n, meq = nlp.n, nlp.layout.equality_rows.stop
+        s_d = max(1.0, float(np.mean(np.abs(self.solution.mult_g))) / 100.0)
+        dual_tol, primal_tol = min(1.0, tol * s_d) / 10.0, tol / 10.0
         best = None
         with np.errstate(all="ignore"):
             for step in range(max_steps + 1):
@@ -431,10 +463,63 @@ class SolutionPredictor:
                 x = x + d[:n]
                 lam = lam.copy()
                 lam[:meq] += d[n:]
-        if best is None or best.steps == 0:
-            return None
-        return replace(best, mult_g=self._inequality_multipliers(nlp, best.x, best.mult_g),
-                       feasible=self._within_bounds(nlp, best.x))
+        return best
+
+    def learn(self, offsets: np.ndarray, *, degree: int | None = None, tol: float = 1e-8) -> "SolutionPredictor":
+        """This predictor with a :class:`SolutionSurface` learnt from solutions at ``offsets``.
+
+        Each offset's solution is found by this predictor's steps (to ``tol``, up to 16
+        back-solves); the converged ones and the reference are fitted, component by component,
+        by a polynomial in the offset's coordinates within the span of ``offsets - c_ref``
+        (least squares). The steps of a later prediction then start from the polynomial's
+        value, which leaves them the error of a polynomial fit instead of the whole change of
+        the solution: on RA-66's sampling (3 fixed directions, 100 offsets drawn like the
+        draws, degree 4) 1.2 back-solves per draw instead of 5.8.
+
+        Parameters
+        ----------
+        offsets : ndarray, shape (k, n_p)
+            Sample offsets ``c``, drawn like the offsets to be predicted.
+        degree : int, optional
+            Of the polynomial; by default the highest, at most 4, whose number of
+            coefficients is at most ``k / 2.5``.
+        tol : float
+            Of the steps that solve at each offset.
+        """
+        t0 = time.perf_counter()
+        offsets = np.atleast_2d(np.asarray(offsets, dtype=float))
+        c_ref = np.asarray(self.nlp.transform.c, dtype=float)
+        meq = self.nlp.layout.equality_rows.stop
+        z_ref = np.concatenate([self.solution.x, self.solution.mult_g[:meq]])
+        dc = offsets - c_ref
+        _, sv, vt = np.linalg.svd(dc, full_matrices=False) if dc.size else (None, np.zeros(0), None)
+        rank = int(np.sum(sv > 1e-10 * max(1.0, sv[0] if sv.size else 0.0)))
+        if rank == 0:
+            return self
+        basis = vt[:rank].T
+        points, values = [np.zeros(rank)], [z_ref]
+        base = replace(self, surface=None)
+        for c, u in zip(offsets, np.einsum("ij,jk->ik", dc, basis)):
+            got = base.predict(self.nlp.with_offset(c), tol=tol, max_steps=16)
+            if got is not None and got.converged:
+                points.append(u)
+                values.append(np.concatenate([got.x, got.mult_g[:meq]]))
+        U, Z = np.array(points), np.array(values)
+        if degree is None:
+            degree = 0
+            while degree < 4 and 2.5 * SolutionSurface.n_terms(rank, degree + 1) <= len(U):
+                degree += 1
+        if degree < 1 or SolutionSurface.n_terms(rank, degree) > len(U):
+            return self
+        lo, hi = U.min(axis=0), U.max(axis=0)
+        surface = SolutionSurface(c_ref, z_ref, basis, lo, hi, int(degree), np.zeros((0, Z.shape[1])), len(U) - 1, 0.0)
+        F = surface.features(U)
+        # least squares by the normal equations, with the products in einsum's own loops: a
+        # BLAS product's summation order can follow its thread count, and every worker must
+        # learn the same surface to the bit (the draws' results do not depend on the executor)
+        gram = np.einsum("ij,ik->jk", F, F)
+        coef = np.linalg.solve(gram, np.einsum("ij,ik->jk", F, Z - z_ref))
+        return replace(self, surface=replace(surface, coef=coef, formed_s=time.perf_counter() - t0))
 
     @staticmethod
     def _within_bounds(nlp: CollocationNLP, x: np.ndarray) -> bool:
@@ -462,6 +547,77 @@ class SolutionPredictor:
         out = mult_g.copy()
         out[rows] = scaled
         return out
+
+
+@dataclass(frozen=True, eq=False)
+class SolutionSurface:
+    """The primal-dual solution of a re-offset NLP as a polynomial in its offset
+    (:meth:`SolutionPredictor.learn`).
+
+    The offsets ``c`` of the sampling's (7.9) move in a space of the dimension of ``q2``;
+    ``u = basis^T (c - c_ref)`` are their coordinates there, ``s = (u - mid) / half`` the
+    coordinates scaled to ``[-1, 1]`` over the learnt range, and the solution's change from
+    the reference is ``sum_j coef_j m_j(s)`` over the monomials ``m_j`` of total degree 0 to
+    ``degree``.
+
+    Attributes
+    ----------
+    c_ref : ndarray, shape (n_p,)
+        The reference offset.
+    z_ref : ndarray, shape (n + m_eq,)
+        The reference solution ``(x, mult_g[:m_eq])``.
+    basis : ndarray, shape (n_p, r)
+        Orthonormal basis of the learnt offsets' span.
+    lo, hi : ndarray, shape (r,)
+        The learnt coordinates' range; :meth:`start` declines offsets more than 5 % of it
+        outside (a polynomial extrapolates poorly).
+    degree : int
+    coef : ndarray, shape (n_terms, n + m_eq)
+        Per monomial, the change of ``(x, mult_g[:m_eq])``.
+    n_learnt : int
+        Offsets whose solutions converged and were fitted (besides the reference).
+    formed_s : float
+        Wall time of learning.
+    """
+
+    c_ref: np.ndarray
+    z_ref: np.ndarray
+    basis: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+    degree: int
+    coef: np.ndarray
+    n_learnt: int
+    formed_s: float
+
+    @staticmethod
+    def n_terms(r: int, degree: int) -> int:
+        """Monomials of total degree 0 to ``degree`` in ``r`` variables."""
+        from math import comb
+        return comb(r + degree, degree)
+
+    def features(self, U: np.ndarray) -> np.ndarray:
+        """The monomials at coordinates ``U`` (shape (k, r)), shape (k, n_terms)."""
+        from itertools import combinations_with_replacement
+        half = np.where(self.hi > self.lo, (self.hi - self.lo) / 2.0, 1.0)
+        S = (np.atleast_2d(U) - (self.hi + self.lo) / 2.0) / half
+        cols = [np.ones(S.shape[0])]
+        for d in range(1, self.degree + 1):
+            for idx in combinations_with_replacement(range(S.shape[1]), d):
+                cols.append(np.prod(S[:, list(idx)], axis=1))
+        return np.stack(cols, axis=1)
+
+    def start(self, c: np.ndarray) -> np.ndarray | None:
+        """The polynomial's ``(x, mult_g[:m_eq])`` at offset ``c``, or None where ``c`` is
+        outside the learnt span or range."""
+        dc = np.asarray(c, dtype=float) - self.c_ref
+        u = np.einsum("ij,i->j", self.basis, dc)
+        if np.max(np.abs(dc - np.einsum("ij,j->i", self.basis, u)), initial=0.0) > 1e-9 * max(1.0, float(np.max(np.abs(dc), initial=0.0))):
+            return None
+        margin = 0.05 * (self.hi - self.lo)
+        if np.any(u < self.lo - margin) or np.any(u > self.hi + margin):
+            return None
+        return self.z_ref + np.einsum("j,jk->k", self.features(u[None, :])[0], self.coef)
 
 
 class _BorderedBanded:

@@ -262,6 +262,8 @@ class WorkerContext:
             predictor = SolutionPredictor.at(nlp, sol) if ref.success else None
         except SensitivityError:
             predictor = None
+        if predictor is not None:
+            predictor = predictor.learn(learning_offsets(recipe))
         return cls(recipe, prepared, ref, time.perf_counter() - t0, bool(prepared.codegen_cached), os.getpid(),
                    predictor)
 
@@ -275,6 +277,25 @@ def trial_parameters(recipe: Recipe, seed: int, draw: int) -> np.ndarray:
         raise RocketidError(f"the sampling distribution returned shape {p.shape}; expected "
                             f"{spec.lower.shape} (one value per parameter)")
     return p
+
+
+#: Offsets from which each worker's predictor learns the solution surface.
+LEARNING_DRAWS = 100
+
+
+def learning_offsets(recipe: Recipe, n: int = LEARNING_DRAWS) -> np.ndarray:
+    """Offsets ``c`` of (7.9) drawn like the draws' (the settings' distribution, ``q2 =
+    V2^T p_trial``) from a stream of their own (not any run's), shape (n, n_p): the
+    predictor learns the solution's polynomial surface from them
+    (:meth:`~rocketid.sensitivity.SolutionPredictor.learn`). They only move IPOPT's start;
+    every draw's solution is IPOPT's."""
+    spec, est = recipe.spec, recipe.estimability
+    rng = np.random.default_rng(np.random.SeedSequence(0x5EED, spawn_key=(9,)))
+    out = []
+    for _ in range(int(n)):
+        p = np.asarray(recipe.settings.draw(rng, spec.lower, spec.upper, spec.nominal), dtype=float)
+        out.append(est.transform(est.q2_of(p)).c)
+    return np.array(out)
 
 
 def evaluate_draw(ctx: WorkerContext, seed: int, draw: int) -> DrawOutcome:
