@@ -64,6 +64,32 @@ def test_an_effect_of_one_flight_is_reported_as_found_in_that_flight_only(flight
     assert not list(out.glob(".*.tmp"))
 
 
+def test_the_joint_fit_holds_the_noise_each_flight_took_from_its_data(flight_files, tmp_path):
+    """``--sigma estimate`` on several flights: each flight's diagnosis takes its noise levels from
+    its data alone (the scatter of fourth differences), and the joint fit holds the same values
+    rather than estimating them from the base model's residuals, which hold B's altimeter bias.
+    Truth: the flights were simulated with the model's noise levels, and A is clean."""
+    f1, f2 = flight_files
+    out = tmp_path / "diag"
+    res = CliRunner().invoke(main, ["diagnose", str(f1), str(f2), *FAST, "--sigma", "estimate", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    d = json.loads((out / "diagnosis.json").read_text())
+    joint = d["joint"]
+    true_sigma = 1.0                                                       # ra66m's, in simulate_measurements
+    for label, f in (("A", f1), ("B", f2)):
+        own = json.loads((out / label / "diagnosis.json").read_text())["noise_from_data"]
+        assert set(own) == {"x", "h", "v"}
+        for ch, entry in own.items():
+            assert joint["noise_from_data"][label][ch] == pytest.approx(entry["sigma"], rel=1e-12)
+            assert joint["sigma"][label][ch] == pytest.approx(entry["sigma"], rel=1e-12)
+            assert entry["sigma"] == pytest.approx(true_sigma, rel=0.05)     # 19 800 samples
+    assert joint["success"]                     # the sigmas above are held, not relaxed to the residuals
+    # judged against the sensors' noise, the clean flight fits and the biased one does not
+    assert joint["consistency"]["A"]["chi2_per_dof_alone"] < 1.1 < joint["consistency"]["B"]["chi2_per_dof_alone"]
+    assert any("from the data alone" in n for n in joint["notes"])
+    assert d["flights"]["B"]["final_effects"] == ["bias_h"]
+
+
 def test_a_file_that_cannot_be_read_among_several_is_named(flight_files, tmp_path):
     f1, f2 = flight_files
     bad = tmp_path / "broken.csv"

@@ -22,7 +22,7 @@ from __future__ import annotations
 import html
 import math
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -94,6 +94,10 @@ class FlightsDiagnosis:
         Why the joint fit could not be made (empty when it was).
     timings : dict
         ``diagnose_s`` (all flights), ``joint_s`` (the joint fit and each flight refitted alone).
+    joint_noise : dict
+        ``{label: {channel: sigma}}``: the noise levels the joint fit held for the channels whose
+        sigma was to be estimated -- each flight's from its data alone, as its diagnosis took them
+        (:attr:`~rocketid.diagnostics.DiagnosisReport.noise_from_data`); empty when none was.
     """
 
     model: str
@@ -103,6 +107,7 @@ class FlightsDiagnosis:
     joint: Any
     joint_failed: str = ""
     timings: Any = None
+    joint_noise: dict = field(default_factory=dict)
 
     # ---- per flight
     def effects(self) -> dict[str, tuple | None]:
@@ -145,6 +150,11 @@ class FlightsDiagnosis:
         notes = list(self.joint.consistency().notes)
         if not self.joint.success:
             notes.insert(0, f"the joint fit did not converge: {self.joint.message}")
+        if self.joint_noise:
+            notes.append("the joint fit holds each flight's noise levels as its diagnosis took them from the data "
+                         "alone (not from the base model's residuals, which hold the misfit): "
+                         + "; ".join(f"{l}: " + ", ".join(f"{c} {v:.4g}" for c, v in d.items())
+                                     for l, d in self.joint_noise.items()))
         return notes
 
     # ---- reports
@@ -198,7 +208,8 @@ class FlightsDiagnosis:
             joint = {"success": bool(self.joint.success), "chi2_per_dof": finite_or_none(self.joint.chi2_per_dof),
                      "per_flight": fit["per_flight"], "parameters": fit["parameters"],
                      "standard_errors": fit["standard_errors"], "sigma": fit["sigma"],
-                     "consistency": self._consistency_rows(), "notes": self._joint_notes()}
+                     "consistency": self._consistency_rows(), "notes": self._joint_notes(),
+                     "noise_from_data": {l: dict(d) for l, d in self.joint_noise.items()}}
         return {"model": self.model, "flights": {l: self._flight_row(l, r) for l, r in zip(self.labels, self.reports)},
                 "joint": joint, "common": self.common(), "verdict": self.verdict(),
                 "timings": dict(self.timings or {})}
@@ -290,14 +301,36 @@ def diagnose_flights(datas: Sequence, labels: Sequence[str], spec, *, files: Seq
         reports.append(rep)
     t1 = time.perf_counter()
     joint, failed = None, ""
+    flights, joint_sigma, noise = _noise_of_the_flights(flights, reports, sigma)
     try:
-        joint = joint_estimate(flights, sigma=sigma)
+        joint = joint_estimate(flights, sigma=joint_sigma)
         joint.consistency()  # each flight refitted alone (cached)
     except RocketidError as exc:
         joint, failed = None, str(exc)
     result = FlightsDiagnosis(model=model_label or spec.name, labels=labels, files=files, reports=tuple(reports),
                               joint=joint, joint_failed=failed,
-                              timings={"diagnose_s": t1 - t0, "joint_s": time.perf_counter() - t1})
+                              timings={"diagnose_s": t1 - t0, "joint_s": time.perf_counter() - t1}, joint_noise=noise)
     if out is not None:
         result.write_joint(out)
     return result
+
+
+def _noise_of_the_flights(flights: list, reports: Sequence, sigma) -> tuple[list, Any, dict]:
+    """The joint fit's flights and ``sigma`` request when some noise levels are to be estimated.
+
+    Each flight's diagnosis took those from its data alone (:attr:`DiagnosisReport.noise_from_data`);
+    the joint fit holds the same values, written into each flight's data with the ones the request
+    gives, instead of estimating them again from the joint residuals of the base model (which hold
+    the misfit the diagnosis looks for). Returns ``(flights, sigma for joint_estimate,
+    {label: {channel: sigma}})``; unchanged when no report estimated any."""
+    from ..data import resolve_quantized, sigma_request
+
+    if not any(r.noise_from_data for r in reports):
+        return flights, sigma, {}
+    out, noise = [], {}
+    for fl, rep in zip(flights, reports):
+        given, _ = sigma_request(resolve_quantized(sigma, fl.data), fl.data.names)
+        values = {**given, **{c: float(v) for c, (v, _) in rep.noise_from_data.items()}}
+        noise[fl.label] = {c: float(v) for c, (v, _) in rep.noise_from_data.items()}
+        out.append(replace(fl, data=fl.data.with_sigma(values)))
+    return out, None, noise
