@@ -22,7 +22,10 @@ from __future__ import annotations
 
 import pytest
 
-import rocketid as ri
+#: The studies' per-case check (``study_harness.Study.check_case``) asserts as a test does: rewritten likewise.
+pytest.register_assert_rewrite("study_harness")
+
+import rocketid as ri  # noqa: E402
 
 
 @pytest.fixture(scope="session")

@@ -35,11 +35,12 @@ for extra in (HERE, HERE / "vehicles"):
 import tern as V  # noqa: E402
 
 import rocketid as ri  # noqa: E402
-from sounding_study import run, truth  # noqa: E402
+from sounding_study import truth  # noqa: E402
+from sounding_study.run import STUDY  # noqa: E402
 from sounding_study.cases import (A_EXIT, ALL, BASE_DRAG, BIAS_H, BY_NAME, DM0, DRAG_STEP, DT_COLD,  # noqa: E402
                                   K_COLD, K_V, TAU, WALLOPS, WIND, Hidden)
 
-#: Cases measured not to meet the bar (``run.acceptable``), with the measured reason.
+#: Cases measured not to meet the bar (``STUDY.acceptable``), with the measured reason.
 KNOWN_FAILURES: dict[str, str] = {
     "headwind": "ab3aede: the wind is found (wind_pl_6, chi2/dof 0.991) but partly explained: CD_0 (the rail-exit Mach "
                 "knot) at its lower bound. The catalogue's wind turns a finned rocket's thrust into the airflow at "
@@ -271,7 +272,7 @@ def test_the_cases_are_consistent():
     # the base drag was out of the catalogue until the study's runs called it explained by a density profile;
     # base_drag (2026-11-26) is its family since
     assert not [c.name for c in ALL if c.out_of_catalogue] and BY_NAME["base-drag"].right == {"base_drag"}
-    assert set(run.COEFFICIENTS) == {f"CD_{j}" for j in range(len(V.CD_KNOTS))}
+    assert set(STUDY.coefficients) == {f"CD_{j}" for j in range(len(V.CD_KNOTS))}
 
 
 def test_classification_rules():
@@ -279,45 +280,45 @@ def test_classification_rules():
     shape in Mach or a density profile is not a power-off base drag."""
     final = {"effects": ["back_pressure"], "verdict": "explained", "parameters": {}}
     case = BY_NAME["back-pressure"]
-    assert run.classify(case, {"final": final}) == "right & explained"
-    assert run.classify(case, {"final": {**final, "effects": ["thrust_profile_5"]}}) == "right & explained"
-    assert run.classify(case, {"final": {**final, "effects": ["burn_rate"]}}) == "WRONG called explained"
-    assert run.classify(case, {"final": {**final, "effects": ["wind"], "verdict": "partly explained"}}) \
+    assert STUDY.classify(case, {"final": final}) == "right & explained"
+    assert STUDY.classify(case, {"final": {**final, "effects": ["thrust_profile_5"]}}) == "right & explained"
+    assert STUDY.classify(case, {"final": {**final, "effects": ["burn_rate"]}}) == "WRONG called explained"
+    assert STUDY.classify(case, {"final": {**final, "effects": ["wind"], "verdict": "partly explained"}}) \
         == "wrong, not called explained"
-    assert run.classify(case, {"final": {**final, "effects": []}}) == "nothing found"
-    assert run.classify(case, {"final": {**final, "verdict": "partly explained"}}) == "right but partly"
+    assert STUDY.classify(case, {"final": {**final, "effects": []}}) == "nothing found"
+    assert STUDY.classify(case, {"final": {**final, "verdict": "partly explained"}}) == "right but partly"
     cold = BY_NAME["cold-motor"]
-    assert run.classify(cold, {"final": {**final, "effects": ["burn_rate"]}}) == "right & explained"
-    assert run.classify(cold, {"final": {**final, "effects": ["start_mass"]}}) == "WRONG called explained"
-    assert run.classify(BY_NAME["cold-day"], {"final": {**final, "effects": ["temperature"]}}) \
+    assert STUDY.classify(cold, {"final": {**final, "effects": ["burn_rate"]}}) == "right & explained"
+    assert STUDY.classify(cold, {"final": {**final, "effects": ["start_mass"]}}) == "WRONG called explained"
+    assert STUDY.classify(BY_NAME["cold-day"], {"final": {**final, "effects": ["temperature"]}}) \
         == "right & explained"
     winter = BY_NAME["cold-motor+cold-day"]
-    assert run.classify(winter, {"final": {**final, "effects": ["burn_rate"]}}) == "right but partly"
-    assert run.classify(winter, {"final": {**final, "effects": ["burn_rate", "density_pl_6"]}}) \
+    assert STUDY.classify(winter, {"final": {**final, "effects": ["burn_rate"]}}) == "right but partly"
+    assert STUDY.classify(winter, {"final": {**final, "effects": ["burn_rate", "density_pl_6"]}}) \
         == "right & explained"
     pair = BY_NAME["headwind+h-bias"]
-    assert run.classify(pair, {"final": {**final, "effects": ["wind_pl_4"]}}) == "right but partly"
-    assert run.classify(pair, {"final": {**final, "effects": ["wind_pl_4", "bias_h"]}}) == "right & explained"
+    assert STUDY.classify(pair, {"final": {**final, "effects": ["wind_pl_4"]}}) == "right but partly"
+    assert STUDY.classify(pair, {"final": {**final, "effects": ["wind_pl_4", "bias_h"]}}) == "right & explained"
     drag = BY_NAME["supersonic-drag"]
-    assert run.classify(drag, {"final": {**final, "effects": ["drag_mach_8"]}}) == "right & explained"
-    assert run.classify(drag, {"final": {**final, "effects": ["drag_bump"]}}) == "right & explained"
-    assert run.acceptable(drag, {"final": {**final, "effects": []}, "base_chi2": 1.01, "band": 1.05})
-    assert not run.acceptable(drag, {"final": {**final, "effects": []}, "base_chi2": 1.3, "band": 1.05})
+    assert STUDY.classify(drag, {"final": {**final, "effects": ["drag_mach_8"]}}) == "right & explained"
+    assert STUDY.classify(drag, {"final": {**final, "effects": ["drag_bump"]}}) == "right & explained"
+    assert STUDY.acceptable(drag, {"final": {**final, "effects": []}, "base_chi2": 1.01, "band": 1.05})
+    assert not STUDY.acceptable(drag, {"final": {**final, "effects": []}, "base_chi2": 1.3, "band": 1.05})
     base = BY_NAME["base-drag"]
-    assert run.classify(base, {"final": {**final, "effects": ["drag_mach_8"]}}) == "WRONG called explained"
-    assert run.classify(base, {"final": {**final, "effects": ["density_pl_7"]}}) == "WRONG called explained"
-    assert run.classify(base, {"final": {**final, "effects": ["base_drag_mach_2"]}}) == "right & explained"
-    assert not run.acceptable(base, {"final": {**final, "effects": ["drag_mach_8"]}})
+    assert STUDY.classify(base, {"final": {**final, "effects": ["drag_mach_8"]}}) == "WRONG called explained"
+    assert STUDY.classify(base, {"final": {**final, "effects": ["density_pl_7"]}}) == "WRONG called explained"
+    assert STUDY.classify(base, {"final": {**final, "effects": ["base_drag_mach_2"]}}) == "right & explained"
+    assert not STUDY.acceptable(base, {"final": {**final, "effects": ["drag_mach_8"]}})
     clean = BY_NAME["clean-700"]
-    assert not run.acceptable(clean, {"final": {**final}})
-    assert run.acceptable(clean, {"final": {**final, "effects": []}})
+    assert not STUDY.acceptable(clean, {"final": {**final}})
+    assert STUDY.acceptable(clean, {"final": {**final, "effects": []}})
 
 
 def test_a_case_makes_its_csv(tmp_path, monkeypatch):
     """The harness writes the case's data where ``ROCKETID_SOUNDING_DIR`` says, readable by ``read_csv``: the
     radar's tags, three channels, the hidden bias in the altitude."""
     monkeypatch.setenv("ROCKETID_SOUNDING_DIR", str(tmp_path))
-    path = run.make_data(BY_NAME["h-bias"])
+    path = STUDY.make_data(BY_NAME["h-bias"])
     assert path.parent == tmp_path and path.exists()
     data = ri.read_csv(path, ("x", "h", "v"))
     t = V.sample_times()
@@ -334,10 +335,4 @@ def test_diagnose_on_sounding_case(case, tmp_path, monkeypatch, request):
     """``rocketid diagnose`` (CLI) on the case: clean data add nothing, an effect the base fit does
     not show may go unfound, a visible one is found and explained, an out-of-catalogue one is not
     called explained, and a wrong family is never reported as explained."""
-    if case.name in KNOWN_FAILURES:
-        request.node.add_marker(pytest.mark.xfail(reason=KNOWN_FAILURES[case.name], strict=False))
-    monkeypatch.setenv("ROCKETID_SOUNDING_DIR", str(tmp_path))
-    record = run.diagnose_cli(case)
-    assert record["exit"] in (0, 1), record["stderr"]
-    assert run.classify(case, record) != "WRONG called explained", run.row(case, record)
-    assert run.acceptable(case, record), run.row(case, record)
+    STUDY.check_case(case, KNOWN_FAILURES, tmp_path, monkeypatch, request)

@@ -34,11 +34,12 @@ import corvid as V  # noqa: E402
 
 import rocketid as ri  # noqa: E402
 from study_harness import Case  # noqa: E402
-from telemetry_study import run, truth  # noqa: E402
+from telemetry_study import truth  # noqa: E402
+from telemetry_study.run import STUDY  # noqa: E402
 from telemetry_study.cases import (A_EXIT, ALL, BIAS_V, BY_NAME, DM0, EPS_THRUST, JET, K_H, MEASURED_2J,  # noqa: E402
                                    RADAR_OFFSET, TAU, VISIBLE_2J, Hidden)
 
-#: Cases measured not to meet the bar (``run.acceptable``), with the measured reason.
+#: Cases measured not to meet the bar (``STUDY.acceptable``), with the measured reason.
 KNOWN_FAILURES: dict[str, str] = {
     "light-load": "588676e: start_mass (dm_start -492 kg for -500) and thrust_level (eps 0.0103) reach the noise "
                   "within BIC 10 and the hold-out (fitted on 12-72 s) predicts neither (mean squared error / "
@@ -108,7 +109,7 @@ def test_the_telemetry_comes_as_stated(tmp_path, monkeypatch):
     dropped, quantized words, and no sigma (the diagnosis estimates it)."""
     monkeypatch.setenv("ROCKETID_TELEMETRY_DIR", str(tmp_path))
     case = BY_NAME["clean-900"]
-    path = run.make_data(case)
+    path = STUDY.make_data(case)
     assert path.parent == tmp_path
     lines = path.read_text().splitlines()
     assert lines[0] == "t,x,h,v" and any(",," in line for line in lines[1:])
@@ -221,7 +222,7 @@ def test_the_cases_are_consistent():
     assert sum(c.name.startswith("clean-") for c in ALL) == 5
     assert {c.name for c in ALL if c.out_of_catalogue} == {"site-gravity", "radar-geometry"}
     assert all(not c.right for c in ALL if c.out_of_catalogue)
-    assert set(run.COEFFICIENTS) == {f"CD_{j}" for j in range(len(V.CD_KNOTS))} | {"CL_alpha"}
+    assert set(STUDY.coefficients) == {f"CD_{j}" for j in range(len(V.CD_KNOTS))} | {"CL_alpha"}
 
 
 def test_the_harness_runs_the_regime(monkeypatch, tmp_path):
@@ -239,11 +240,11 @@ def test_the_harness_runs_the_regime(monkeypatch, tmp_path):
     monkeypatch.setattr(subprocess, "run", fake)
     monkeypatch.setenv("ROCKETID_TELEMETRY_DIR", str(tmp_path))
     monkeypatch.setenv("ROCKETID_SOUNDING_DIR", str(tmp_path))
-    record = run.diagnose_cli(BY_NAME["clean-900"])
+    record = STUDY.diagnose_cli(BY_NAME["clean-900"])
     assert seen[-1][-4:] == ["--sigma", "estimate", "--window", "12:"]
     assert record["command"].endswith("--workers 1 --sigma estimate --window 12:")
     assert sounding.STUDY.extra_args == ()
-    plain = dataclasses.replace(run.STUDY, extra_args=())
+    plain = dataclasses.replace(STUDY, extra_args=())
     plain.diagnose_cli(BY_NAME["clean-900"])
     assert seen[-1][-2:] == ["--workers", "1"]
 
@@ -253,30 +254,30 @@ def test_classification_rules():
     a located throttle shape is the thrust profile; a mass error for a time-tag delay is wrong."""
     final = {"effects": ["throttle_window"], "verdict": "explained", "parameters": {}}
     bucket = BY_NAME["deep-bucket"]
-    assert run.classify(bucket, {"final": final}) == "right & explained"
-    assert run.classify(bucket, {"final": {**final, "effects": ["thrust_level"]}}) == "right but partly"
-    assert run.classify(bucket, {"final": {**final, "effects": ["burn_rate"]}}) == "WRONG called explained"
+    assert STUDY.classify(bucket, {"final": final}) == "right & explained"
+    assert STUDY.classify(bucket, {"final": {**final, "effects": ["thrust_level"]}}) == "right but partly"
+    assert STUDY.classify(bucket, {"final": {**final, "effects": ["burn_rate"]}}) == "WRONG called explained"
     nothing = {"final": {**final, "effects": []}, "base_chi2": 1.001, "band": 1.05}
-    assert not run.acceptable(bucket, nothing)                        # visible: nothing found fails
-    assert run.acceptable(BY_NAME["hot-day"], nothing)                # absorbed by the drag table
+    assert not STUDY.acceptable(bucket, nothing)                      # visible: nothing found fails
+    assert STUDY.acceptable(BY_NAME["hot-day"], nothing)              # absorbed by the drag table
     delay = BY_NAME["frame-delay"]
-    assert run.classify(delay, {"final": {**final, "effects": ["start_mass"]}}) == "WRONG called explained"
-    assert run.classify(delay, {"final": {**final, "effects": ["time_offset"]}}) == "right & explained"
+    assert STUDY.classify(delay, {"final": {**final, "effects": ["start_mass"]}}) == "WRONG called explained"
+    assert STUDY.classify(delay, {"final": {**final, "effects": ["time_offset"]}}) == "right & explained"
     pair = BY_NAME["deep-bucket+v-bias"]
-    assert run.classify(pair, {"final": {**final, "effects": ["throttle_window"]}}) == "right but partly"
-    assert run.classify(pair, {"final": {**final, "effects": ["throttle_window", "bias_v"]}}) == "right & explained"
+    assert STUDY.classify(pair, {"final": {**final, "effects": ["throttle_window"]}}) == "right but partly"
+    assert STUDY.classify(pair, {"final": {**final, "effects": ["throttle_window", "bias_v"]}}) == "right & explained"
     hot = BY_NAME["hot-engine+hot-day"]
-    assert run.classify(hot, {"final": {**final, "effects": ["thrust_level"]}}) == "right & explained"
-    assert run.classify(hot, {"final": {**final, "effects": ["thrust_level", "temperature"]}}) == "right & explained"
+    assert STUDY.classify(hot, {"final": {**final, "effects": ["thrust_level"]}}) == "right & explained"
+    assert STUDY.classify(hot, {"final": {**final, "effects": ["thrust_level", "temperature"]}}) == "right & explained"
     radar = BY_NAME["radar-geometry"]
-    assert run.acceptable(radar, {"final": {**final, "effects": ["bias_x"], "verdict": "partly explained"}})
-    assert not run.acceptable(radar, {"final": {**final, "effects": ["bias_x"]}})
-    assert run.acceptable(BY_NAME["vibration-noise"], nothing)
-    assert not run.acceptable(BY_NAME["vibration-noise"], {"final": {**final, "effects": ["scale_v"],
-                                                                     "verdict": "partly explained"}})
+    assert STUDY.acceptable(radar, {"final": {**final, "effects": ["bias_x"], "verdict": "partly explained"}})
+    assert not STUDY.acceptable(radar, {"final": {**final, "effects": ["bias_x"]}})
+    assert STUDY.acceptable(BY_NAME["vibration-noise"], nothing)
+    assert not STUDY.acceptable(BY_NAME["vibration-noise"], {"final": {**final, "effects": ["scale_v"],
+                                                                       "verdict": "partly explained"}})
     legacy = Case("x", Hidden(), 0, "x", right=frozenset({"wind"}), needed=frozenset({"wind"}))
-    assert legacy.visible is None and run.acceptable(legacy, nothing)          # the other studies' rule
-    assert not run.acceptable(legacy, {**nothing, "base_chi2": 1.3})
+    assert legacy.visible is None and STUDY.acceptable(legacy, nothing)        # the other studies' rule
+    assert not STUDY.acceptable(legacy, {**nothing, "base_chi2": 1.3})
 
 
 @pytest.mark.slow
@@ -285,10 +286,4 @@ def test_diagnose_on_telemetry_case(case, tmp_path, monkeypatch, request):
     """``rocketid diagnose --sigma estimate --window 12:`` (CLI) on the case: clean data add nothing, a
     visible effect is found and explained, an invisible one may go unfound, an out-of-catalogue one is not
     called explained, and a wrong family is never reported as explained."""
-    if case.name in KNOWN_FAILURES:
-        request.node.add_marker(pytest.mark.xfail(reason=KNOWN_FAILURES[case.name], strict=False))
-    monkeypatch.setenv("ROCKETID_TELEMETRY_DIR", str(tmp_path))
-    record = run.diagnose_cli(case)
-    assert record["exit"] in (0, 1), record["stderr"]
-    assert run.classify(case, record) != "WRONG called explained", run.row(case, record)
-    assert run.acceptable(case, record), run.row(case, record)
+    STUDY.check_case(case, KNOWN_FAILURES, tmp_path, monkeypatch, request)

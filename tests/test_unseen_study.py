@@ -32,10 +32,11 @@ import kestrel as K  # noqa: E402
 
 import rocketid as ri  # noqa: E402
 from rocketid.physics.atmosphere import us76_pressure  # noqa: E402
-from unseen_study import run, truth  # noqa: E402
+from unseen_study import truth  # noqa: E402
+from unseen_study.run import STUDY  # noqa: E402
 from unseen_study.cases import ALL, CASES, Hidden  # noqa: E402
 
-#: Cases measured not to meet the bar (``run.acceptable``), with the measured reason.
+#: Cases measured not to meet the bar (``STUDY.acceptable``), with the measured reason.
 KNOWN_FAILURES: dict[str, str] = {
     "h-bias-drift": "a570929: bias_h_drift finds the drift (2.88 m + 0.147 m/s t for 3 + 0.15) at chi2/dof 1.086 "
                     "against the band 1.082: partly explained -- the data's own noise draw is above the band (the "
@@ -125,14 +126,14 @@ def test_classification_rules():
     """The outcome classes: a wrong family called explained is the worst outcome."""
     case = next(c for c in CASES if c.name == "back-pressure")
     final = {"effects": ["back_pressure"], "verdict": "explained", "parameters": {}}
-    assert run.classify(case, {"final": final}) == "right & explained"
-    assert run.classify(case, {"final": {**final, "effects": ["thrust_level"]}}) == "WRONG called explained"
-    assert run.classify(case, {"final": {**final, "effects": ["thrust_level"], "verdict": "partly explained"}}) \
+    assert STUDY.classify(case, {"final": final}) == "right & explained"
+    assert STUDY.classify(case, {"final": {**final, "effects": ["thrust_level"]}}) == "WRONG called explained"
+    assert STUDY.classify(case, {"final": {**final, "effects": ["thrust_level"], "verdict": "partly explained"}}) \
         == "wrong, not called explained"
-    assert run.classify(case, {"final": {**final, "effects": []}}) == "nothing found"
-    assert run.classify(case, {"final": {**final, "verdict": "partly explained"}}) == "right but partly"
+    assert STUDY.classify(case, {"final": {**final, "effects": []}}) == "nothing found"
+    assert STUDY.classify(case, {"final": {**final, "verdict": "partly explained"}}) == "right but partly"
     clean = next(c for c in CASES if c.name.startswith("clean"))
-    assert not run.acceptable(clean, {"final": {**final}})
+    assert not STUDY.acceptable(clean, {"final": {**final}})
 
 
 @pytest.mark.slow
@@ -141,10 +142,4 @@ def test_diagnose_on_unseen_case(case, tmp_path, monkeypatch, request):
     """``rocketid diagnose`` (CLI) on the case: clean data add nothing, an effect the base fit does
     not show may go unfound, a visible one is found and explained, and a wrong family is never
     reported as explained."""
-    if case.name in KNOWN_FAILURES:
-        request.node.add_marker(pytest.mark.xfail(reason=KNOWN_FAILURES[case.name], strict=False))
-    monkeypatch.setenv("ROCKETID_UNSEEN_DIR", str(tmp_path))
-    record = run.diagnose_cli(case)
-    assert record["exit"] in (0, 1), record["stderr"]
-    assert run.classify(case, record) != "WRONG called explained", run.row(case, record)
-    assert run.acceptable(case, record), run.row(case, record)
+    STUDY.check_case(case, KNOWN_FAILURES, tmp_path, monkeypatch, request)

@@ -27,14 +27,10 @@ for extra in (TESTS, TESTS / "vehicles"):
 import osprey as O  # noqa: E402
 from study_harness import Study, family  # noqa: E402
 
-from airlaunch_study.cases import ALL, BY_NAME  # noqa: E402
+from airlaunch_study.cases import ALL  # noqa: E402
 
 STUDY = Study("Osprey-A (air-launched)", TESTS / "vehicles" / "osprey.py", dict(O.truth(None)), ALL, family,
               "airlaunch_study.truth", "ROCKETID_AIR_DIR", "/tmp/rocketid-air", "air-table", timeout=3600.0)
-MODEL_FILE, COEFFICIENTS = STUDY.model_file, STUDY.coefficients
-data_dir, make_data, diagnose_cli = STUDY.data_dir, STUDY.make_data, STUDY.diagnose_cli
-classify, acceptable, sizes, row, table = STUDY.classify, STUDY.acceptable, STUDY.sizes, STUDY.row, STUDY.table
-__all__ = ["STUDY", "BY_NAME", "classify", "acceptable", "row", "diagnose_cli", "make_data", "main"]
 
 
 def main(argv=None) -> int:

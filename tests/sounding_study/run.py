@@ -28,15 +28,11 @@ for extra in (TESTS, TESTS / "vehicles"):
 import tern as V  # noqa: E402
 from study_harness import Study, family  # noqa: E402
 
-from sounding_study.cases import ALL, BY_NAME  # noqa: E402
+from sounding_study.cases import ALL  # noqa: E402
 
 STUDY = Study("Tern-2 (sounding rocket)", TESTS / "vehicles" / "tern.py", dict(V.truth(None)), ALL, family,
               "sounding_study.truth", "ROCKETID_SOUNDING_DIR", "/tmp/rocketid-sounding", "sounding-table",
               timeout=3600.0)
-MODEL_FILE, COEFFICIENTS = STUDY.model_file, STUDY.coefficients
-data_dir, make_data, diagnose_cli = STUDY.data_dir, STUDY.make_data, STUDY.diagnose_cli
-classify, acceptable, sizes, row, table = STUDY.classify, STUDY.acceptable, STUDY.sizes, STUDY.row, STUDY.table
-__all__ = ["STUDY", "BY_NAME", "classify", "acceptable", "row", "diagnose_cli", "make_data", "main"]
 
 
 def main(argv=None) -> int:

@@ -30,7 +30,7 @@ for extra in (TESTS, TESTS / "vehicles"):
 import corvid as V  # noqa: E402
 from study_harness import Study, family  # noqa: E402
 
-from telemetry_study.cases import ALL, BY_NAME  # noqa: E402
+from telemetry_study.cases import ALL  # noqa: E402
 
 #: What the regime asks of the command line: the noise levels estimated, the fit cut to the telemetry's span.
 EXTRA_ARGS = ("--sigma", "estimate", "--window", f"{V.T_ACQUIRE:g}:")
@@ -38,10 +38,6 @@ EXTRA_ARGS = ("--sigma", "estimate", "--window", f"{V.T_ACQUIRE:g}:")
 STUDY = Study("Corvid-L (real telemetry: unknown noise, multi-rate, from T+12 s)", TESTS / "vehicles" / "corvid.py",
               dict(V.truth(None)), ALL, family, "telemetry_study.truth", "ROCKETID_TELEMETRY_DIR",
               "/tmp/rocketid-telemetry", "telemetry-table", timeout=3600.0, extra_args=EXTRA_ARGS)
-MODEL_FILE, COEFFICIENTS = STUDY.model_file, STUDY.coefficients
-data_dir, make_data, diagnose_cli = STUDY.data_dir, STUDY.make_data, STUDY.diagnose_cli
-classify, acceptable, sizes, row, table = STUDY.classify, STUDY.acceptable, STUDY.sizes, STUDY.row, STUDY.table
-__all__ = ["STUDY", "BY_NAME", "classify", "acceptable", "row", "diagnose_cli", "make_data", "main"]
 
 
 def main(argv=None) -> int:

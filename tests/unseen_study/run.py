@@ -26,14 +26,10 @@ for extra in (TESTS, TESTS / "vehicles"):
 import kestrel as K  # noqa: E402
 from study_harness import Study, family  # noqa: E402
 
-from unseen_study.cases import ALL, BY_NAME  # noqa: E402
+from unseen_study.cases import ALL  # noqa: E402
 
 STUDY = Study("Kestrel-S", TESTS / "vehicles" / "kestrel.py", dict(K.truth(None)), ALL, family,
               "unseen_study.truth", "ROCKETID_UNSEEN_DIR", "/tmp/rocketid-unseen", "unseen-table", timeout=1800.0)
-MODEL_FILE, COEFFICIENTS = STUDY.model_file, STUDY.coefficients
-data_dir, make_data, diagnose_cli = STUDY.data_dir, STUDY.make_data, STUDY.diagnose_cli
-classify, acceptable, sizes, row, table = STUDY.classify, STUDY.acceptable, STUDY.sizes, STUDY.row, STUDY.table
-__all__ = ["STUDY", "BY_NAME", "classify", "acceptable", "row", "diagnose_cli", "make_data", "main"]
 
 
 def main(argv=None) -> int:
