@@ -764,7 +764,7 @@ def test_a_throttle_on_a_mass_that_is_a_state():
     user's throttle (``throttle_effect``, knots given) scales the mass state's equation. Simulated against the
     same vehicle with the throttle written into its own equations by hand -- thrust and the mass equation's
     right-hand side both times ``1 - d(t)``, the piecewise-linear ``d`` written out here -- the outputs agree
-    to the integrator's tolerance. The catalogue's event shapes refuse a mass state, with the reason."""
+    to the integrator's tolerance. The catalogue's throttle window does the same with its own shape."""
     import sys
     sys.path.insert(0, str(Path(__file__).parent / "vehicles"))
     import tern
@@ -789,8 +789,25 @@ def test_a_throttle_on_a_mass_that_is_a_state():
     assert np.max(np.abs(want["h"] - plain["h"])) > 100.0          # the throttle matters
     for name in ("x", "h", "v"):
         np.testing.assert_allclose(got[name], want[name], rtol=0, atol=1e-3 * (1 if name == "v" else 10))
-    with pytest.raises(ModelError, match="not offered for a mass that is a state"):
-        with_effects(base, [throttle_window_effect(base.t0, base.tf, 0.5)])
+    # the catalogue's window: thrust and the mass equation times 1 - d (s_on - s_off), s = (1 + tanh(u / w)) / 2
+    w, on, off, depth = 0.5, 3.0, 6.5, 0.12
+    window = with_effects(base, [throttle_window_effect(base.t0, base.tf, w)])
+    assert len(window.states) == len(base.states)                 # no new state: the mass state's own equation
+    hand = base.to_model()
+    t = hand.t
+
+    def switch(at):
+        return (1 + sp.tanh((t - base.t0 - at) / w)) / 2
+
+    d = depth * (switch(on) - switch(off))
+    hand.redefine(thrust_sym, hand.definition(thrust_sym) * (1 - d))
+    hand.ode({hand.mass_kg: -hand.thrust_table * (1 - d) / (tern.ISP * tern.G0)})
+    got = ri.simulate(window, {**tern.truth(base), "d_window": depth, "t_win_on": on, "t_win_off": off},
+                      times).outputs()
+    want = ri.simulate(hand.freeze(), tern.truth(base), times).outputs()
+    assert np.max(np.abs(want["h"] - plain["h"])) > 100.0
+    for name in ("x", "h", "v"):
+        np.testing.assert_allclose(got[name], want[name], rtol=0, atol=1e-3 * (1 if name == "v" else 10))
 
 
 def test_a_throttle_shape_on_a_commanded_schedule_carries_the_unburnt_propellant():

@@ -794,14 +794,14 @@ def _throttle_edit(name: str, size_name: str, w: float) -> Callable:
         if t_off is not None:
             switch, S = switch - onset_step(tau, t_off, w), S - integral(tau, t_off)
         m.redefine(t_sym, thrust * (1 - d * switch))
-        _throttled_mass(m, name, size_name, d * switch, d * S, f"{d}_unburnt", screen=screen, states=False)
+        _throttled_mass(m, name, size_name, d * switch, d * S, f"{d}_unburnt", screen=screen)
 
     edit.screens = True
     return edit
 
 
 def _throttled_mass(m: Model, effect: str, size_prefix: str, reduction: sp.Expr, integral: sp.Expr | None,
-                    state_name: str, *, screen: bool = False, states: bool = True) -> None:
+                    state_name: str, *, screen: bool = False) -> None:
     """The mass when the mass flow is scaled by ``1 - reduction(t)`` with the thrust. A mass that is a state
     (burnt at a thrust table's rate) has its equation ``dm/dt = f`` replaced by ``f (1 - reduction)``. A mass
     written in time: ``m(t) + int mdot reduction dt`` from the start, ``mdot = -dm/dt`` of the base model --
@@ -811,20 +811,11 @@ def _throttled_mass(m: Model, effect: str, size_prefix: str, reduction: sp.Expr,
     scan's), which vanish in the base flow. ``screen``: for an onset scan's bank (many copies at once, scored
     at zero size), ``m + mdot(t) integral`` also when the flow varies -- its rate is off by ``mdot'
     integral``, small where the flow varies slowly, and the scan only places the refits' starts; a state
-    per copy would make the bank's model many times larger. The refits use the state. ``states=False`` (the
-    catalogue's event shapes) refuses a mass state: with the throttle window and step offered on mass
-    states, Tern-2's cold-motor diagnosis took 1151 s against 144-284 s before and Osprey-A's hot motor
-    1005 s, the window's refit alone 188-194 s; :func:`throttle_effect` (knots the user gives) scales the
-    state's equation."""
+    per copy would make the bank's model many times larger. The refits use the state."""
     m_sym, mass = _role_definition(m, "mass", effect)
     mass_x = _expanded(m, mass)
     held = mass_x.free_symbols & {s.symbol for s in m._states}
     if held:
-        if not states:
-            raise ModelError(f"effect {effect!r} is not offered for a mass that is a state ({', '.join(map(str, held))} "
-                             f"of model {m.name!r}): its event-time refits took minutes each on such vehicles "
-                             "(Osprey-A's throttle window 188 s); pass throttle_effect(knots) as a candidate, which "
-                             "scales the mass state's equation")
         # a mass state: its own equation takes the factor (as the thrust does), no new state
         for st in held:
             m.ode({st: _explicit_rhs(m, st, effect) * (1 - reduction)})
