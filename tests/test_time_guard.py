@@ -58,3 +58,32 @@ def test_a_refits_time_limit_holds_for_all_its_solves(monkeypatch):
     monkeypatch.setattr(R, "estimate", counted)
     refit, _ = run_refit(task)
     assert refit.gave_up and len(limits) == 1 and limits[0] <= 1e-3
+
+
+def test_a_located_shapes_solve_from_the_guesses_keeps_its_scans_start():
+    """The solve from the model's own guesses (after a warm solve that ends above the noise) resets the
+    base coefficients to their guesses, but a located shape keeps where its scan put it: at its own guesses
+    (no size, its time at the start of the flight) the objective has no gradient in its time, and IPOPT
+    crawled there under heavy regularization for the refit's whole limit (Osprey-A's throttle window).
+    An effect that is not located starts from its guesses, as before."""
+    from rocketid.diagnostics.effects import throttle_step_effect
+    from rocketid.diagnostics.refit import _guesses_start, refit_spec
+    base = ra66m()
+    step = throttle_step_effect(base.t0, base.tf, 1.0)
+    fitted = {n: 1.1 * base.parameter(n).guess + 0.01 for n in base.parameter_names}   # a distorted base fit
+    task = RefitTask(base_spec=base, data=None, mesh=None, effects=(step,), added=("throttle_step",),
+                     start={**fitted, "t_step": 20.0, "d_step": 0.03}, sizes={"d_step": 0.05},
+                     base_objective=1e6, base_n_estimated=8, base_parameters=base.parameter_names, options={},
+                     timeout=60.0)
+    model = refit_spec(task, {})
+    cold = _guesses_start(task, model)
+    assert cold.parameter("t_step").guess == 20.0 and cold.parameter("d_step").guess == 0.03
+    for n in base.parameter_names:
+        assert cold.parameter(n).guess == base.parameter(n).guess      # not the distorted fit's
+    assert refit_spec(task).parameter("CD_M_0").guess == pytest.approx(fitted["CD_M_0"])   # the warm start's
+    plain = RefitTask(base_spec=base, data=None, mesh=None, effects=(CATALOGUE["thrust_level"],),
+                      added=("thrust_level",), start={**fitted, "eps_thrust": 0.02}, sizes={"eps_thrust": 0.02},
+                      base_objective=1e6, base_n_estimated=8, base_parameters=base.parameter_names, options={},
+                      timeout=60.0)
+    m = refit_spec(plain, {})
+    assert _guesses_start(plain, m) is m and m.parameter("eps_thrust").guess == 0.0

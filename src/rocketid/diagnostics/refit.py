@@ -1083,14 +1083,8 @@ def run_refit(task: RefitTask) -> tuple[Refit, EstimationResult | None]:
                        prepared=None if prep is None else replace(prep, spec=spec))
         if not (new.success and new.chi2_per_dof <= task.band_upper) and time.perf_counter() < deadline:
             # warm start from a fit the missing effect distorted: also from the model's own guesses (the
-            # same model and NLP: only the start differs). A located shape keeps the start its scan gave
-            # its own parameters: at its guesses (no size, its times at the start of the flight) the event
-            # has no gradient in its times, and IPOPT crawled there under heavy regularization (Osprey-A's
-            # throttle window on its mass state: 50 iterations in 40 s, chi2/dof 1.4e5, against 10
-            # iterations in 0.3 s from the scan's start)
-            if held:
-                own = set(model.parameter_names) - set(task.base_parameters)
-                model = refit_spec(task, {n: v for n, v in task.start.items() if n in own}, model=model)
+            # same model and NLP: only the start differs)
+            model = _guesses_start(task, model)
             cold = estimate(model, task.data, mesh=task.mesh, options=options(),
                             prepared=replace(new.prepared, spec=model))
             if cold.success and (not new.success or cold.objective < new.objective):
@@ -1109,6 +1103,20 @@ def run_refit(task: RefitTask) -> tuple[Refit, EstimationResult | None]:
                                                for k, v in e.least.items()},
                            base_values=task.base_values, base_chi2_per_dof=task.base_chi2_per_dof,
                            model_parameters=task.base_spec.parameter_names), new
+
+
+def _guesses_start(task: RefitTask, model):
+    """The task's model (``refit_spec(task, {})``) started for the refit from the model's own guesses: the
+    base coefficients at their guesses; a located shape's own parameters where its scan put them.
+
+    At its own guesses a located shape has no size and its times at the start of the flight, where the
+    objective has no gradient in its times: IPOPT crawled there under heavy regularization (Osprey-A's
+    throttle window on its mass state: 50 iterations in 40 s, chi2/dof 1.4e5, against 10 iterations in
+    0.3 s from the scan's start)."""
+    if not _locations_started(task):
+        return model
+    own = set(model.parameter_names) - set(task.base_parameters)
+    return refit_spec(task, {n: v for n, v in task.start.items() if n in own}, model=model)
 
 
 def _locations_started(task: RefitTask) -> tuple[str, ...]:
