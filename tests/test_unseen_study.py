@@ -43,10 +43,6 @@ KNOWN_FAILURES: dict[str, str] = {
                     "exact truth leaves chi2/n 1.084 on them, seed 307), so no model can reach it",
     "back-pressure+headwind": "5e37825 to a570929: a spurious misalignment (0.43 deg) added first, then "
                               "back_pressure and wind; chi2/dof 1.043, h not white, partly explained",
-    "sliver-tailoff": "5034405: thrust_profile_9, right family, partly explained. It was throttle_step, explained, "
-                      "while the catalogue's throttle shapes scaled the thrust of a mass state alone (its mass flow's "
-                      "scaling was silently lost); they now refuse a mass state (scaling its equation made the "
-                      "diagnoses of Tern-2 and Osprey-A take 17-19 minutes)",
 }
 
 
