@@ -376,9 +376,24 @@ def start_checks(spec: ModelSpec, data: Measurements, times: np.ndarray, S: np.n
     return notes
 
 
-def units_check(spec: ModelSpec, data: Measurements, times: np.ndarray, S: np.ndarray) -> list[str]:
+#: Below this unit factor (either way) a downrange channel's mismatch is reported, not refused: the
+#: downrange of a steep flight follows the wind and the launch angle, and a 4 m/s surface wind made a
+#: hybrid sounding rocket's GPS downrange 2.6 times the model's at its guess (Wren-H), which read as feet.
+DOWNRANGE_FIRM_FACTOR = 10.0
+
+
+def units_check(spec: ModelSpec, data: Measurements, times: np.ndarray, S: np.ndarray, *,
+                firm: bool = True) -> list[str]:
     """Likely unit mistakes: a measured altitude, downrange or speed whose size differs from the
     model's (the simulation at the guess ``S``) by a unit factor (km, feet, km/h, knots).
+
+    Parameters
+    ----------
+    firm : bool
+        True: the mismatches that refuse the data -- every one in altitude and speed, and in
+        downrange those by a factor of :data:`DOWNRANGE_FIRM_FACTOR` or more (km). False: the
+        others (a downrange channel that looks in feet), which are only reported: physics moves a
+        steep flight's downrange by a few times as well.
 
     Returns
     -------
@@ -401,9 +416,16 @@ def units_check(spec: ModelSpec, data: Measurements, times: np.ndarray, S: np.nd
         ratio = a / b        # the factor the data would need
         for what, factor in (_SPEED_UNITS if role == "speed" else _LENGTH_UNITS):
             if abs(math.log(ratio / factor)) < math.log(1.6) and abs(math.log(ratio)) > math.log(2.5):
-                out.append(f"channel {ch.name!r} ({role}) looks {what}: its largest value is {b:.4g} but the model "
-                           f"at the guess reaches {a:.4g}, {ratio:.3g} times more; convert the column (or, if the "
-                           "values are right, check the model's guess)")
+                strong = role != "downrange" or abs(math.log(factor)) >= math.log(DOWNRANGE_FIRM_FACTOR)
+                if strong != firm:
+                    break
+                text = (f"channel {ch.name!r} ({role}) looks {what}: its largest value is {b:.4g} but the model "
+                        f"at the guess reaches {a:.4g}, {ratio:.3g} times more; convert the column (or, if the "
+                        "values are right, check the model's guess)")
+                if not strong:
+                    text += (" -- not refused: a steep flight's downrange also moves by a few times with the wind "
+                             "and the launch angle")
+                out.append(text)
                 break
     return out
 
@@ -434,17 +456,18 @@ def start_states(spec: ModelSpec, data: Measurements, times: np.ndarray, p: np.n
     traj = simulate(spec, p, times, rtol=1e-8, atol=1e-8)
     S = np.array(traj.states, float)
     finite = np.all(np.isfinite(S), axis=1)
-    problems = []
+    problems, doubts = [], []
     if not traj.success or not finite.all():
         problems.append(f"the simulation at the guess failed ({traj.message or 'non-finite states'})")
     if finite.any():
         units = units_check(spec, data, times[finite], S[finite])
         if units:
             raise DataError("; ".join(units))
+        doubts = units_check(spec, data, times[finite], S[finite], firm=False)   # reported, not refused
         scale = _scale_gap(spec, data, times[finite], S[finite])
         if scale:
             # data orders of magnitude off the model: starting from them would hide the mistake
-            return StartPoint(_held(S, spec, p), "simulation", tuple(problems + scale))
+            return StartPoint(_held(S, spec, p), "simulation", tuple(problems + scale + doubts))
     if not problems:
         problems += start_checks(spec, data, times, S)
         far = {k: v for k, v in _misfit(spec, data, times, S).items() if v > FAR}
@@ -452,15 +475,16 @@ def start_states(spec: ModelSpec, data: Measurements, times: np.ndarray, p: np.n
             problems.append("the simulation at the guess is far from the data (RMS misfit " + ", ".join(
                 f"{k} {100 * v:.0f} %" for k, v in far.items()) + " of the measured range)")
     if not problems:
-        return StartPoint(S, "simulation")
+        return StartPoint(S, "simulation", tuple(doubts))
     Sd, source = states_from_data(spec, data, times, fallback=np.where(np.isfinite(S), S, np.nan))
     how = ", ".join(f"{k} {v}" for k, v in source.items())
     if all(v in ("simulation", "initial value") for v in source.values()):
         held = _held(S, spec, p)
         return StartPoint(held, "simulation", tuple(
-            problems + ["no state is measured directly, so the start cannot follow the data; states held at the "
-                        "simulation's last value"]))
-    return StartPoint(Sd, "data", tuple(problems + [f"the collocation states start from the data ({how}) instead"]))
+            doubts + problems + ["no state is measured directly, so the start cannot follow the data; states held "
+                                 "at the simulation's last value"]))
+    return StartPoint(Sd, "data", tuple(doubts + problems
+                                        + [f"the collocation states start from the data ({how}) instead"]))
 
 
 def _held(S: np.ndarray, spec: ModelSpec, p) -> np.ndarray:
