@@ -276,6 +276,26 @@ def _event_rivals(accs, scr: Screen, effect: Effect, pick: Acceptance, fit, chos
                       among=events)
 
 
+def _refined_rivals(accs, scr: Screen, effect: Effect, pick: Acceptance, first: int, fit, chosen, holdout, level,
+                    options, timeout) -> tuple:
+    """:func:`_tie_break` of a choice that leaves a residual against the refined shapes of other families
+    (contenders from index ``first`` on). A refined shape within :data:`BIC_TIE` does not replace an accepted
+    choice (:func:`_refine_choice`), but it is a rival: Wren-H on a 15 K warmer day, ``base_drag`` (chi2/dof
+    1.061) was called explained while ``temperature`` (``dT_air`` 14.98 for 15, chi2/dof 1.057) reached the
+    noise as well."""
+    k = next(j for j, a in enumerate(accs) if a is pick)
+    other = [j for j in range(first, len(scr.contenders))
+             if _family(scr.contenders[j].effect.name) != _family(effect.name)]
+    return _tie_break(accs, k, fit, chosen, [c.effect for c in scr.contenders], holdout, level, options, timeout,
+                      among=other)
+
+
+def _snug(pick: Acceptance, band) -> bool:
+    """An accepted refit at the noise's expected level with white residuals (no residual left to refine)."""
+    return pick.accepted and pick.refit.chi2_per_dof <= 1.0 + math.sqrt(2.0 / max(1, band.dof)) and \
+        _holm(pick.refit.whiteness) >= 0.05
+
+
 def _with_sizes(r: Refit) -> str:
     """``name (parameter value, ...)`` of a refit's effect parameters (at most four): what each rival says."""
     vals = dict(zip(r.parameter_names, (float(v) for v in r.p)))
@@ -626,7 +646,15 @@ def discover(fit: EstimationResult, candidates: Sequence[Effect], *, level: floa
         ambiguous, rivals = amb or ambiguous, riv or rivals
         if stop:
             break
+        first, snug = len(scr.contenders), _snug(accs[i], band)
         scr, accs, effect, pick, why = _refine_choice(ctx, current, chosen, scr, accs, i, why, n_tests)
+        if not snug and len(scr.contenders) > first:
+            k, tie = _refined_rivals(accs, scr, effect, pick, first, current, chosen, holdout, level, options, timeout)
+            why, stop, amb, riv = _settle(number, tie, k, scr, accs, keep, why, notes, steps)
+            ambiguous, rivals = amb or ambiguous, riv or rivals
+            if stop:
+                break
+            effect, pick = scr.contenders[k].effect, accs[k]
         if effect.scan is not None:
             # event shapes of other families explain an event alike (a mass released, a throttle-up from the
             # same time: Halcyon-8's 150 kg dropped at 55 s as mass_jettison at BIC 2398.8, throttle_step 2407.9)
@@ -744,8 +772,7 @@ def _refine_choice(ctx: _Search, current: EstimationResult, chosen: list, scr: S
     ``start_mass`` at BIC 3115.8 met ``thrust_profile_3`` at 3124.9, whose hold-out error was 3.8 times
     start_mass's, just short of decisive, and the right answer became "the data cannot tell them apart")."""
     effect, pick = scr.contenders[i].effect, accs[i]
-    snug = pick.accepted and pick.refit.chi2_per_dof <= 1.0 + math.sqrt(2.0 / max(1, ctx.band.dof)) and \
-        _holm(pick.refit.whiteness) >= 0.05
+    snug = _snug(pick, ctx.band)
     if not ctx.refine:
         return scr, accs, effect, pick, why
     fam = _near_rivals(accs, scr, ctx.vehicle, i, ctx.band) if snug else \
