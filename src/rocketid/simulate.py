@@ -314,6 +314,13 @@ def simulate(spec: ModelSpec, p: Sequence[float] | Mapping | None = None, times:
             ok, msg = False, (f"gave up after {max_wall_time:g} s of wall time (max_wall_time) at t = {stop.t:.4g} s "
                               f"of [{spec.t0:g}, {spec.tf:g}]")
             break
+        except (ZeroDivisionError, OverflowError, ValueError) as exc:
+            # the right-hand side evaluated where it is not defined (a division by a mass or speed that
+            # reached zero, a square root of a negative number): the trajectory ends here, as a failure
+            # the callers report (Wren-H with 1.5 kg of oxidiser vented: the start simulation crashed)
+            ok, msg = False, (f"integration failed on [{a:g}, {b:g}]: the equations could not be evaluated "
+                              f"({type(exc).__name__}: {exc})")
+            break
         if not sol.success:
             ok, msg = False, f"integration failed on [{a:g}, {b:g}]: {sol.message}"
             break
