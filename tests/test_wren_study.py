@@ -38,7 +38,26 @@ from wren_study.cases import (ALL, BALLAST, BY_NAME, DT_HOT, GEOID, HEADWIND, HO
 from wren_study.run import STUDY  # noqa: E402
 
 #: Cases measured not to meet the bar (``STUDY.acceptable``), with the measured reason. None run yet.
-KNOWN_FAILURES: dict[str, str] = {}
+KNOWN_FAILURES: dict[str, str] = {
+    "hot-tank": "3a42d0c: burn_rate + start_mass + base_drag_mach_2, chi2/dof 929 -> 1.678, partly explained (1348 s): "
+                "the hotter tank changes thrust and mass flow together, in time, and no catalogue shape does that "
+                "(the user's throttle_effect(knots) would; the verdict now suggests it)",
+    "cold-tank": "3a42d0c: burn_rate + base_drag_mach_5 + misalignment, chi2/dof 589 -> 1.266 with v not white, "
+                 "partly explained (1333 s): as hot-tank",
+    "burn-through": "3a42d0c: base_drag_mach_5 + drag_mach_7 + temperature, chi2/dof 6.33 -> 1.556, partly "
+                    "explained: a thrust loss from 6.8 s that grows (the port at the liner) is taken by drag shapes; "
+                    "thrust_profile on the mesh did not win",
+    "gps-latency": "3a42d0c: time_offset (tau 0.1972 +- 0.0007 for 0.2) + base_drag (-0.0052), called explained: "
+                   "the catalogue's time offset is first order, y - tau dy/dt, and at 0.2 s the neglected "
+                   "tau^2/2 d2v/dt2 across the thrust knee is about 1 m/s (4 sigma); a negative power-off drag "
+                   "takes it up",
+    "nose-ballast": "3a42d0c: thrust_level (eps_thrust -0.030) called explained; start_mass (dm_start 1.62 for 1.5) "
+                    "ends at chi2/dof 1.275 above the band 1.254 because the declared rail-exit speed is the "
+                    "nominal mass's (the heavier rocket leaves the rail slower), which a thrust error absorbs",
+    "rail-angle": "3a42d0c: wind_pl_5 (a 0.8 m/s surface wind tilts the weathercocking rocket at rail exit by "
+                  "about the rail's 1.5 deg) called explained; no catalogue entry moves a declared start, so the "
+                  "wind is the only shape that can",
+}
 
 
 @pytest.fixture(scope="module")
