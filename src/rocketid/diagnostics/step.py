@@ -266,26 +266,19 @@ def _settle(number: int, tie: str, index: int | None, scr: Screen, accs, keep: t
     return why, False, "", tie
 
 
-def _event_rivals(accs, scr: Screen, effect: Effect, pick: Acceptance, fit, chosen, holdout, level, options,
-                  timeout) -> tuple:
-    """:func:`_tie_break` of the chosen event shape against the event shapes of other families."""
-    k = next(j for j, a in enumerate(accs) if a is pick)
-    events = [j for j, c in enumerate(scr.contenders) if c.effect.scan is not None
-              and _family(c.effect.name) != _family(effect.name)]
-    return _tie_break(accs, k, fit, chosen, [c.effect for c in scr.contenders], holdout, level, options, timeout,
-                      among=events)
+def _rivals(accs, scr: Screen, effect: Effect, pick: Acceptance, among, fit, chosen, holdout, level, options,
+            timeout) -> tuple:
+    """:func:`_tie_break` of the choice against the contenders ``among(index, contender)`` selects, of other
+    families than the choice's.
 
-
-def _refined_rivals(accs, scr: Screen, effect: Effect, pick: Acceptance, first: int, fit, chosen, holdout, level,
-                    options, timeout) -> tuple:
-    """:func:`_tie_break` of a choice that leaves a residual against the refined shapes of other families
-    (contenders from index ``first`` on). A refined shape within :data:`BIC_TIE` does not replace an accepted
-    choice (:func:`_refine_choice`), but it is a rival: Wren-H on a 15 K warmer day, ``base_drag`` (chi2/dof
-    1.061) was called explained while ``temperature`` (``dT_air`` 14.98 for 15, chi2/dof 1.057) reached the
-    noise as well."""
+    Two uses in :func:`discover`: the chosen event shape against the event shapes of other families; a
+    choice that leaves a residual against the refined shapes of other families (a refined shape within
+    :data:`BIC_TIE` does not replace an accepted choice, :func:`_refine_choice`, but it is a rival: Wren-H on
+    a 15 K warmer day, ``base_drag`` at chi2/dof 1.061 was called explained while ``temperature``, ``dT_air``
+    14.98 for 15, reached 1.057)."""
     k = next(j for j, a in enumerate(accs) if a is pick)
-    other = [j for j in range(first, len(scr.contenders))
-             if _family(scr.contenders[j].effect.name) != _family(effect.name)]
+    other = [j for j, c in enumerate(scr.contenders)
+             if among(j, c) and _family(c.effect.name) != _family(effect.name)]
     return _tie_break(accs, k, fit, chosen, [c.effect for c in scr.contenders], holdout, level, options, timeout,
                       among=other)
 
@@ -649,7 +642,8 @@ def discover(fit: EstimationResult, candidates: Sequence[Effect], *, level: floa
         first, snug = len(scr.contenders), _snug(accs[i], band)
         scr, accs, effect, pick, why = _refine_choice(ctx, current, chosen, scr, accs, i, why, n_tests)
         if not snug and len(scr.contenders) > first:
-            k, tie = _refined_rivals(accs, scr, effect, pick, first, current, chosen, holdout, level, options, timeout)
+            k, tie = _rivals(accs, scr, effect, pick, lambda j, c: j >= first, current, chosen, holdout, level,
+                             options, timeout)
             why, stop, amb, riv = _settle(number, tie, k, scr, accs, keep, why, notes, steps)
             ambiguous, rivals = amb or ambiguous, riv or rivals
             if stop:
@@ -658,7 +652,8 @@ def discover(fit: EstimationResult, candidates: Sequence[Effect], *, level: floa
         if effect.scan is not None:
             # event shapes of other families explain an event alike (a mass released, a throttle-up from the
             # same time: Halcyon-8's 150 kg dropped at 55 s as mass_jettison at BIC 2398.8, throttle_step 2407.9)
-            k, tie = _event_rivals(accs, scr, effect, pick, current, chosen, holdout, level, options, timeout)
+            k, tie = _rivals(accs, scr, effect, pick, lambda j, c: c.effect.scan is not None, current, chosen,
+                             holdout, level, options, timeout)
             why, stop, amb, riv = _settle(number, tie, k, scr, accs, keep, why, notes, steps)
             ambiguous, rivals = amb or ambiguous, riv or rivals
             if stop:
