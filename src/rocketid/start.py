@@ -400,6 +400,11 @@ def units_check(spec: ModelSpec, data: Measurements, times: np.ndarray, S: np.nd
     list of str
         One message per channel, naming the likely unit and the fix.
     """
+    return [text for text, strong in _unit_mismatches(spec, data, times, S) if strong == firm]
+
+
+def _unit_mismatches(spec: ModelSpec, data: Measurements, times: np.ndarray, S: np.ndarray) -> list[tuple]:
+    """``(message, firm)`` of each channel that looks in another unit (:func:`units_check`)."""
     out = []
     for sym, ch in _state_channels(spec, data).items():
         role = next((r for r in ("altitude", "downrange", "speed") if spec.role(r) == sym), None)
@@ -417,15 +422,13 @@ def units_check(spec: ModelSpec, data: Measurements, times: np.ndarray, S: np.nd
         for what, factor in (_SPEED_UNITS if role == "speed" else _LENGTH_UNITS):
             if abs(math.log(ratio / factor)) < math.log(1.6) and abs(math.log(ratio)) > math.log(2.5):
                 strong = role != "downrange" or abs(math.log(factor)) >= math.log(DOWNRANGE_FIRM_FACTOR)
-                if strong != firm:
-                    break
                 text = (f"channel {ch.name!r} ({role}) looks {what}: its largest value is {b:.4g} but the model "
                         f"at the guess reaches {a:.4g}, {ratio:.3g} times more; convert the column (or, if the "
                         "values are right, check the model's guess)")
                 if not strong:
                     text += (" -- not refused: a steep flight's downrange also moves by a few times with the wind "
                              "and the launch angle")
-                out.append(text)
+                out.append((text, strong))
                 break
     return out
 
@@ -460,10 +463,10 @@ def start_states(spec: ModelSpec, data: Measurements, times: np.ndarray, p: np.n
     if not traj.success or not finite.all():
         problems.append(f"the simulation at the guess failed ({traj.message or 'non-finite states'})")
     if finite.any():
-        units = units_check(spec, data, times[finite], S[finite])
-        if units:
-            raise DataError("; ".join(units))
-        doubts = units_check(spec, data, times[finite], S[finite], firm=False)   # reported, not refused
+        units = _unit_mismatches(spec, data, times[finite], S[finite])
+        if any(strong for _, strong in units):
+            raise DataError("; ".join(text for text, strong in units if strong))
+        doubts = [text for text, strong in units if not strong]                  # reported, not refused
         scale = _scale_gap(spec, data, times[finite], S[finite])
         if scale:
             # data orders of magnitude off the model: starting from them would hide the mistake
