@@ -548,3 +548,32 @@ def test_an_event_shape_is_chosen_only_when_it_explains_and_not_at_the_start():
     later = Refit(**{**at_start.__dict__, "p": np.array([0.3, 0.004, 19.4])})
     assert S._from_the_start(onset, at_start) and not S._from_the_start(onset, later)
     assert not S._from_the_start(CATALOGUE["misalignment"], at_start)
+
+
+def _wind_refit(values, knots_km=(0.0, 0.5, 1.5, 3.0)):
+    """A refit that adds the catalogue's piecewise-linear wind through ``values`` (m/s) at ``knots_km``."""
+    from rocketid.diagnostics.effects import wind_profile_effect
+    wind = wind_profile_effect(knots_km, name="wind_pl_test")
+    names = tuple(wind.realistic)
+    base = refit("wind_pl_test", 0.992)
+    return wind, Refit(**{**base.__dict__, "parameter_names": ("CD",) + names, "p": np.array([0.3, *values]),
+                          "std": np.array([0.01] + [1.0] * len(names)), "effect_parameters": names,
+                          "n_estimated": 8 + len(names), "sizes": dict(wind.realistic), "changes": dict(wind.changes)})
+
+
+def test_a_wind_profile_is_judged_by_its_shear_between_knots():
+    """Every knot value within five realistic speeds, yet the profile swings by 100-200 m/s between knots a
+    kilometre apart (Wren-H's pad hold: a 13-knot wind through -113, +101 m/s stood in for a motor change): no
+    atmosphere shears so, and the refit is implausible. A jet stream's profile passes."""
+    wind, _ = _wind_refit([0.0] * 4)
+    # the realistic change is a shear of 20 m/s per km across the knots' altitudes
+    assert wind.changes == {("W_0", "W_1"): pytest.approx(10.0), ("W_1", "W_2"): pytest.approx(20.0),
+                            ("W_2", "W_3"): pytest.approx(30.0)}
+    jet = accept(_wind_refit([3.0, 8.0, 30.0, 70.0])[1], BAND)
+    assert jet.accepted, jet.reason()
+    wiggle = accept(_wind_refit([3.0, 8.0, -110.0, 100.0])[1], BAND)
+    assert not wiggle.check("size").passed and not wiggle.admissible
+    assert "W_2 - W_1 = -118 is 5.9 times the realistic change 20 between them" in wiggle.check("size").detail
+    assert "W_3 - W_2 = +210 is 7.0 times" in wiggle.check("size").detail
+    # the knot values alone (at most 110/30 = 3.7 realistic speeds) would have passed
+    assert max(wiggle.refit.size_ratio().values()) < SIZE_FACTOR

@@ -650,7 +650,7 @@ class EstimationResult:
 
 def estimate(spec: ModelSpec, data: Measurements, *, guess: Mapping | Sequence[float] | None = None,
              mesh: Mesh | None = None, options: Mapping[str, Any] | None = None,
-             warm_start: EstimationResult | None = None, prepared: Prepared | None = None,
+             warm_start: "EstimationResult | NLPSolution | None" = None, prepared: Prepared | None = None,
              sigma: str | Mapping[str, float | str] | None = None,
              window: Sequence[float] | None = None) -> EstimationResult:
     """Estimate all parameters of ``spec`` from ``data`` (the NLP (7.5)).
@@ -665,8 +665,9 @@ def estimate(spec: ModelSpec, data: Measurements, *, guess: Mapping | Sequence[f
         Discretization (default: :func:`default_mesh`).
     options : mapping, optional
         IPOPT options.
-    warm_start : EstimationResult, optional
-        Start from a previous solution of the same problem (primal and dual).
+    warm_start : EstimationResult or NLPSolution, optional
+        Start from a previous solution of the same problem (primal and dual): a fit, or the
+        solution IPOPT returned for it (what a refit's worker process hands back).
     prepared : Prepared, optional
         Reuse an already built NLP (same spec, data and mesh).
     sigma : "estimate" or mapping, optional
@@ -717,8 +718,12 @@ def estimate(spec: ModelSpec, data: Measurements, *, guess: Mapping | Sequence[f
     check_guess(spec, p0)
     warm = None
     if warm_start is not None:
-        x0 = warm_start.x.copy()
-        warm = warm_start.solution
+        warm = warm_start if isinstance(warm_start, NLPSolution) else warm_start.solution
+        x0 = np.array(warm.x, float)
+        if x0.shape != (nlp.n,):
+            raise SettingsError(f"warm_start: a solution of {x0.size} variables cannot start this problem of "
+                                f"{nlp.n} (another model, data or mesh); start it from the model's guesses instead "
+                                "(no warm_start)")
         if guess is not None:
             x0 = nlp.layout.with_reduced(x0, p0)  # (7.5): the reduced parameters are p
     else:

@@ -33,7 +33,10 @@ answer comes from taking the best helper for the explanation. An effect is
    its realistic size *for this vehicle* (a fraction of its thrust, mass flow,
    speed; :meth:`~rocketid.diagnostics.effects.Effect.sizes`), not below the least
    its physics allows (:attr:`~rocketid.diagnostics.effects.Effect.least`: Earth's
-   rotation), and not held at a bound.
+   rotation), not held at a bound, and no change between neighbouring parameters of a
+   profile beyond :data:`SIZE_FACTOR` times its realistic size
+   (:attr:`~rocketid.diagnostics.effects.Effect.changes`: a wind's shear between knots; a
+   profile that alternates +-100 m/s from knot to knot fits anything and is no wind).
 
 A refit that passes 1, 2 and 6 is **admissible**: it is a step toward the
 explanation (the stepwise search adds it and looks for the rest: while another
@@ -230,10 +233,16 @@ class Acceptance:
     refit : Refit
     checks : tuple of Check
         In the order of :data:`ALL`.
+    level : float
+        The family-wise level of the LR test it was judged at.
+    n_tests : int
+        The Bonferroni count it was judged with (the contenders of its step).
     """
 
     refit: Refit
     checks: tuple
+    level: float = 0.05
+    n_tests: int = 1
 
     def check(self, name: str) -> Check:
         return next(c for c in self.checks if c.name == name)
@@ -320,11 +329,14 @@ def accept(refit: Refit, band: NoiseBand, *, level: float = 0.05, n_tests: int =
                             f"plausible (largest change {moved or '-'} {100 * shift:.0f} %)"))
     ratios = refit.size_ratio() if refit.success else {}
     big = {k: r for k, r in ratios.items() if r > SIZE_FACTOR}
+    steep = {ab: r for ab, r in (refit.change_ratio() if refit.success else {}).items() if r > SIZE_FACTOR}
     small = {k: m for k, m in refit.least.items() if refit.success and abs(refit.estimate(k)[0]) < m}
     bound = list(refit.at_bound)
-    if big or bound or small:
+    if big or bound or small or steep:
         bits = [f"{k} = {refit.estimate(k)[0]:.4g} is {r:.1f} times its realistic size {refit.sizes[k]:.3g}"
                 for k, r in big.items()]
+        bits += [f"{b} - {a} = {refit.estimate(b)[0] - refit.estimate(a)[0]:+.4g} is {r:.1f} times the realistic change "
+                 f"{refit.changes[(a, b)]:.3g} between them" for (a, b), r in steep.items()]
         bits += [f"{k} = {refit.estimate(k)[0]:.3g} is below {m:g}, the least its physics allows" for k, m in small.items()]
         bits += [f"{k} is held at a bound" for k in bound]
         checks.append(Check("size", False, "; ".join(bits)))
@@ -332,4 +344,4 @@ def accept(refit: Refit, band: NoiseBand, *, level: float = 0.05, n_tests: int =
         worst = max(ratios.items(), key=lambda kv: kv[1]) if ratios else None
         checks.append(Check("size", True, "no realistic size stated" if worst is None else
                             f"largest {worst[0]}: {worst[1]:.2g} of its realistic size"))
-    return Acceptance(refit, tuple(checks))
+    return Acceptance(refit, tuple(checks), float(level), max(1, int(n_tests)))

@@ -115,6 +115,11 @@ class Effect:
         ``reading({parameter: (estimate, standard error)}) -> str``: what the estimates say in the
         field's own terms (a launch site's latitude and azimuth from their offsets), added to the
         explanation; None for most effects.
+    changes : mapping of (str, str) to float
+        The realistic size of the change ``b - a`` between two of its parameters, keyed ``(a, b)``: a
+        profile's change between neighbouring knots (a wind's shear across the altitude between them).
+        A change beyond :data:`~rocketid.diagnostics.accept.SIZE_FACTOR` times it is implausible, as a
+        parameter's size is. Empty for most effects.
     """
 
     name: str
@@ -129,6 +134,7 @@ class Effect:
     starts: tuple = field(default=(), compare=False)
     scan: "OnsetScan | None" = field(default=None, compare=False, repr=False)
     reading: Callable | None = field(default=None, compare=False, repr=False)
+    changes: Mapping[tuple, float] = field(default_factory=dict, compare=False)
 
     def __post_init__(self):
         if not isinstance(self.name, str) or not self.name.isidentifier():
@@ -981,6 +987,14 @@ def _time_offset(m: Model) -> tuple:
 WIND_CENTRES_KM = (3.0, 8.0, 13.0, 18.0)
 WIND_WIDTH_KM = 2.5
 SURFACE_LAYER_M = 500.0
+WIND_SHEAR = 0.02
+"""Realistic vertical shear of a horizontal wind, 1/s (20 m/s per km): a strong shear at the 1 km scale.
+The design envelopes of launch ranges put the 99th percentile of 1 km shears near 0.03-0.05 1/s in the jet
+stream; the implausibility line, :data:`~rocketid.diagnostics.accept.SIZE_FACTOR` times this (0.1 1/s, a
+wind change of 100 m/s across one kilometre), lies well beyond any of them."""
+WIND_SHEAR_FLOOR = 2.0
+"""Realistic wind change between knots closer than 100 m, m/s (gusts; the profiles' knots are at least
+100 m apart, so this only keeps a stated size for a user's finer profile)."""
 WIND_SPEED_EPS = 0.1
 
 
@@ -1179,6 +1193,11 @@ def wind_profile_effect(knots_km: Sequence[float], *, name: str | None = None, p
         return _air_relative(m, name, build)
 
     realistic = {n: realistic_speed for n in names}
+    # the wind's change between neighbouring knots: a shear across their altitude difference (a profile that
+    # alternates +-100 m/s from knot to knot fits anything and is no wind)
+    heights = dict(zip(names, knots[first:]))
+    changes = {(a, b): max(WIND_SHEAR_FLOOR, WIND_SHEAR * 1000.0 * (heights[b] - heights[a]))
+               for a, b in zip(names, names[1:])}
     aloft = knots[0] * 1000.0 >= SURFACE_LAYER_M
     if surface and not aloft:
         realistic[names[0]] = realistic_speed / 3          # a surface wind; aloft, a wind like the others
@@ -1187,7 +1206,8 @@ def wind_profile_effect(knots_km: Sequence[float], *, name: str | None = None, p
             f"{', '.join(f'{k:g}' for k in knots)} km ({prefix}0 {where}{'' if surface else ', fixed at 0'}; "
             "constant above the last knot), positive downrange; air-relative velocity, drag along it, lift normal "
             "to it, alpha_air in the lift coefficient, qbar and Mach from the airspeed")
-    return Effect(name, f"wind piecewise linear in altitude ({len(knots)} knots)", "environment", apply, desc, realistic)
+    return Effect(name, f"wind piecewise linear in altitude ({len(knots)} knots)", "environment", apply, desc, realistic,
+                  changes=changes)
 
 
 def density_profile_effect(knots_km: Sequence[float], *, name: str | None = None, prefix: str = "rho_",

@@ -714,6 +714,13 @@ class Refit:
         ``{parameter: step}`` for the locations of an added located shape (an event time, a drag hump's
         Mach number): the spacing of the scan that located it, the yardstick its standard error is
         judged by (:func:`~rocketid.diagnostics.accept.accept`).
+    changes : dict
+        ``{(a, b): size}``: the realistic size of the change ``b - a`` between two added parameters
+        (:attr:`~rocketid.diagnostics.effects.Effect.changes`: a wind's shear between knots).
+    solution : NLPSolution or None
+        IPOPT's primal-dual solution of the refit's NLP (None when it failed): the chosen model is fitted
+        again in the main process from exactly this point (:func:`~rocketid.solve.estimate`'s
+        ``warm_start``), so that the model reported is the one that was judged.
     """
 
     effects: tuple
@@ -743,6 +750,8 @@ class Refit:
     base_values: dict = field(default_factory=dict)
     base_chi2_per_dof: float = float("nan")
     location_steps: dict = field(default_factory=dict)
+    changes: dict = field(default_factory=dict)
+    solution: Any = None
 
     @property
     def name(self) -> str:
@@ -796,6 +805,10 @@ class Refit:
                 out[n] = abs(self.estimate(n)[0]) / s
         return out
 
+    def change_ratio(self) -> dict:
+        """``{(a, b): |estimate b - estimate a| / realistic size}`` of the changes with a stated size."""
+        return {(a, b): abs(self.estimate(b)[0] - self.estimate(a)[0]) / s for (a, b), s in self.changes.items() if s}
+
     def to_dict(self) -> dict:
         return {"effects": list(self.effects), "added": list(self.added), "converged": bool(self.success),
                 "gave_up": bool(self.gave_up), "message": self.message, "chi2_per_dof": float(self.chi2_per_dof),
@@ -805,7 +818,9 @@ class Refit:
                                   "realistic": self.sizes.get(n)} for n in self.effect_parameters},
                 "whiteness": {k: float(v) for k, v in self.whiteness.items()},
                 "plausible_coefficients": self.plausible_coefficients, "implausible": list(self.implausible),
-                "identifiability": self.identifiability, "seconds": float(self.seconds), "notes": list(self.notes)}
+                "identifiability": self.identifiability, "seconds": float(self.seconds), "notes": list(self.notes),
+                **({"changes": [{"from": a, "to": b, "value": self.estimate(b)[0] - self.estimate(a)[0],
+                                 "realistic": s} for (a, b), s in self.changes.items()]} if self.changes else {})}
 
 
 INFLATION = 3.0
@@ -916,7 +931,8 @@ def summarize_refit(new: EstimationResult, base_objective: float, base_n_estimat
                     added: Sequence[str], sizes: Mapping[str, float], *, level: float = 0.05,
                     base_parameters: Sequence[str] = (), seconds: float = 0.0, notes: Sequence[str] = (),
                     least: Mapping[str, float] | None = None, base_values: Mapping[str, float] | None = None,
-                    base_chi2_per_dof: float = float("nan"), model_parameters: Sequence[str] | None = None) -> Refit:
+                    base_chi2_per_dof: float = float("nan"), model_parameters: Sequence[str] | None = None,
+                    changes: Mapping[tuple, float] | None = None) -> Refit:
     """The :class:`Refit` of a fitted model with ``effects``: whiteness per channel, standard
     errors, the base coefficients' plausibility, the added parameters' identifiability.
 
@@ -971,7 +987,9 @@ def summarize_refit(new: EstimationResult, base_objective: float, base_n_estimat
                  location_steps={n: step for e in effects if e.name in added_set and e.scan is not None
                                  and len(e.scan.times) > 1 for n, step in
                                  ((n, float(e.scan.times[1] - e.scan.times[0])) for n in e.locations)
-                                 if n in names})
+                                 if n in names},
+                 solution=new.solution if new.success else None,
+                 changes={(a, b): float(v) for (a, b), v in (changes or {}).items() if a in eff_params and b in eff_params})
 
 
 #: IPOPT's return status when its maximum CPU or wall time was exceeded.
@@ -1022,6 +1040,8 @@ class RefitTask:
     base_values : dict
         The estimates of the fit before the refit, by name.
     base_chi2_per_dof : float
+    changes : dict
+        Realistic sizes of changes between the added parameters (:attr:`Effect.changes`).
     """
 
     base_spec: Any
@@ -1040,6 +1060,7 @@ class RefitTask:
     band_upper: float = math.inf
     base_values: dict = field(default_factory=dict)
     base_chi2_per_dof: float = float("nan")
+    changes: dict = field(default_factory=dict)
 
 
 def refit_spec(task: RefitTask, start: Mapping | None = None, *, model=None):
@@ -1096,13 +1117,20 @@ def run_refit(task: RefitTask) -> tuple[Refit, EstimationResult | None]:
     if not new.success and _timed_out(new):
         notes.append(f"gave up after {task.timeout:g} s (the refit's time limit)")
         new = replace(new, message=f"gave up after {task.timeout:g} s (time limit; IPOPT status {new.status})")
+    return summarize_task(task, new, seconds=time.perf_counter() - t0, notes=notes), new
+
+
+def summarize_task(task: RefitTask, new: EstimationResult, *, seconds: float = 0.0,
+                   notes: Sequence[str] = ()) -> Refit:
+    """The :class:`Refit` of ``task`` made from ``new``, a fit of the task's model (:func:`summarize_refit`
+    with the task's base, sizes and level)."""
     return summarize_refit(new, task.base_objective, task.base_n_estimated,
                            [e for e in task.effects], task.added, task.sizes, level=task.level,
-                           base_parameters=task.base_parameters, seconds=time.perf_counter() - t0,
+                           base_parameters=task.base_parameters, seconds=seconds,
                            notes=notes, least={k: v for e in task.effects if e.name in task.added
                                                for k, v in e.least.items()},
                            base_values=task.base_values, base_chi2_per_dof=task.base_chi2_per_dof,
-                           model_parameters=task.base_spec.parameter_names), new
+                           model_parameters=task.base_spec.parameter_names, changes=task.changes)
 
 
 def _guesses_start(task: RefitTask, model):
