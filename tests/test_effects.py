@@ -63,9 +63,11 @@ def _values(spec: ri.ModelSpec, exprs, point: dict) -> np.ndarray:
 
 #: Catalogue effects for a motor that stops inside the horizon (RA-66's burns throughout): tested on Tern-2.
 NEEDS_BURN_OUT = {"base_drag"}
+#: Catalogue effects for a declared moving start (RA-66 lifts off from rest): tested on Wren-H below.
+NEEDS_MOVING_START = {"start_angle", "start_speed"}
 
 
-@pytest.mark.parametrize("name", sorted(set(CATALOGUE) - NEEDS_BURN_OUT))
+@pytest.mark.parametrize("name", sorted(set(CATALOGUE) - NEEDS_BURN_OUT - NEEDS_MOVING_START))
 @pytest.mark.parametrize("case", ["ra66m", "ra66"])
 def test_zero_gives_back_the_base_model(name, case, ra66m_spec, ra66_spec):
     base = ra66m_spec if case == "ra66m" else ra66_spec
@@ -857,3 +859,30 @@ def test_a_throttle_shape_on_a_commanded_schedule_carries_the_unburnt_propellant
     assert np.max(np.abs(want["h"] - plain["h"])) > 100.0
     for name in ("x", "h", "v"):
         np.testing.assert_allclose(got[name], want[name], rtol=1e-6, atol=1e-3)
+
+
+@pytest.mark.parametrize("name", sorted(NEEDS_MOVING_START))
+def test_a_start_correction_acts_on_a_moving_start_only(name, ra66m_spec):
+    """``start_angle`` / ``start_speed`` correct a declared moving start (Wren-H leaves its rail at 25 m/s): at
+    zero they give back the base model (same equations, same start), and their parameter moves only the start
+    of its state; from rest (RA-66M) they do not apply, and say why."""
+    import math
+    import sys
+    from pathlib import Path
+    sys.path.insert(0, str(Path(__file__).resolve().parent / "vehicles"))
+    import wren
+    base = wren.build_model()
+    spec = with_effects(base, [name])
+    (par,) = [n for n in spec.parameter_names if n not in base.parameter_names]
+    assert spec.parameter(par).guess == 0.0 and set(CATALOGUE[name].realistic) == {par}
+    assert [spec.expand(e) for e in spec.equations] == [base.expand(e) for e in base.equations]
+    truth = dict(wren.truth(base))
+    p0 = spec.parameter_vector(truth)
+    assert np.array_equal(spec.initial_state(p0), base.initial_state(base.parameter_vector(truth)))
+    moved = spec.initial_state(spec.parameter_vector({**truth, par: 0.01}))
+    role = {"start_angle": "flight_path_angle", "start_speed": "speed"}[name]
+    j = spec.state_symbols.index(spec.role(role))
+    assert math.isclose(moved[j] - spec.states[j].initial, 0.01)
+    assert np.count_nonzero(moved - spec.initial_state(p0)) == 1
+    with pytest.raises(ri.ModelError, match="starts at rest"):
+        with_effects(ra66m_spec, [name])

@@ -107,15 +107,21 @@ class StateSpec:
     derivative : sympy.Symbol
         The symbol that stands for ``d symbol / dt`` in residuals.
     initial : float
-        Initial value (the guess, when ``initial_parameter`` is set).
+        Initial value (the guess, when ``initial_parameter`` is set; the declared value an
+        ``offset`` is added to).
     initial_parameter : sympy.Symbol or None
         Parameter holding the initial value when the initial state is free.
+    offset : bool
+        The parameter is an offset from ``initial`` (the start is ``initial + p``), not the
+        initial value itself: a declared start estimated as a correction
+        (:meth:`Model.start_offset`).
     """
 
     symbol: sp.Symbol
     derivative: sp.Symbol
     initial: float
     initial_parameter: sp.Symbol | None = None
+    offset: bool = False
 
     @property
     def free(self) -> bool:
@@ -476,7 +482,7 @@ class ModelSpec:
         """Initial state vector, with free initial values taken from ``p``."""
         p = self.guess if p is None else np.asarray(p, dtype=float)
         index = {s: i for i, s in enumerate(self.parameter_symbols)}
-        return np.array([p[index[s.initial_parameter]] if s.free else s.initial
+        return np.array([p[index[s.initial_parameter]] + (s.initial if s.offset else 0.0) if s.free else s.initial
                          for s in self.states], dtype=float)
 
     # -- expressions ---------------------------------------------------------
@@ -627,7 +633,9 @@ class ModelSpec:
         states = []
         for st in self.states:
             value = init.get(st.symbol, st.initial)
-            if st.free:
+            if st.free and st.offset:
+                states.append(replace(st, initial=value))       # the offset now corrects the window's start
+            elif st.free:
                 builder._parameters = [replace(ps, guess=value) if ps.symbol == st.initial_parameter else ps
                                        for ps in builder._parameters]
                 states.append(replace(st, initial=value))
@@ -881,6 +889,29 @@ class Model:
             ipar = self._add_parameter(f"{name}_0", initial, bounds, nominal)
         self._states.append(StateSpec(sym, der, initial, ipar))
         return sym
+
+    def start_offset(self, state: sp.Symbol | str, name: str, *, nominal: float | None = None,
+                     bounds: tuple[float, float] = (-math.inf, math.inf)) -> sp.Symbol:
+        """Estimate a correction to a state's declared initial value: the start becomes
+        ``initial + name`` (guess 0).
+
+        For a start that was computed or read, not measured -- a rail-exit speed worked out for the
+        nominal mass, a launch rail's elevation read off an inclinometer -- the correction's size
+        says how far off the declaration was.
+
+        Raises
+        ------
+        ModelError
+            ``state`` is not a state, or its initial value is already estimated.
+        """
+        st = self._state(state)
+        if st.free:
+            raise ModelError(f"the initial value of state {st.symbol} is already estimated "
+                             f"(parameter {st.initial_parameter}); it cannot take an offset too")
+        par = self._add_parameter(name, 0.0, bounds, nominal)
+        self._states = [replace(s, initial_parameter=par, offset=True) if s.symbol == st.symbol else s
+                        for s in self._states]
+        return par
 
     def der(self, state: sp.Symbol | str) -> sp.Symbol:
         """The symbol standing for ``d state / dt`` (use it in implicit residuals)."""

@@ -339,7 +339,7 @@ def transcribe(spec: ModelSpec, measurements: Measurements, mesh: Mesh) -> Trans
     Mz.sum_duplicates()
     point_data = np.column_stack([col_t, spec.input_values(col_t)])
 
-    # initial conditions: S[0, i] - s0_i = 0, or S[0, i] - p_init = 0 for free ones
+    # initial conditions: S[0, i] - s0_i = 0, or S[0, i] - p_init = 0 for free ones (= s0_i for an offset)
     pindex = {s: j for j, s in enumerate(spec.parameter_symbols)}
     ic_r, ic_c, ic_v = [], [], []
     ic_off = np.zeros(ns)
@@ -347,8 +347,8 @@ def transcribe(spec: ModelSpec, measurements: Measurements, mesh: Mesh) -> Trans
         ic_r.append(i); ic_c.append(int(layout.state_index(0, i))); ic_v.append(1.0)
         if s.free:
             ic_r.append(i); ic_c.append(int(layout.parameter_index(pindex[s.initial_parameter]))); ic_v.append(-1.0)
-        else:
-            ic_off[i] = s.initial
+        if not s.free or s.offset:
+            ic_off[i] = s.initial          # S[0, i] - p_init = s0_i for an offset from the declared start
     ic = sps.csr_matrix((ic_v, (ic_r, ic_c)), shape=(ns, layout.n))
 
     # outputs at their own sample times: u = (states, derivatives, scalar params)

@@ -1662,6 +1662,29 @@ def _refine_thrust(vehicle: "Vehicle | None") -> list[Effect]:
     return [burn_rate_effect()] + out + [throttle_step_effect(bounds[0], bounds[-1], w), throttle_window_effect(bounds[0], bounds[-1], w)]
 
 
+START_ANGLE = math.radians(1.0)
+"""Realistic error of a declared start's flight-path angle, rad: a launch rail's elevation read off by a
+degree (an inclinometer on a sagging rail), a release attitude."""
+
+START_SPEED_SHARE = 0.03
+"""Realistic error of a declared start's speed, as a share of it: a rail-exit speed worked out from the
+static firing for the nominal mass and rail friction, a release speed."""
+
+
+def _start_offset(effect: str, role: str, name: str, nominal: float) -> Callable[[Model], tuple]:
+    """``apply`` of a correction to the declared start of the state playing ``role`` (a moving start only:
+    from rest the start is the launcher's, held by it, and other effects describe its release)."""
+    def apply(m: Model) -> tuple:
+        sym = _role_state(m, role, effect)
+        v0 = _initial_value(m, _role_state(m, "speed", effect))
+        if not v0 > 0:
+            raise ModelError(f"effect {effect!r} corrects a declared moving start (a rail exit, a release); model "
+                             f"{m.name!r} starts at rest, where the launcher holds the vehicle")
+        return (m.start_offset(sym, name, nominal=nominal),)
+    apply.__name__ = f"_{effect}"
+    return apply
+
+
 def _build_catalogue() -> dict[str, Effect]:
     def rel_bias(channel: str, floor: float, sigmas: float):
         return lambda veh: {f"b_{channel}": max(floor, sigmas * float(veh.sigma.get(channel, 0.0)))}
@@ -1703,6 +1726,16 @@ def _build_catalogue() -> dict[str, Effect]:
         Effect("scale_h", "altitude scale factor", "sensor", _scale("h"),
                "z_h = (1 + k_h) h: an altimeter reading proportionally high or low (a barometric altitude on a "
                "non-standard day, a radar altimeter's scale)", {"k_h": 2e-3}),
+        Effect("start_angle", "declared start's flight-path angle", "kinematics",
+               _start_offset("start_angle", "flight_path_angle", "dgamma_start", START_ANGLE),
+               "flight-path angle at the start gamma(t0) + dgamma_start, rad: a moving start declared turned (a "
+               "launch rail's elevation misread, a release attitude)", {"dgamma_start": START_ANGLE}),
+        Effect("start_speed", "declared start's speed", "kinematics",
+               _start_offset("start_speed", "speed", "dv_start", 1.0),
+               "speed at the start v(t0) + dv_start, m/s: a moving start declared too fast or too slow (a rail-exit "
+               "speed worked out for another mass, a release speed)", {"dv_start": 1.0},
+               relative=lambda veh: {"dv_start": max(0.3, START_SPEED_SHARE * veh.start_speed)}
+               if math.isfinite(veh.start_speed) and veh.start_speed > 0 else {}),
         Effect("time_offset", "time-tag offset", "sensor", _time_offset,
                "every output z(t) = y(t - tau) ~ y - tau dy/dt, tau in s", {"tau": 0.01},
                relative=lambda veh: {"tau": max(0.01, float(veh.sample_interval))}),
@@ -1898,8 +1931,10 @@ def effect_parameter_problems(spec: ModelSpec, declared: Mapping[str, Sequence[s
     for o in spec.outputs:
         used |= spec.expand(o.expr).free_symbols
     params = {p.symbol: p for p in spec.parameters}
-    # a knot of a time family enters through the family's symbol
+    # a knot of a time family enters through the family's symbol; an offset of a declared start through the
+    # initial conditions
     used |= {k for f in spec.families if f.symbol in used for k in f.knots}
+    used |= {s.initial_parameter for s in spec.states if s.offset}
     problems: dict[str, str] = {}
     for name, syms in declared.items():
         for s in syms:
@@ -1914,7 +1949,7 @@ def effect_parameter_problems(spec: ModelSpec, declared: Mapping[str, Sequence[s
             elif s not in used:
                 problems[name] = (f"effect {name!r}: parameter {s} does not enter the model's equations or outputs "
                                   f"(model {spec.name!r}); use it in a definition (m.redefine), an equation "
-                                  "(m.add_term) or an output (m.redefine_output)")
+                                  "(m.add_term), an output (m.redefine_output) or a start (m.start_offset)")
             if name in problems:
                 break
     return problems
