@@ -45,6 +45,7 @@ from sympy.printing.numpy import NumPyPrinter
 from .model import ModelSpec
 from .output import write_text
 from .symbolic import SymbolicModel, derive
+from .tables import TableFunction
 
 __all__ = ["GeneratedModel", "OutputFunction", "generate", "generate_source", "generate_hessian_source",
            "cache_dir", "cache_path"]
@@ -96,6 +97,41 @@ class _Printer(NumPyPrinter):
         # model symbols print under their safe names (no xreplace: rebuilding
         # large Piecewise trees is slow in SymPy)
         return self._names.get(expr) or super()._print_Symbol(expr)
+
+    def _print_Function(self, expr):
+        # a table (rocketid.tables) is a call of a function of the module, its samples at the module's top
+        if isinstance(expr, TableFunction):
+            cls = type(expr)
+            self.tables.setdefault(cls.__name__, cls)
+            return f"_{cls.__name__}({self._print(expr.args[0])})"
+        return super()._print_Function(expr)
+
+    @property
+    def tables(self) -> dict:
+        if not hasattr(self, "_tables"):
+            self._tables = {}
+        return self._tables
+
+
+def _table_lines(printer: _Printer) -> list[str]:
+    """The module-level samples and functions of the tables ``printer`` printed (rocketid.tables), by name."""
+    lines = []
+    for name in sorted(printer.tables):
+        cls = printer.tables[name]
+        x, y = cls.samples
+        lines += [f"_X_{name} = numpy.array({list(x)!r})", f"_Y_{name} = numpy.array({list(y)!r})"]
+        if cls.is_slope:
+            lines += [f"_S_{name} = numpy.diff(_Y_{name}) / numpy.diff(_X_{name})", "", "",
+                      f"def _{name}(x):",
+                      f'    """The slope of table {cls.label!r} at x (piecewise constant, 0 outside its samples)."""',
+                      f"    i = numpy.searchsorted(_X_{name}, x, side='right') - 1",
+                      f"    return numpy.where((i >= 0) & (i < _S_{name}.size), "
+                      f"_S_{name}[numpy.clip(i, 0, _S_{name}.size - 1)], 0.0)", "", ""]
+        else:
+            lines += ["", "", f"def _{name}(x):",
+                      f'    """Table {cls.label!r} at x, interpolated linearly (its end values outside)."""',
+                      f"    return numpy.interp(x, _X_{name}, _Y_{name})", "", ""]
+    return lines
 
     def _print_Piecewise(self, expr):
         args = list(expr.args)
@@ -181,8 +217,9 @@ def generate_hessian_source(sym: SymbolicModel, spec_name: str = "") -> str:
            f"HESS_ROWS = {pt.hess_rows!r}",
            f"HESS_COLS = {pt.hess_cols!r}",
            ""]
-    out += _hessian_function(sym, names, _Printer(names))
-    return "\n".join(out) + "\n"
+    printer = _Printer(names)
+    body = _hessian_function(sym, names, printer)
+    return "\n".join(out + _table_lines(printer) + body) + "\n"
 
 
 def generate_source(sym: SymbolicModel, spec_name: str = "") -> str:
@@ -220,6 +257,7 @@ def generate_source(sym: SymbolicModel, spec_name: str = "") -> str:
             f"OUTPUT_HESS_ROWS = {tuple(o.hess_rows for o in sym.outputs)!r}",
             f"OUTPUT_HESS_COLS = {tuple(o.hess_cols for o in sym.outputs)!r}",
             ""]
+    tables_at = len(out)
 
     def function(fname, args, doc, exprs, ncols, unpack, single=False):
         return _function(printer, fname, args, doc, exprs, ncols, unpack, single)
@@ -240,6 +278,7 @@ def generate_source(sym: SymbolicModel, spec_name: str = "") -> str:
                         o.grad_exprs, len(o.grad_exprs), [("U", un), ("D", dn[:1])])
         out += function(f"output_{k}_hess", ["U", "D"], f"d2 {o.name}/du2 at OUTPUT_HESS_ROWS/COLS[{k}].",
                         o.hess_exprs, len(o.hess_exprs), [("U", un), ("D", dn[:1])])
+    out[tables_at:tables_at] = _table_lines(printer)
     return "\n".join(out) + "\n"
 
 

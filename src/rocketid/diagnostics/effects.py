@@ -53,6 +53,7 @@ import sympy as sp
 
 from ..errors import ModelError
 from ..model import ROLES, Model, ModelSpec, missing_role_message
+from ..tables import table_function
 from ..physics.atmosphere import us76_offset_log_pressure_ratio, us76_pressure, us76_temperature
 from ..physics.gravity import EARTH_RADIUS
 
@@ -557,8 +558,10 @@ def _burn_rate(m: Model) -> tuple:
     clock = origin + k * (m.t - origin)
     warp = {m.t: clock}
     for u in motor:
-        warp[u.symbol] = u.expr.xreplace({m.t: clock}) if u.expr is not None else piecewise_linear(clock, u.times,
-                                                                                                    u.values)
+        # a sampled curve on the motor's clock: one table function (rocketid.tables), not a sum of a ramp per
+        # sample -- a 249-sample static-firing table made CSE 70 % of a Wren-H diagnosis that way
+        warp[u.symbol] = u.expr.xreplace({m.t: clock}) if u.expr is not None else \
+            table_function(u.times, u.values, str(u.symbol))(clock)
     # a mass state starts at its declared value, which is what the stated curve leaves at t0; on the faster
     # clock the motor has burnt for (1 + eps)(t0 - t_i) by then: eps (t0 - t_i) dm/dt(t0) more (to first order)
     at_start = {m.t: sp.Float(m.t0), **{u.symbol: (u.expr.xreplace({m.t: m.t0}) if u.expr is not None
