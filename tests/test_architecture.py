@@ -19,13 +19,14 @@ SRC = Path(__file__).resolve().parents[1] / "src" / PACKAGE
 
 #: The pipeline, upstream first. A module may import its own stage and earlier ones.
 #: ``simulate`` comes right after ``model``: the truth data must share nothing with the
-#: collocation it checks (it uses only errors, data and model).
+#: collocation it checks (it uses only errors, data, model and the printing of expressions).
 LAYERS: list[tuple[str, ...]] = [
     ("errors",),
     ("output",),         # atomic writes and output locations: every file rocketid writes
     ("summary",),        # the Summary value every stage's results render (text, HTML)
     ("data",),
     ("model",),
+    ("tables", "printing"),  # tabulated functions for models; NumPy printing of model expressions
     ("simulate",),
     ("physics",),
     ("symbolic",),

@@ -40,10 +40,10 @@ from typing import Callable
 
 import numpy as np
 import sympy as sp
-from sympy.printing.numpy import NumPyPrinter
 
 from .model import ModelSpec
 from .output import write_text
+from .printing import WherePrinter
 from .symbolic import SymbolicModel, derive
 from .tables import TableFunction
 
@@ -84,10 +84,9 @@ def _safe_name(sym: sp.Symbol, taken: set[str]) -> str:
     return name
 
 
-class _Printer(NumPyPrinter):
-    """NumPy printer with Piecewise as nested ``numpy.where``: unlike
-    ``numpy.select`` it keeps boolean results boolean, so conditions that are
-    themselves piecewise (Mach number through a layered speed of sound) work."""
+class _Printer(WherePrinter):
+    """NumPy printer with Piecewise as nested ``numpy.where`` (:class:`~rocketid.printing.WherePrinter`),
+    model symbols under their safe names and tables as calls of the module's functions."""
 
     def __init__(self, names: dict | None = None):
         super().__init__({"fully_qualified_modules": True, "inline": True, "allow_unknown_functions": False})
@@ -133,15 +132,6 @@ def _table_lines(printer: _Printer) -> list[str]:
                       f"    return numpy.interp(x, _X_{name}, _Y_{name})", "", ""]
     return lines
 
-    def _print_Piecewise(self, expr):
-        args = list(expr.args)
-        if args[-1].cond == True:  # noqa: E712 (SymPy's true)
-            out = self._print(args.pop().expr)
-        else:
-            out = "numpy.nan"
-        for e, c in reversed(args):
-            out = f"numpy.where({self._print(c)}, {self._print(e)}, {out})"
-        return out
 
 
 def _emit_block(lines: list[str], exprs, targets, printer: _Printer, indent: str) -> None:

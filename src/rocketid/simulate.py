@@ -22,6 +22,7 @@ families, input kinks), where the right-hand side is not smooth.
 
 from __future__ import annotations
 
+import functools
 import time
 from dataclasses import dataclass
 from typing import Mapping, Sequence
@@ -33,6 +34,7 @@ from scipy.integrate import solve_ivp
 from .data import Channel, Measurements
 from .errors import ModelError, RocketidError, SettingsError
 from .model import ModelSpec
+from .printing import WherePrinter
 
 __all__ = ["Trajectory", "simulate", "simulate_measurements"]
 
@@ -91,6 +93,9 @@ def _locals_at(spec: ModelSpec, t: np.ndarray, p: np.ndarray) -> list[np.ndarray
     return out
 
 
+_ALONG_PRINTER = WherePrinter({"fully_qualified_modules": True, "inline": True, "allow_unknown_functions": True})
+
+
 def evaluate_along(spec: ModelSpec, expr: sp.Expr, times: np.ndarray, states: np.ndarray,
                    p: np.ndarray, derivatives: np.ndarray | None = None) -> np.ndarray:
     """Evaluate an expression of (t, states, derivatives, inputs, parameters) along a trajectory."""
@@ -103,7 +108,10 @@ def evaluate_along(spec: ModelSpec, expr: sp.Expr, times: np.ndarray, states: np
     if fn is None:
         if len(_ALONG_CACHE) >= 4 * _CACHE_MAX:
             _ALONG_CACHE.clear()
-        fn = _ALONG_CACHE[key] = sp.lambdify(args, expr, modules="numpy")
+        # nested numpy.where for Piecewise: an output may hold the dynamics (time_offset_2), whose layered
+        # atmosphere inside a Mach table's conditions numpy.select cannot take
+        fn = _ALONG_CACHE[key] = sp.lambdify(args, expr, modules=[{"functools": functools, "numpy": np}, "numpy"],
+                                             printer=_ALONG_PRINTER, cse=True)
     ders = derivatives if derivatives is not None else np.full_like(states, np.nan)
     with np.errstate(all="ignore"):
         val = fn(times, *states.T, *ders.T, *spec.input_values(times).T, *_locals_at(spec, times, p))
