@@ -52,7 +52,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from ..errors import RocketidError
+from ..errors import RocketidError, SettingsError
 from ..solve import EstimationResult, estimate
 from .accept import Acceptance, NoiseBand, accept, fits_to_noise
 from .effects import Effect, Vehicle, with_effects
@@ -320,8 +320,11 @@ def _fit_of(base_spec, effects: Sequence[Effect], refit: Refit, data, mesh, opti
         ps = spec.parameter(n)
         guess[n] = float(np.clip(v, ps.lower, ps.upper))
     if refit.solution is not None:
-        fit = estimate(spec.with_guess(guess), data, mesh=mesh, options=options, warm_start=refit.solution)
-        if fit.success:
+        try:
+            fit = estimate(spec.with_guess(guess), data, mesh=mesh, options=options, warm_start=refit.solution)
+        except SettingsError:       # a solution of another NLP (it cannot happen for the same task's model)
+            fit = None
+        if fit is not None and fit.success:
             return fit
     return estimate(spec, data, guess=guess, mesh=mesh, options=options)
 
