@@ -969,10 +969,11 @@ def _time_offset_second(m: Model) -> tuple:
 
 
 def _second_derivative(m: Model, expr: sp.Expr, effect: str) -> sp.Expr:
-    """``d2 expr / dt2`` along the model's equations, in closed form: every state's rate from its explicit
-    equation, every known input through its own derivative (a sampled input's slope: its table function of
-    time, :mod:`rocketid.tables`). The result holds time, the states and scalar parameters only (what an
-    output may hold). Raises ModelError for an implicit equation or a rate that holds a time family."""
+    """``d2 expr / dt2`` along the model's equations, in closed form: every state's rate from its equation
+    (solved for it: the equation must be linear in the rate), every known input through its own derivative
+    (a sampled input's slope: its table function of time, :mod:`rocketid.tables`). The result holds time,
+    the states and scalar parameters only (what an output may hold). Raises ModelError for an equation that
+    is not linear in its rate or a rate that holds a time family."""
     rates = {}
     for st in m._states:
         # the rate from the equation, which is linear in it (an explicit ODE, or the flight-path angle's
@@ -1005,8 +1006,8 @@ def _second_derivative(m: Model, expr: sp.Expr, effect: str) -> sp.Expr:
 
 
 def _time_offset_edit(m: Model, effect: str, *, second: bool) -> tuple:
-    """``z(t) = y(t - tau)``: to first order ``y - tau dy/dt`` (the derivative the collocation polynomial's), with
-    ``second`` also ``+ tau^2/2 d2y/dt2`` (:func:`_second_derivative`)."""
+    """``z(t) = y(t - tau)``: to first order ``y - tau dy/dt`` (``dy/dt`` through the state derivatives, the
+    collocation polynomial's), with ``second`` also ``+ tau^2/2 d2y/dt2`` (:func:`_second_derivative`)."""
     if not m.output_names:
         raise ModelError(f"effect {effect!r} needs measured outputs; model {m.name!r} has none yet")
     states = {}
