@@ -55,11 +55,12 @@ CODEGEN_VERSION = "3"
 
 @functools.lru_cache(maxsize=None)
 def generator_fingerprint() -> str:
-    """A hash of the code generator's own source (this module and :mod:`rocketid.symbolic`),
-    part of every cache key: a change to the generator never reuses a stale module."""
+    """A hash of the code generator's own source (this module, :mod:`rocketid.symbolic`, the printer
+    :mod:`rocketid.printing` and the tables :mod:`rocketid.tables`), part of every cache key: a change to
+    the generator never reuses a stale module."""
     here = Path(__file__).resolve().parent
     h = hashlib.sha256()
-    for name in ("codegen.py", "symbolic.py"):
+    for name in ("codegen.py", "symbolic.py", "printing.py", "tables.py"):
         h.update((here / name).read_bytes())
     return h.hexdigest()[:16]
 
