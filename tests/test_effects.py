@@ -921,6 +921,13 @@ def test_second_order_time_offset_against_an_exact_delay():
         # measured 0.029 m, 0.057 m, 0.20 m/s (the third-order term across the tail-off) against 0.26 m, 0.69 m,
         # 0.95 m/s to first order
         assert err2 < tol and err2 < err1 / 4, (name, err2, err1)
-    # a model whose equations hold a time family (RA-66's drag in time) cannot write it into its outputs
+    # a model whose equations hold a time family (RA-66's drag in time) cannot write it into its outputs, and
+    # the diagnosis does not offer it there
     with pytest.raises(ri.ModelError, match="time family"):
         with_effects(ri.ra66(), [time_offset_second_effect()])
+    from rocketid.diagnostics import CATALOGUE
+    from rocketid.diagnostics.screen import vehicle_of
+    ra66_fit = ri.estimate(ri.ra66(), ri.simulate_measurements(ri.ra66(), ri.ra66_truth(ri.ra66()), ri.ra66_times(),
+                                                                seed=0))
+    assert vehicle_of(ra66_fit).time_families and CATALOGUE["time_offset"].refinements(vehicle_of(ra66_fit)) == []
+    assert [e.name for e in CATALOGUE["time_offset"].refinements(None)] == ["time_offset_2"]

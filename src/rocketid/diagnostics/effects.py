@@ -215,6 +215,9 @@ class Vehicle:
         The altitudes by which the aerodynamic action ``integral |qbar| dt`` reaches 0, 1, ..., 100 %
         of its total, m (empty when unknown): refined wind and density profiles put their knots at
         equal shares of it, where the data can pin them.
+    time_families : bool
+        The model has coefficients in time (time families: RA-66's drag), which an output cannot hold
+        (no ``time_offset_2``).
     """
 
     thrust: float
@@ -230,6 +233,7 @@ class Vehicle:
     knot_times: tuple = ()
     mach_knots: tuple = ()
     aero_altitudes: tuple = ()
+    time_families: bool = False
 
 
 # ---------------------------------------------------------------------------
@@ -1806,7 +1810,7 @@ def _build_catalogue() -> dict[str, Effect]:
         Effect("time_offset", "time-tag offset", "sensor", _time_offset,
                "every output z(t) = y(t - tau) ~ y - tau dy/dt, tau in s", {"tau": 0.01},
                relative=lambda veh: {"tau": max(0.01, float(veh.sample_interval))},
-               refine=lambda veh: [time_offset_second_effect(veh)]),
+               refine=lambda veh: [] if veh is not None and veh.time_families else [time_offset_second_effect(veh)]),
     ]
     return {e.name: e for e in effects}
 

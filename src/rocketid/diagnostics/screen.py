@@ -145,7 +145,8 @@ def vehicle_of(fit: EstimationResult) -> Vehicle:
         mach=(float(np.min(mach)), float(np.max(mach))) if mach is not None and np.all(np.isfinite(mach)) else None,
         sigma=sig, sample_interval=dt,
         knot_times=tuple(float(b) for b in fit.prepared.transcription.mesh.boundaries),
-        mach_knots=_mach_knots(spec), aero_altitudes=_aero_altitudes(np.asarray(t, float), alt, qbar))
+        mach_knots=_mach_knots(spec), aero_altitudes=_aero_altitudes(np.asarray(t, float), alt, qbar),
+        time_families=bool(spec.families))
 
 
 def _aero_altitudes(t, alt, qbar) -> tuple:
