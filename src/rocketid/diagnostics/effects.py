@@ -545,6 +545,12 @@ def _explicit_rhs(m: Model, state: sp.Symbol, effect: str) -> sp.Expr:
     return der - eq
 
 
+def _input_table(u) -> type:
+    """The table function (:mod:`rocketid.tables`) of a sampled input: its samples, evaluable at any
+    expression, with its slope as derivative."""
+    return table_function(u.times, u.values, str(u.symbol))
+
+
 def _burn_rate(m: Model) -> tuple:
     """The motor on a clock ``(1 + eps_burn)`` times faster (module notes of :func:`burn_rate_effect`)."""
     t_sym, thrust = _role_definition(m, "thrust", "burn_rate")
@@ -564,8 +570,7 @@ def _burn_rate(m: Model) -> tuple:
     for u in motor:
         # a sampled curve on the motor's clock: one table function (rocketid.tables), not a sum of a ramp per
         # sample -- a 249-sample static-firing table made CSE 70 % of a Wren-H diagnosis that way
-        warp[u.symbol] = u.expr.xreplace({m.t: clock}) if u.expr is not None else \
-            table_function(u.times, u.values, str(u.symbol))(clock)
+        warp[u.symbol] = u.expr.xreplace({m.t: clock}) if u.expr is not None else _input_table(u)(clock)
     # a mass state starts at its declared value, which is what the stated curve leaves at t0; on the faster
     # clock the motor has burnt for (1 + eps)(t0 - t_i) by then: eps (t0 - t_i) dm/dt(t0) more (to first order)
     at_start = {m.t: sp.Float(m.t0), **{u.symbol: (u.expr.xreplace({m.t: m.t0}) if u.expr is not None
@@ -993,8 +998,7 @@ def _second_derivative(m: Model, expr: sp.Expr, effect: str) -> sp.Expr:
         raise ModelError(f"effect {effect!r} writes the outputs' second derivative from the equations, and model "
                          f"{m.name!r}'s equations hold a time family (a coefficient in time), which an output cannot")
     inputs = {u.symbol: (u.expr, sp.diff(u.expr, m.t)) if u.expr is not None else
-              (table_function(u.times, u.values, str(u.symbol))(m.t),
-               table_function(u.times, u.values, str(u.symbol)).slope(m.t)) for u in m._inputs}
+              (_input_table(u)(m.t), _input_table(u).slope(m.t)) for u in m._inputs}
 
     def ddt(e: sp.Expr) -> sp.Expr:
         out = sp.diff(e, m.t)

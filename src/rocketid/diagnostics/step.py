@@ -56,7 +56,7 @@ from ..errors import RocketidError, SettingsError
 from ..solve import EstimationResult, estimate
 from .accept import Acceptance, NoiseBand, accept, fits_to_noise
 from .effects import Effect, Vehicle, with_effects
-from .refit import REFIT_TIMEOUT, Refit, RefitTask, refit_all
+from .refit import REFIT_TIMEOUT, Refit, RefitTask, refit_all, summarize_task
 from .screen import Contender, Screen, screen, vehicle_of
 
 __all__ = ["Step", "Discovery", "discover", "VERDICTS", "MAX_EFFECTS"]
@@ -340,8 +340,6 @@ def _judged_again(ctx: "_Search", current: EstimationResult, effects: Sequence[E
     point ``pick`` judged (2 J apart by more than :data:`SAME_POINT_2J`, or its estimates outside their
     standard errors of it): the verdict is the test of the model reported. ``current``: the fit the step
     started from (the refit's base); the new acceptance keeps ``pick``'s level and Bonferroni count."""
-    from .refit import summarize_task
-
     r = pick.refit
     same = fit.success and abs(2.0 * (fit.objective - r.objective)) <= SAME_POINT_2J
     if same:
