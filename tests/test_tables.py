@@ -75,3 +75,27 @@ def test_generated_code_holds_the_table_once_and_evaluates_it(tmp_path, monkeypa
     assert np.allclose(np.abs(res[:, 0]), np.interp(1.1 * t, X, Y))
     slope = np.array([float(table_function(X, Y, "force").slope(1.1 * u)) for u in t])
     assert np.allclose(np.abs(jac[:, jk[0]]), np.abs(t * slope))
+
+
+def test_the_point_hessian_holds_the_tables_slope(tmp_path, monkeypatch):
+    """v' = k T(k t): d2F/dk2 = 2 t T'(k t) (T'' is zero between samples), in the Hessian's companion module
+    (made on first use) as a call of the slope's function, equal to numpy's slope of the samples."""
+    monkeypatch.setenv("ROCKETID_CACHE_DIR", str(tmp_path))
+    m = ri.Model("pushed", 0.0, 4.0)
+    v = m.state("v", 0.0)
+    k = m.parameter("k", 1.0, bounds=(0.5, 2.0))
+    T = table_function(X, Y, "force")
+    m.ode({v: k * T(k * m.t)})
+    m.output("v", v, 1.0)
+    gen = generate(m.freeze(), use_cache=False)
+    assert f"def _{T.slope.__name__}(x):" in gen.hessian_source
+    names = list(gen.module.Z_NAMES)
+    t = np.array([0.3, 1.2, 3.0])
+    Z = np.zeros((t.size, len(names)))
+    Z[:, names.index("k")] = 1.1
+    D = np.zeros((t.size, len(gen.module.D_NAMES)))
+    D[:, 0] = t
+    H = gen.hessian(Z, D, np.ones((t.size, 1)))
+    (j,) = [i for i, (r, c) in enumerate(zip(gen.HESS_ROWS, gen.HESS_COLS)) if names[r] == names[c] == "k"]
+    slope = np.array([float(T.slope(1.1 * u)) for u in t])
+    assert np.allclose(np.abs(H[:, j]), np.abs(2 * t * slope))
