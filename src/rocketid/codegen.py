@@ -92,6 +92,7 @@ class _Printer(WherePrinter):
     def __init__(self, names: dict | None = None):
         super().__init__({"fully_qualified_modules": True, "inline": True, "allow_unknown_functions": False})
         self._names = names or {}
+        self.tables: dict = {}            # the tables printed, by class name (rocketid.tables)
 
     def _print_Symbol(self, expr):
         # model symbols print under their safe names (no xreplace: rebuilding
@@ -105,12 +106,6 @@ class _Printer(WherePrinter):
             self.tables.setdefault(cls.__name__, cls)
             return f"_{cls.__name__}({self._print(expr.args[0])})"
         return super()._print_Function(expr)
-
-    @property
-    def tables(self) -> dict:
-        if not hasattr(self, "_tables"):
-            self._tables = {}
-        return self._tables
 
 
 def _table_lines(printer: _Printer) -> list[str]:
