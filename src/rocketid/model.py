@@ -907,7 +907,8 @@ class Model:
         st = self._state(state)
         if st.free:
             raise ModelError(f"the initial value of state {st.symbol} is already estimated "
-                             f"(parameter {st.initial_parameter}); it cannot take an offset too")
+                             f"(parameter {st.initial_parameter}); it cannot take an offset too: declare the state "
+                             "with its value and without free=True to estimate a correction to it, or keep it free")
         par = self._add_parameter(name, 0.0, bounds, nominal)
         self._states = [replace(s, initial_parameter=par, offset=True) if s.symbol == st.symbol else s
                         for s in self._states]
