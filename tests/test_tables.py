@@ -36,6 +36,10 @@ def test_a_table_is_numpys_interpolation_and_its_slope():
     got = f(np.array([0.3, 1.2, 3.0]), 1.1)
     assert np.allclose(got[0], np.interp(1.1 * np.array([0.3, 1.2, 3.0]), X, Y))
     assert pickle.loads(pickle.dumps(e)) == e
+    # a class pickles as the call that makes it (its samples); the base classes by name
+    from rocketid.tables import TableSlope
+    for cls in (T, T.slope, TableFunction, TableSlope):
+        assert pickle.loads(pickle.dumps(cls)) is cls
 
 
 @pytest.mark.parametrize("x, y, match", [((0.0,), (1.0,), "at least two"), ((0.0, 0.0), (1.0, 2.0), "increase"),

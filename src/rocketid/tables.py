@@ -39,7 +39,7 @@ class _TableClass(FunctionClass):
 
 
 def _reduce_class(cls):
-    if not hasattr(cls, "samples"):
+    if not cls.samples[0]:                  # the base classes (no samples) pickle by name
         return cls.__qualname__
     x, y = cls.samples
     maker = table_function if not cls.is_slope else _slope_of
