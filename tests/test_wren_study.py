@@ -53,8 +53,9 @@ KNOWN_FAILURES: dict[str, str] = {
     "nose-ballast": "298194c: thrust_level (eps_thrust -0.030) called explained (the verdict notes that a mass error "
                     "acts alike through T/m); start_mass alone (dm_start 1.62 for 1.5) ends at chi2/dof 1.275 above "
                     "the band because the declared rail-exit speed is the nominal mass's, and start_mass + start_speed "
-                    "(dv_start -0.29 m/s, the truth's slower rail exit) reaches 1.050 but is a pair, which the search "
-                    "does not try once one effect has reached the noise",
+                    "(dv_start -0.29 m/s, the truth's slower rail exit) reaches 1.050 but leaves the speed residuals "
+                    "not white, and thrust_level + start_speed has a BIC 37 lower: the data prefer the thrust "
+                    "(test_the_data_prefer_a_thrust_error_to_the_ballast)",
     "hot-day": "3a42d0c: base_drag called explained; since 9c92e9e (refined shapes of other families weighed as "
                "rivals) a named tie -- base_drag, temperature (dT_air 15 for 15), mass_jettison, throttle_step "
                "reach the noise within BIC 10 and the hold-out from 2 s predicts them alike: not explained by the "
@@ -242,6 +243,42 @@ def test_a_misread_rail_is_the_start_angle(spec):
     assert abs(math.degrees(value) - (RAIL_TRUE_DEG - 85.0)) < 0.02 and std < math.radians(0.01)
     speed = accept(run_refit(ctx.task(fit, [CATALOGUE["start_speed"]], ("start_speed",)))[0], band)
     assert not speed.check("noise").passed
+
+
+def test_the_data_prefer_a_thrust_error_to_the_ballast(spec):
+    """Why the nose ballast is a known failure (``KNOWN_FAILURES``): the data themselves, not the search, prefer
+    the wrong attribution. From the diagnosis's base fit, the truth's two errors (``start_mass`` +
+    ``start_speed``: 1.56 kg for 1.5, -0.29 m/s) reach the noise but leave the speed residuals not white (Holm
+    p 0.0004), while a thrust 3 % low does both with one parameter, and with the start speed beside it
+    (``thrust_level`` + ``start_speed``) lowers BIC by 37 more than the truth's pair (measured: BIC 1355.3,
+    1357.9, 1320.6). A point-mass trajectory sees thrust and mass through their ratio; with the drag table
+    estimated, a thrust scale is exactly a uniform mass scale (start mass and consumption) with the drag
+    coefficients scaled alike, and what is left to tell a constant 1.5 kg from a thrust scale is a 0.6 %
+    drift of the ratio over the burn, which these data read the other way. When this test fails, the
+    catalogue or the fit has changed what the data say: run the case again and revisit ``KNOWN_FAILURES``."""
+    from rocketid.diagnostics import CATALOGUE
+    from rocketid.diagnostics.accept import accept, noise_band
+    from rocketid.diagnostics.api import _noise_from_data
+    from rocketid.diagnostics.refit import run_refit
+    from rocketid.diagnostics.screen import vehicle_of
+    from rocketid.diagnostics.step import _Search
+    data = truth.measurements(Hidden(dm_payload=BALLAST), seed=BY_NAME["nose-ballast"].seed)
+    sigma, _ = _noise_from_data("estimate", data, [], {})
+    fit = ri.estimate(spec, data, sigma=sigma, mesh=ri.default_mesh(spec, refine_first=3))
+    band = noise_band(fit)
+    ctx = _Search(spec, band, vehicle_of(fit), 0.05, None, 300.0, 1, False, None)
+
+    def judged(*names):
+        return accept(run_refit(ctx.task(fit, [CATALOGUE[n] for n in names], names))[0], band)
+
+    thrust, truth_pair, thrust_pair = judged("thrust_level"), judged("start_mass", "start_speed"), \
+        judged("thrust_level", "start_speed")
+    assert thrust.accepted and thrust_pair.accepted, (thrust.reason(), thrust_pair.reason())
+    assert abs(thrust.refit.estimate("eps_thrust")[0] + 0.03) < 0.002
+    dm, _ = truth_pair.refit.estimate("dm_start")
+    assert abs(dm - BALLAST) < 0.2 and truth_pair.check("noise").passed
+    assert not truth_pair.accepted and not truth_pair.check("white").passed
+    assert thrust_pair.refit.bic[1] < truth_pair.refit.bic[1] - 20
 
 
 @pytest.mark.parametrize("name", sorted(MEASURED_2J))
