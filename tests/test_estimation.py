@@ -175,6 +175,28 @@ def test_exponential_decay_fit_is_exact():
     assert fit.objective < 1e-6
 
 
+def test_a_fit_held_at_a_bound_gives_its_estimates_back_as_a_guess():
+    """Data decaying at k = 0.7 fitted with k <= 0.5: k ends on its bound, where IPOPT's bound relaxation may
+    leave it a hair past (1e-8 relative); those estimates given back as the next fit's guess are taken (the
+    guess moved onto the bound) and reach the same optimum, while a guess clearly outside is still refused."""
+    m = ri.Model("decay-bounded", 0.0, 2.0)
+    y = m.state("y", 1.0, free=True, bounds=(0.1, 10.0))
+    k = m.parameter("k", 0.3, bounds=(0.0, 0.5))
+    m.ode({y: -k * y})
+    m.output("y", y, sigma=0.01)
+    spec = m.freeze()
+    t = np.arange(1, 201) * 0.01
+    data = ri.Measurements.from_arrays(t, {"y": 1.3 * np.exp(-0.7 * t)})
+    fit = ri.estimate(spec, data)
+    assert fit.success and [str(s) for s, _ in fit.active_bounds()] == ["k"]
+    past = {"y_0": fit.value("y_0"), "k": 0.5 * (1 + 5e-8)}
+    again = ri.estimate(spec, data, guess=past)
+    assert again.success and again.value("k") <= 0.5 + 2e-8       # IPOPT: the bound relaxed by 1e-8 max(1, |b|)
+    assert again.objective == pytest.approx(fit.objective, rel=1e-6)
+    with pytest.raises(ri.ModelError, match="the guess 0.51 of parameter k lies outside its bounds"):
+        ri.estimate(spec, data, guess={"k": 0.51})
+
+
 @pytest.mark.parametrize("free_start", [False, True])
 def test_linear_in_parameter_fit_equals_least_squares(free_start):
     """y' = c u with u = 1: y = y0 + c t. The maximum-likelihood c (and y0) from noisy

@@ -1321,6 +1321,13 @@ def _unknown_msg(spec: ModelSpec, where: str, extra: set) -> str:
             "with m.state, m.input, m.constant, m.parameter, m.piecewise_linear or m.define")
 
 
+GUESS_SLACK = 1e-7
+"""A guess this far outside a bound (relative to ``max(1, |bound|)``) is taken as on it: IPOPT relaxes every
+bound by ``bound_relax_factor`` (1e-8 relative) and may return an estimate just past it, and a fit's estimates
+given back as the next fit's guess must not be refused for that (the estimating function moves it onto the
+bound)."""
+
+
 def check_guess(spec: ModelSpec, values: Sequence[float] | None = None, *, where: str = "",
                 error: type[Exception] = ModelError) -> None:
     """Refuse a guess outside the parameters' bounds (the one bounds check of a guess).
@@ -1337,6 +1344,6 @@ def check_guess(spec: ModelSpec, values: Sequence[float] | None = None, *, where
     """
     p = spec.guess if values is None else np.asarray(values, dtype=float)
     for ps, v in zip(spec.parameters, p):
-        if not (ps.lower <= v <= ps.upper):
+        if not (ps.lower - GUESS_SLACK * max(1.0, abs(ps.lower)) <= v <= ps.upper + GUESS_SLACK * max(1.0, abs(ps.upper))):
             raise error((f"{where}: " if where else "") + f"the guess {v:g} of parameter {ps.symbol} lies outside "
                         f"its bounds [{ps.lower:g}, {ps.upper:g}]; move the guess inside or widen the bounds")
