@@ -10,8 +10,10 @@ estimated. The events files are printed beside the findings as the answer key; n
 them as input.
 
 Run: ``nice python3 benchmarks/falcon9_study.py`` (about 5-10 minutes on 2 busy cores);
-``nice python3 benchmarks/falcon9_study.py --variants`` fits CRS-11 with the throttle and each
-model change tried against the misfit after 90 s (docs/real-telemetry.md, "After 90 s").
+``nice python3 benchmarks/falcon9_study.py --variants [CRS-12]`` fits CRS-11 (or CRS-12) with the throttle and each
+model change tried against the misfit after 90 s (docs/real-telemetry.md, "After 90 s");
+``--load-limit`` runs the whole study with the attitude bounded by a load limit (``LOAD_LIMIT``) on both
+flights.
 """
 
 from __future__ import annotations
@@ -32,11 +34,14 @@ from rocketid.joint import Flight, joint_estimate
 CANDIDATES = ["thrust_level", "transonic_drag", "bias_v", "bias_h", "back_pressure"]
 EDGES = (20, 50, 90, 110, 140)
 #: The model changes tried against the misfit after 90 s (keywords of ``falcon9_model``).
+LOAD_LIMIT = {"q_alpha": math.radians(3.0) * 30_000.0, "alpha_max": math.radians(15.0)}
+"""``--load-limit``: the attitude bounded by a load limit (3 deg at 30 kPa, at most 15 deg) on both flights."""
+
+
 VARIANTS = {
     "as shipped (attitude +-3 deg, knots every 10 s)": {},
     "attitude +-10 deg": {"alpha_max": math.radians(10.0)},
-    "attitude bound q-alpha 1571 Pa rad, at most 15 deg": {"q_alpha": math.radians(3.0) * 30_000.0,
-                                                           "alpha_max": math.radians(15.0)},
+    "attitude bound q-alpha 1571 Pa rad, at most 15 deg": LOAD_LIMIT,
     "attitude knots every 5 s": {"alpha_step": 5.0},
     "Earth rotation (28.5 N, heading 45 deg)": {"earth_rotation": True},
     "drag knots 3.5, 5, 7 added above Mach 2.5": {"mach_knots": MACH_KNOTS[:5] + (3.5, 5.0, 7.0)},
@@ -152,12 +157,12 @@ def throttle_fit(label, data, base):
     return spec, fit, knots
 
 
-def main():
+def main(model_kw=None):
     flights = []
     for label in FLIGHTS:
         data = falcon9_measurements(label)
         noise = reading_noise(data)
-        spec, fit, knots = throttle_fit(label, data, falcon9_model(data))
+        spec, fit, knots = throttle_fit(label, data, falcon9_model(data, **(model_kw or {})))
         try:
             se = uncertainty(fit).standard_errors
         except ri.SensitivityError as exc:
@@ -206,15 +211,16 @@ def main():
     print(joint.estimability().summary())
 
 
-def variants():
-    """CRS-11 with the throttle (knots as the diagnosis finds them) under each model change."""
-    data = falcon9_measurements("CRS-11")
+def variants(label: str = "CRS-11"):
+    """One flight (CRS-11 by default) with the throttle (knots as the diagnosis finds them) under each model
+    change."""
+    data = falcon9_measurements(label)
     noise = reading_noise(data)
     knots = None
     for name, kw in VARIANTS.items():
         base = falcon9_model(data, **kw)
         if knots is None:
-            spec, fit, knots = throttle_fit("CRS-11", data, base)
+            spec, fit, knots = throttle_fit(label, data, base)
         else:
             spec = with_effects(base, [throttle_effect(knots)])
             fit = ri.estimate(spec, data, options={"max_iter": 500})
@@ -222,10 +228,14 @@ def variants():
         print(f"\n-- {name}: chi2/dof (quantization sigma) {fit.chi2_per_dof:.3g}, at the reading noise "
               f"{chi2_at_reading_noise(fit, data, noise, len(spec.parameters)):.3f}; RMS v by window "
               + fmt(rms_by_window(fit.residuals['v'], data['v'].times))
-              + f"; RMS h 110-140 s {rms_by_window(fit.residuals['h'], data['h'].times)[-1]:.1f} m; CD "
+              + f"; RMS h by window " + fmt(rms_by_window(fit.residuals['h'], data['h'].times), "{:.1f}") + "; CD "
               + fmt(cd, "{:.2f}") + f"; attitude knots at a bound: "
               + str(sum(1 for s, _ in fit.active_bounds() if str(s).startswith("alpha"))))
 
 
 if __name__ == "__main__":
-    variants() if "--variants" in sys.argv[1:] else main()
+    args = sys.argv[1:]
+    if "--variants" in args:
+        variants(*[a for a in args if a.startswith("CRS-")][:1])
+    else:
+        main(LOAD_LIMIT if "--load-limit" in args else None)
