@@ -2,15 +2,18 @@
 
 Run ``python3 benchmarks/bench_draw_bounds.py [--draws 300] [--seed 1]``. On RA-66 (noisy data,
 seed 0, the study's settings), for each draw of one run: whether the predictor's solution stays
-within the bounds (``Prediction.feasible``), and the (7.9) solve started from the prediction and
-from the reference solution (iterations, wall time, objective). Prints the counts and means: the
-reason the sampling starts a draw whose prediction crosses a bound from the reference.
+within the bounds, and for the draws whose solution crosses one, the (7.9) solve started three
+ways: from the prediction held on the crossed bounds (``Prediction.active``, what the sampling
+does), from the prediction across the bound (``hold=False``, the path before f825809), and from
+the reference solution (the path from f825809 until the held prediction). Prints iterations,
+wall times and the largest objective difference between the starts.
 """
 
 from __future__ import annotations
 
 import argparse
 import collections
+import math
 import time
 from dataclasses import replace
 
@@ -34,30 +37,40 @@ def main() -> None:
     ctx = WorkerContext.build(prepare_sampling(prep, settings=SamplingSettings()).recipe, prep)
     est, ref = ctx.recipe.estimability, ctx.reference
     rows = []
+    within = collections.Counter()
     for k in range(1, args.draws + 1):
         q2 = est.q2_of(trial_parameters(ctx.recipe, args.seed, k))
         nlp = ref.nlp.with_offset(est.transform(q2).c)
-        pred = ctx.predictor.predict(nlp)
-        t = time.perf_counter()
-        # IPOPT from the prediction whatever it is (the path before the fix)
-        a = fit_nlp(ctx.prepared, nlp, pred.x, warm=replace(ref.solution, x=pred.x, mult_g=pred.mult_g))
-        ta = time.perf_counter() - t
+        across = ctx.predictor.predict(nlp, hold=False)
+        if across is None or across.feasible:
+            within[across is not None] += 1
+            continue
+        held = ctx.predictor.predict(nlp)
+        timed = []
+        for pred in (held if held.feasible else None, across):
+            t = time.perf_counter()
+            if pred is None:
+                timed.append((None, math.nan, math.nan))
+                continue
+            r = fit_nlp(ctx.prepared, nlp, pred.x, warm=replace(ref.solution, x=pred.x, mult_g=pred.mult_g))
+            timed.append((r.iterations, time.perf_counter() - t, r.objective))
         t = time.perf_counter()
         b = estimate_q1(ctx.prepared, est, q2, warm_start=ref)
-        tb = time.perf_counter() - t
-        rows.append((pred.feasible, a.iterations, b.iterations, ta, tb, abs(a.objective - b.objective) / b.objective))
-    r = np.array(rows, dtype=float)
-    f = r[:, 0] == 1
-    print(f"draws {len(r)}; predictions within the bounds {int(f.sum())}, across a bound {int((~f).sum())}")
-    print("iterations from the prediction, within:", dict(collections.Counter(r[f, 1].astype(int))),
-          "across:", dict(collections.Counter(r[~f, 1].astype(int))))
-    print("iterations from the reference, across:", dict(collections.Counter(r[~f, 2].astype(int))))
-    if (~f).any():
-        print(f"ms per solve across a bound: from the prediction {r[~f, 3].mean() * 1e3:.1f}, "
-              f"from the reference {r[~f, 4].mean() * 1e3:.1f}")
-    print(f"ms per solve within: from the prediction {r[f, 3].mean() * 1e3:.1f}")
-    print(f"largest relative objective difference {r[:, 5].max():.2g}")
-
+        timed.append((b.iterations, time.perf_counter() - t, b.objective))
+        objs = [o for _, _, o in timed if math.isfinite(o)]
+        rows.append((k, held.active, [i for i, _, _ in timed], [w for _, w, _ in timed],
+                     (max(objs) - min(objs)) / min(objs)))
+    print(f"draws {args.draws}; predictions within the bounds {within[True]}, none {within[False]}, "
+          f"across a bound {len(rows)}")
+    for k, active, its, ws, dobj in rows:
+        print(f"  draw {k}: rows held {list(active)}; iterations held / across / reference {its}; "
+              f"ms {', '.join(f'{1e3 * w:.1f}' for w in ws)}; objectives within {dobj:.1g} (relative)")
+    if rows:
+        its = np.array([r[2] for r in rows], dtype=float)
+        ws = np.array([r[3] for r in rows], dtype=float)
+        print("mean iterations held / across / reference: " + ", ".join(f"{v:.2f}" for v in np.nanmean(its, axis=0)))
+        print("mean ms held / across / reference: " + ", ".join(f"{1e3 * v:.1f}" for v in np.nanmean(ws, axis=0)))
+        print(f"largest relative objective difference {max(r[4] for r in rows):.2g}")
 
 if __name__ == "__main__":
     main()

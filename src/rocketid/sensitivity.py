@@ -292,12 +292,17 @@ class Prediction:
         Both are within the tolerances IPOPT would apply (:meth:`SolutionPredictor.predict`).
     feasible : bool
         ``x`` is within the variable bounds and the inequality rows (the bounds of ``p`` as
-        linear rows in (7.9)) within theirs. A prediction that crosses a bound is a poor start:
-        IPOPT needed 10-18 iterations from it against 4-8 from the reference solution (RA-66,
-        10 of 300 draws), so the sampling starts those draws from the reference instead.
+        linear rows in (7.9)) within theirs. A prediction that crosses a bound is a poor start
+        (IPOPT needed 10-18 iterations from it against 4-8 from the reference solution: RA-66,
+        10 of 300 draws); :meth:`SolutionPredictor.predict` then predicts again with the crossed
+        rows held on their bounds (``active``), and only a point that still leaves the bounds is
+        not feasible (the sampling starts such a draw from the reference).
     from_surface : bool
         The steps started from the learnt solution surface (:meth:`SolutionPredictor.learn`),
         not from the reference solution.
+    active : tuple of int
+        Inequality rows (indices within ``layout.linear_rows``) held on their bounds: the
+        prediction with an active set (empty: none crossed).
     """
 
     x: np.ndarray
@@ -308,6 +313,7 @@ class Prediction:
     converged: bool
     feasible: bool = True
     from_surface: bool = False
+    active: tuple = ()
 
 
 @dataclass(frozen=True, eq=False)
@@ -329,7 +335,8 @@ class SolutionPredictor:
 
     The inequality rows (the bounds of ``p`` as linear rows in (7.9)) keep their multipliers
     from the reference: away from the bounds they are of the order of IPOPT's final barrier
-    parameter; a prediction that crosses a bound is repaired by IPOPT's iterations.
+    parameter. A prediction that crosses a bound is predicted again with the crossed rows held
+    on their bounds (an active set: the rows as equalities, their multipliers solved for).
 
     Attributes
     ----------
@@ -397,7 +404,8 @@ class SolutionPredictor:
         primal = nlp.constraints(x)[eq] - nlp.c_lower[eq]
         return dual, primal
 
-    def predict(self, nlp: CollocationNLP, *, tol: float = 1e-8, max_steps: int | None = None) -> Prediction | None:
+    def predict(self, nlp: CollocationNLP, *, tol: float = 1e-8, max_steps: int | None = None,
+                hold: bool = True) -> Prediction | None:
         """The predicted solution of ``nlp`` (this predictor's NLP at another offset).
 
         Steps with the reference factors, from the learnt surface's value where it applies
@@ -409,7 +417,8 @@ class SolutionPredictor:
         starts from the learnt surface met the test and IPOPT still took an iteration from
         them), at most ``max_steps`` times (default
         :attr:`MAX_STEPS`; 1 gives the first-order prediction alone). It keeps the point with
-        the smallest constraint violation.
+        the smallest constraint violation. A point that crosses a bound of ``p`` is predicted
+        again with the crossed rows held on their bounds (``hold``; :attr:`Prediction.active`).
 
         Returns
         -------
@@ -428,16 +437,107 @@ class SolutionPredictor:
                 lam[:nlp.layout.equality_rows.stop] = z[nlp.n:]
                 best = self._steps(nlp, z[:nlp.n], lam, tol, max_steps)
                 if best is not None and best.converged:
-                    return self._finish(nlp, replace(best, from_surface=True))
+                    return self._finish(nlp, replace(best, from_surface=True), tol, hold)
         best = self._steps(nlp, np.array(self.solution.x, dtype=float), np.array(self.solution.mult_g, dtype=float),
                            tol, max_steps)
         if best is None or best.steps == 0:
             return None
-        return self._finish(nlp, best)
+        return self._finish(nlp, best, tol, hold)
 
-    def _finish(self, nlp: CollocationNLP, best: Prediction) -> Prediction:
-        return replace(best, mult_g=self._inequality_multipliers(nlp, best.x, best.mult_g),
+    def _finish(self, nlp: CollocationNLP, best: Prediction, tol: float, hold: bool = True) -> Prediction:
+        best = replace(best, mult_g=self._inequality_multipliers(nlp, best.x, best.mult_g),
                        feasible=self._within_bounds(nlp, best.x))
+        if best.feasible or not best.converged or not hold:
+            return best
+        held = self._on_bounds(nlp, best, tol)
+        return best if held is None else held
+
+    #: Rounds of the active set: a held row whose multiplier has the wrong sign is released.
+    ACTIVE_ROUNDS = 3
+
+    def _on_bounds(self, nlp: CollocationNLP, best: Prediction, tol: float) -> Prediction | None:
+        """The prediction with the inequality rows that ``best`` crosses held on their bounds.
+
+        The solution of the re-offset NLP then has those bounds active: the steps solve the
+        KKT conditions with the held rows as equalities, ``[[K, B], [B^T, 0]]`` with ``B`` the
+        rows (``K``'s reference factors and their Schur complement, one back-solve per held row
+        and per step). A held row whose multiplier comes out with the wrong sign (IPOPT's: <= 0
+        on a lower bound, >= 0 on an upper) is released and the rest held again
+        (:attr:`ACTIVE_ROUNDS`). None when a variable bound is crossed, the steps do not meet
+        the tolerances of :meth:`predict`, or the point still leaves a bound. (RA-66, the
+        study's run 1: the 10 of 300 draws whose prediction crosses a bound of ``p`` take 1
+        IPOPT iteration from this point against 4-8 from the reference solution,
+        ``benchmarks/bench_draw_bounds.py``.)"""
+        rows = nlp.layout.linear_rows
+        if rows.stop == rows.start or np.any(best.x < nlp.x_lower) or np.any(best.x > nlp.x_upper):
+            return None
+        A = nlp.structure.A_lin
+        lo, hi = nlp.c_lower[rows], nlp.c_upper[rows]
+        a = A @ best.x
+        held = np.flatnonzero((a < lo) | (a > hi))
+        lower = a[held] < lo[held]
+        meq = nlp.layout.equality_rows.stop
+        s_d = max(1.0, float(np.mean(np.abs(self.solution.mult_g))) / 100.0)
+        dual_tol, primal_tol = min(1.0, tol * s_d) / 10.0, tol / 10.0
+        for _ in range(self.ACTIVE_ROUNDS):
+            if held.size == 0:
+                return None
+            got = self._held_steps(nlp, best, held, np.where(lower, lo[held], hi[held]), dual_tol, primal_tol)
+            if got is None:
+                return None
+            x, lam, mu, steps = got
+            wrong = (lower & (mu > 0)) | (~lower & (mu < 0))
+            if not wrong.any():
+                mult = np.array(best.mult_g, dtype=float)
+                mult[:meq] = lam
+                mult[rows.start + held] = mu
+                if not self._within_bounds(nlp, x, slack=primal_tol):
+                    return None
+                r_dual, r_primal = self.residual(nlp, x, mult)
+                return Prediction(x, mult, best.steps + steps, float(np.max(np.abs(r_primal))) if r_primal.size else 0.0,
+                                  float(np.max(np.abs(r_dual))), True, True, best.from_surface,
+                                  tuple(int(i) for i in held))
+            held, lower = held[~wrong], lower[~wrong]
+        return None
+
+    def _held_steps(self, nlp: CollocationNLP, best: Prediction, held: np.ndarray, target: np.ndarray,
+                    dual_tol: float, primal_tol: float):
+        """Simplified Newton steps on the KKT conditions with rows ``held`` of ``A_lin`` equal to ``target``:
+        ``(x, equality multipliers, held rows' multipliers, steps)``, or None when they do not converge."""
+        n, meq = nlp.n, nlp.layout.equality_rows.stop
+        rows = nlp.layout.linear_rows
+        Ah = nlp.structure.A_lin[held]
+        B = np.zeros((n + meq, held.size))
+        B[:n] = Ah.T.toarray()
+        W = np.column_stack([self.lu.solve(B[:, j]) for j in range(held.size)])
+        S = B.T @ W
+        x, lam, mu = np.array(best.x, dtype=float), np.array(best.mult_g[:meq], dtype=float), np.zeros(held.size)
+        full = np.array(best.mult_g, dtype=float)
+        full[rows] = 0.0
+        with np.errstate(all="ignore"):
+            for step in range(2 * self.MAX_STEPS + 1):       # from a point off the held bounds: more steps
+                full[:meq] = lam
+                full[rows.start + held] = mu
+                r_dual, r_primal = self.residual(nlp, x, full)
+                r_held = Ah @ x - target
+                primal = max(float(np.max(np.abs(r_primal))) if r_primal.size else 0.0, float(np.max(np.abs(r_held))))
+                dual = float(np.max(np.abs(r_dual)))
+                if not (np.isfinite(primal) and np.isfinite(dual)):
+                    return None
+                if primal <= primal_tol and dual <= dual_tol:
+                    return x, lam, mu, step
+                if step == 2 * self.MAX_STEPS:
+                    return None
+                u = self.lu.solve(-np.concatenate([r_dual, r_primal]))
+                try:
+                    dmu = np.linalg.solve(S, B.T @ u + r_held)
+                except np.linalg.LinAlgError:
+                    return None
+                d = u - W @ dmu
+                if not (np.all(np.isfinite(d)) and np.all(np.isfinite(dmu))):
+                    return None
+                x, lam, mu = x + d[:n], lam + d[n:], mu + dmu
+        return None
 
     def _steps(self, nlp: CollocationNLP, x: np.ndarray, lam: np.ndarray, tol: float,
                max_steps: int) -> Prediction | None:
@@ -502,7 +602,9 @@ class SolutionPredictor:
         points, values = [np.zeros(rank)], [z_ref]
         base = replace(self, surface=None)
         for c, u in zip(offsets, np.einsum("ij,jk->ik", dc, basis)):
-            got = base.predict(self.nlp.with_offset(c), tol=tol, max_steps=16)
+            # the smooth solution surface: a point across a bound is kept as the steps find it, not held on
+            # the bound (a bound's kink is no polynomial)
+            got = base.predict(self.nlp.with_offset(c), tol=tol, max_steps=16, hold=False)
             if got is not None and got.converged:
                 points.append(u)
                 values.append(np.concatenate([got.x, got.mult_g[:meq]]))
@@ -529,12 +631,13 @@ class SolutionPredictor:
         return replace(self, surface=replace(surface, coef=coef, formed_s=time.perf_counter() - t0))
 
     @staticmethod
-    def _within_bounds(nlp: CollocationNLP, x: np.ndarray) -> bool:
-        """``x`` within the variable bounds and the inequality rows within theirs."""
+    def _within_bounds(nlp: CollocationNLP, x: np.ndarray, slack: float = 0.0) -> bool:
+        """``x`` within the variable bounds and the inequality rows within theirs (or ``slack`` past them:
+        a row held on its bound by the steps)."""
         rows = nlp.layout.linear_rows
         a = nlp.structure.A_lin @ x if rows.stop > rows.start else np.empty(0)
         return bool(np.all(x >= nlp.x_lower) and np.all(x <= nlp.x_upper)
-                    and np.all(a >= nlp.c_lower[rows]) and np.all(a <= nlp.c_upper[rows]))
+                    and np.all(a >= nlp.c_lower[rows] - slack) and np.all(a <= nlp.c_upper[rows] + slack))
 
     def _inequality_multipliers(self, nlp: CollocationNLP, x: np.ndarray, mult_g: np.ndarray) -> np.ndarray:
         """Multipliers of the inequality rows that keep each row's complementarity (slack times
