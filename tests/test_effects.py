@@ -931,3 +931,34 @@ def test_second_order_time_offset_against_an_exact_delay():
                                                                 seed=0))
     assert vehicle_of(ra66_fit).time_families and CATALOGUE["time_offset"].refinements(vehicle_of(ra66_fit)) == []
     assert [e.name for e in CATALOGUE["time_offset"].refinements(None)] == ["time_offset_2"]
+
+
+def test_a_thrust_level_reads_as_a_mass_error_exactly(ra66m_spec):
+    """The diagnosis's reading of a thrust level as a mass error (``api._mass_reading``): RA-66M flown with a
+    thrust 3 % low is, to every output, RA-66M with its mass (start and consumption) 1/0.97 times as large and
+    every aerodynamic coefficient (its CD(Mach) knots and CL_alpha, all estimated) scaled alike -- written here as
+    a user would, by scaling the model's mass definition -- and the words give that scale and the start mass."""
+    from rocketid.cases import ra66m_truth
+    from rocketid.diagnostics.api import _mass_reading
+    from rocketid.diagnostics.effects import Vehicle
+
+    def mass_scale(m):
+        s = m.parameter("s_mass", 0.0)
+        m.redefine("mass", m.definition("mass") * (1 + s))
+        return s
+
+    eps = -0.03
+    k = 1.0 / (1.0 + eps)
+    truth = dict(zip(ra66m_spec.parameter_names, (float(v) for v in ra66m_truth(ra66m_spec))))
+    t = np.linspace(1.0, ra66m_spec.tf, 40)
+    thrust = ri.simulate(with_effects(ra66m_spec, ["thrust_level"]), {**truth, "eps_thrust": eps}, t).outputs()
+    heavier = {n: (v * k if n.startswith(("CD_M_", "CL_alpha")) else v) for n, v in truth.items()}
+    scaled = ri.simulate(with_effects(ra66m_spec, [custom_effect("mass_scale", mass_scale)]),
+                         {**heavier, "s_mass": k - 1.0}, t).outputs()
+    for name in ("x", "h", "v"):
+        np.testing.assert_allclose(scaled[name], thrust[name], rtol=1e-7, atol=1e-6)
+    veh = Vehicle(thrust=1.0, mass=60.0, mass_flow=1.0, speed=1.0, start_speed=0.0, duration=1.0,
+                  altitude=(0.0, 1.0), mach=None, sigma={}, sample_interval=0.1)
+    text = _mass_reading({"eps_thrust": (eps, 1e-4)}, veh)
+    assert "the thrust -3 % is the mass +3.1 % throughout (+1.86 kg at the start" in text, text
+    assert _mass_reading({"eps_thrust": (eps, 1e-4)}, None) == "" and _mass_reading({}, veh) == ""

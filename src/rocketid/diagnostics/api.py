@@ -547,6 +547,7 @@ def _final(disc, ranking, level, window) -> FinalModel | None:
             text += (" Note: x, h and v see the thrust and the mass only through their ratio (the acceleration): an "
                      "error of the vehicle's mass (its start mass or its consumption) would fit much alike, the drag "
                      "coefficients taking up the rest; a measured thrust or mass tells them apart.")
+            text += _mass_reading(params, disc.vehicle)
         blind = _blind_spots(ranking, exclude=disc.effect_names)
         if blind:
             text += f" These data cannot show whether these are present too, as the coefficients take them up: {blind}."
@@ -569,6 +570,23 @@ def _final(disc, ranking, level, window) -> FinalModel | None:
                 f"the residual sits in: {_where(fit, level, window)}. Try {_suggest(ranking)}.")
     return FinalModel(disc.effect_names, params, float(fit.chi2_per_dof), bool(disc.fits_to_noise), disc.verdict,
                       text[0].upper() + text[1:], fit)
+
+
+def _mass_reading(params: Mapping, vehicle) -> str:
+    """The mass error that a found thrust level ``eps_thrust`` is the same as, in words (empty without one).
+
+    In the point-mass equations thrust, drag and lift act through force / mass and gravity does not
+    depend on the mass: a thrust ``(1 + eps) P`` gives the same flight as the mass ``m / (1 + eps)``
+    throughout (start mass and consumption scaled alike) with every aerodynamic coefficient scaled by
+    ``1 / (1 + eps)`` -- exactly, when the model estimates those coefficients."""
+    value = params.get("eps_thrust")
+    m0 = getattr(vehicle, "mass", math.nan)
+    if value is None or not (math.isfinite(m0) and m0 > 0) or not -1.0 < value[0] < 1.0:
+        return ""
+    k = 1.0 / (1.0 + value[0]) - 1.0
+    return (f" Read as a mass error, the thrust {100 * value[0]:+.2g} % is the mass {100 * k:+.2g} % throughout "
+            f"({m0 * k:+.3g} kg at the start, the consumption scaled alike) with the drag coefficients "
+            f"{100 * k:+.2g} %: the same flight exactly, when every aerodynamic coefficient is estimated.")
 
 
 def _variant(fit, meas, effects, settings: dict, notes: list):
