@@ -2,7 +2,8 @@
 variable ordering and initialization options, on the core solve of RA-66.
 
 Run ``nice python3 benchmarks/bench_ipopt_options.py`` (a few minutes; ``--repeat R``,
-default 3; ``--sizes default,528``). For each mesh, the full 8-parameter estimation from a
+default 3; ``--sizes default,528``; ``--only permuting_scaling`` runs the defaults and the variants
+whose names hold one of the given words). For each mesh, the full 8-parameter estimation from a
 simulation at p0 is solved with rocketid's defaults and with each variant below, the
 variants interleaved within each repetition (so that they share the load); the table gives
 the median IPOPT CPU time (``print_timing_statistics``: the whole algorithm, of which the
@@ -129,6 +130,9 @@ def child(args) -> None:
         pv, pc = time_ordering(nlp)
         perm = Permuted(nlp, pv, pc)
         variants = VARIANTS + [("variables and rows in time order", {"__permuted__": True})]
+        if args.only:
+            keys = [k for k in args.only.split(",") if k]
+            variants = [v for i, v in enumerate(variants) if i == 0 or any(k in v[0] for k in keys)]
         runs = {name: [] for name, _ in variants}
         load0 = uptime()
         for _ in range(args.repeat):
@@ -164,6 +168,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--sizes", default="default,528")
+    parser.add_argument("--only", default="", help="comma-separated substrings: run the defaults and the variants "
+                        "whose names hold one of them (e.g. 'permuting_scaling')")
     parser.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
@@ -173,7 +179,8 @@ def main() -> None:
     for label, env_extra in (("OpenBLAS threads: default", {}), ("OPENBLAS_NUM_THREADS=1", {"OPENBLAS_NUM_THREADS": "1"})):
         env = {k: v for k, v in os.environ.items() if k not in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")}
         env.update(env_extra)
-        cmd = [sys.executable, __file__, "--child", "--repeat", str(args.repeat), "--sizes", args.sizes]
+        cmd = [sys.executable, __file__, "--child", "--repeat", str(args.repeat), "--sizes", args.sizes,
+               "--only", args.only]
         t0 = time.perf_counter()
         res = subprocess.run(cmd, env=env, capture_output=True, text=True)
         if res.returncode:
