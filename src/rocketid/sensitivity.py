@@ -510,7 +510,9 @@ class SolutionPredictor:
         B = np.zeros((n + meq, held.size))
         B[:n] = Ah.T.toarray()
         W = np.column_stack([self.lu.solve(B[:, j]) for j in range(held.size)])
-        S = B.T @ W
+        # the products in einsum's own loops, not BLAS's (whose summation order may follow its thread count):
+        # a draw's start, and so IPOPT's iterate of record, must not depend on the executor
+        S = np.einsum("ij,ik->jk", B, W)
         x, lam, mu = np.array(best.x, dtype=float), np.array(best.mult_g[:meq], dtype=float), np.zeros(held.size)
         full = np.array(best.mult_g, dtype=float)
         full[rows] = 0.0
@@ -530,10 +532,10 @@ class SolutionPredictor:
                     return None
                 u = self.lu.solve(-np.concatenate([r_dual, r_primal]))
                 try:
-                    dmu = np.linalg.solve(S, B.T @ u + r_held)
+                    dmu = np.linalg.solve(S, np.einsum("ij,i->j", B, u) + r_held)
                 except np.linalg.LinAlgError:
                     return None
-                d = u - W @ dmu
+                d = u - np.einsum("ij,j->i", W, dmu)
                 if not (np.all(np.isfinite(d)) and np.all(np.isfinite(dmu))):
                     return None
                 x, lam, mu = x + d[:n], lam + d[n:], mu + dmu
