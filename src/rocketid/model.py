@@ -1344,6 +1344,7 @@ def check_guess(spec: ModelSpec, values: Sequence[float] | None = None, *, where
     """
     p = spec.guess if values is None else np.asarray(values, dtype=float)
     for ps, v in zip(spec.parameters, p):
-        if not (ps.lower - GUESS_SLACK * max(1.0, abs(ps.lower)) <= v <= ps.upper + GUESS_SLACK * max(1.0, abs(ps.upper))):
+        lo, hi = ps.lower - GUESS_SLACK * max(1.0, abs(ps.lower)), ps.upper + GUESS_SLACK * max(1.0, abs(ps.upper))
+        if not lo <= v <= hi:
             raise error((f"{where}: " if where else "") + f"the guess {v:g} of parameter {ps.symbol} lies outside "
                         f"its bounds [{ps.lower:g}, {ps.upper:g}]; move the guess inside or widen the bounds")

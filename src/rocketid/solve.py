@@ -716,7 +716,7 @@ def estimate(spec: ModelSpec, data: Measurements, *, guess: Mapping | Sequence[f
     nlp = prepared.nlp
     p0 = spec.parameter_vector(guess)
     check_guess(spec, p0)
-    p0 = np.clip(p0, [ps.lower for ps in spec.parameters], [ps.upper for ps in spec.parameters])
+    p0 = np.clip(p0, spec.lower, spec.upper)         # a guess within GUESS_SLACK past a bound: onto it
     warm = None
     if warm_start is not None:
         warm = warm_start if isinstance(warm_start, NLPSolution) else warm_start.solution
