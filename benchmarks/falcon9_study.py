@@ -12,8 +12,8 @@ them as input.
 Run: ``nice python3 benchmarks/falcon9_study.py`` (about 5-10 minutes on 2 busy cores);
 ``nice python3 benchmarks/falcon9_study.py --variants [CRS-12]`` fits CRS-11 (or CRS-12) with the throttle and each
 model change tried against the misfit after 90 s (docs/real-telemetry.md, "After 90 s");
-``--load-limit`` runs the whole study with the attitude bounded by a load limit (``LOAD_LIMIT``) on both
-flights.
+``--load-limit`` runs the whole study with the attitude bounded by a load limit on both flights
+(``rocketid.examples.falcon9.LOAD_LIMIT``).
 """
 
 from __future__ import annotations
@@ -27,17 +27,13 @@ import rocketid as ri
 from rocketid.diagnostics import rank_candidates, throttle_effect, with_effects
 from rocketid.diagnostics.locate import locate
 from rocketid.estimability import uncertainty
-from rocketid.examples.falcon9 import (FLIGHTS, MACH_KNOTS, falcon9_events, falcon9_measurements, falcon9_model,
-                                       reading_noise, smooth_residuals)
+from rocketid.examples.falcon9 import (FLIGHTS, LOAD_LIMIT, MACH_KNOTS, falcon9_events, falcon9_measurements,
+                                       falcon9_model, reading_noise, smooth_residuals)
 from rocketid.joint import Flight, joint_estimate
 
 CANDIDATES = ["thrust_level", "transonic_drag", "bias_v", "bias_h", "back_pressure"]
 EDGES = (20, 50, 90, 110, 140)
 #: The model changes tried against the misfit after 90 s (keywords of ``falcon9_model``).
-LOAD_LIMIT = {"q_alpha": math.radians(3.0) * 30_000.0, "alpha_max": math.radians(15.0)}
-"""``--load-limit``: the attitude bounded by a load limit (3 deg at 30 kPa, at most 15 deg) on both flights."""
-
-
 VARIANTS = {
     "as shipped (attitude +-3 deg, knots every 10 s)": {},
     "attitude +-10 deg": {"alpha_max": math.radians(10.0)},

@@ -18,7 +18,7 @@ import pytest
 import rocketid as ri
 from rocketid.diagnostics import rank_candidates, throttle_effect, with_effects
 from rocketid.diagnostics.locate import locate
-from rocketid.examples.falcon9 import (FLIGHTS, falcon9_data_path, falcon9_events, falcon9_measurements,
+from rocketid.examples.falcon9 import (FLIGHTS, LOAD_LIMIT, falcon9_data_path, falcon9_events, falcon9_measurements,
                                        falcon9_model, reading_noise, smooth_residuals)
 from rocketid.joint import Flight, joint_estimate
 
@@ -143,15 +143,13 @@ def test_the_late_altitude_misfit_of_crs12_is_the_attitude_bound():
     drag because the attitude cannot); with a load-limited attitude (``q_alpha``: 3 deg at 30 kPa, at most
     15 deg in thin air) the altitude reaches its reading noise there, the speed is no worse, and every drag
     knot is plausible. Measured: 47.0 -> 31.5 m against 29.3 m; CD 0.22-1.50 -> 0.25-0.61."""
-    import math
     data = falcon9_measurements("CRS-12")
     noise = reading_noise(data)
     shipped = falcon9_model(data)
     knots = _throttle_knots(shipped, data)
     fits = {}
     for label, base in (("shipped", shipped),
-                        ("limited", falcon9_model(data, q_alpha=math.radians(3.0) * 30_000.0,
-                                                  alpha_max=math.radians(15.0)))):
+                        ("limited", falcon9_model(data, **LOAD_LIMIT))):
         fits[label] = ri.estimate(with_effects(base, [throttle_effect(knots)]), data, options={"max_iter": 500})
         assert fits[label].success, label
     late = data["h"].times >= 110.0

@@ -494,9 +494,9 @@ class SolutionPredictor:
                 if not self._within_bounds(nlp, x, slack=primal_tol):
                     return None
                 r_dual, r_primal = self.residual(nlp, x, mult)
-                return Prediction(x, mult, best.steps + steps, float(np.max(np.abs(r_primal))) if r_primal.size else 0.0,
-                                  float(np.max(np.abs(r_dual))), True, True, best.from_surface,
-                                  tuple(int(i) for i in held))
+                primal = float(np.max(np.abs(r_primal))) if r_primal.size else 0.0
+                return Prediction(x, mult, best.steps + steps, primal, float(np.max(np.abs(r_dual))), True, True,
+                                  best.from_surface, tuple(int(i) for i in held))
             held, lower = held[~wrong], lower[~wrong]
         return None
 

@@ -64,7 +64,7 @@ from ..physics.gravity import EARTH_RADIUS, G0
 
 __all__ = ["FLIGHTS", "falcon9_data_path", "falcon9_events", "falcon9_measurements", "falcon9_model", "reading_noise",
            "smooth_residuals",
-           "LIFTOFF_MASS", "THRUST_VAC", "THRUST_SL", "ISP_VAC", "AREA", "MACH_KNOTS", "QUANTIZATION"]
+           "LIFTOFF_MASS", "THRUST_VAC", "THRUST_SL", "ISP_VAC", "AREA", "MACH_KNOTS", "QUANTIZATION", "LOAD_LIMIT"]
 
 #: The flights shipped: label -> file stem.
 FLIGHTS = {"CRS-11": "falcon9_crs11_stage1", "CRS-12": "falcon9_crs12_stage1"}
@@ -77,6 +77,11 @@ AREA = math.pi * (3.7 / 2) ** 2
 #: Largest thrust direction off the velocity, rad: a launcher flies near zero attack angle through
 #: the dense atmosphere (structural loads), 3 degrees allows for steering and winds.
 ALPHA_MAX = math.radians(3.0)
+#: A load-limited attitude instead (``falcon9_model(data, **LOAD_LIMIT)``): ``qbar |alpha| <= 1571 Pa rad``
+#: (3 degrees at 30 kPa, about max-q), at most 15 degrees where the air is thin. On CRS-12 it takes the
+#: altitude after 110 s to its reading noise with a plausible drag table, where the +-3 degree bound holds
+#: the drag at Mach 2.5 at its upper bound (docs/real-telemetry.md).
+LOAD_LIMIT = {"q_alpha": math.radians(3.0) * 30_000.0, "alpha_max": math.radians(15.0)}
 MACH_KNOTS = (0.0, 0.8, 1.1, 1.5, 2.5, 4.0)
 #: Quantization steps of the broadcast's numbers: altitude 0.1 km, speed 1 km/h.
 QUANTIZATION = {"h": 100.0, "v": 1000.0 / 3600.0}
