@@ -72,5 +72,6 @@ def main() -> None:
         print("mean ms held / across / reference: " + ", ".join(f"{1e3 * v:.1f}" for v in np.nanmean(ws, axis=0)))
         print(f"largest relative objective difference {max(r[4] for r in rows):.2g}")
 
+
 if __name__ == "__main__":
     main()
