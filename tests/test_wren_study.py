@@ -408,3 +408,29 @@ def test_diagnose_on_wren_case(case, tmp_path, monkeypatch, request):
     visible) is found and explained with right families only, the out-of-catalogue rail angle is not called
     explained, and a wrong family is never reported as explained."""
     STUDY.check_case(case, KNOWN_FAILURES, tmp_path, monkeypatch, request)
+
+
+def test_the_shape_tool_puts_its_knots_over_the_burn(spec):
+    """``tests/wren_study/shapes.py`` (the tool the motor cases' shapes were measured with): its powered shapes
+    have their knots on mesh boundaries over the burn only, and a powered profile of zero is the model."""
+    from wren_study import shapes
+    from rocketid.diagnostics import with_effects
+    from rocketid.diagnostics.effects import Vehicle
+    mesh = ri.default_mesh(spec, refine_first=3)
+    veh = Vehicle(thrust=3600.0, mass=60.0, mass_flow=1.0, speed=300.0, start_speed=25.0, duration=spec.tf - spec.t0,
+                  altitude=(1200.0, 10200.0), mach=None, sigma={}, sample_interval=0.1,
+                  knot_times=tuple(float(b) for b in mesh.boundaries))
+    knots = shapes._burn_knots(veh, 9)
+    assert len(knots) == 9 and knots[0] == spec.t0 and knots[-1] == shapes.BURN_END
+    assert set(knots) <= set(veh.knot_times)
+    prof = shapes.effect("powered_profile9", veh)
+    assert len(prof.parameter_names) == 9
+    t = np.array([3.0, 12.0, 30.0])
+    truth_p = dict(V.truth(spec))
+    base = ri.simulate(spec, truth_p, t).outputs()
+    zero = ri.simulate(with_effects(spec, [prof]), {**truth_p, **{n: 0.0 for n in prof.parameter_names}}, t).outputs()
+    for name in ("x", "h", "v"):
+        np.testing.assert_allclose(zero[name], base[name], rtol=1e-8, atol=1e-5)   # the integrator's tolerance
+    assert shapes.effect("powered_throttle5", veh).name == "powered_throttle5"
+    with pytest.raises(SystemExit, match="unknown effect"):
+        shapes.effect("powered_thing", veh)
