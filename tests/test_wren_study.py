@@ -225,24 +225,36 @@ def test_a_misread_rail_is_the_start_angle(spec):
     catalogue's ``start_angle`` refit from the diagnosis's base fit (the noise from the data's differences)
     reaches the noise band and reads the rail 1.50 deg low (measured -1.5001 deg); a start-speed error alone
     does not explain it (chi2/dof 314 measured)."""
+    base, judged = _refits_from_the_base_fit(spec, Hidden(elevation_deg=RAIL_TRUE_DEG), "rail-angle")
+    assert not judged.band.contains(base.chi2_per_dof)
+    angle = judged("start_angle")
+    assert angle.accepted, angle.reason()
+    value, std = angle.refit.estimate("dgamma_start")
+    assert abs(math.degrees(value) - (RAIL_TRUE_DEG - 85.0)) < 0.02 and std < math.radians(0.01)
+    speed = judged("start_speed")
+    assert not speed.check("noise").passed
+
+
+def _refits_from_the_base_fit(spec, hidden: Hidden, case: str):
+    """The case's base fit as the diagnosis makes it (the noise from the data's differences, its mesh), and
+    ``judged(*names)``: the refit of those catalogue effects from it, judged by the acceptance test
+    (``judged.band`` the noise band)."""
     from rocketid.diagnostics import CATALOGUE
     from rocketid.diagnostics.accept import accept, noise_band
     from rocketid.diagnostics.api import _noise_from_data
     from rocketid.diagnostics.refit import run_refit
     from rocketid.diagnostics.screen import vehicle_of
     from rocketid.diagnostics.step import _Search
-    data = truth.measurements(Hidden(elevation_deg=RAIL_TRUE_DEG), seed=BY_NAME["rail-angle"].seed)
+    data = truth.measurements(hidden, seed=BY_NAME[case].seed)
     sigma, _ = _noise_from_data("estimate", data, [], {})
     fit = ri.estimate(spec, data, sigma=sigma, mesh=ri.default_mesh(spec, refine_first=3))
     band = noise_band(fit)
-    assert not band.contains(fit.chi2_per_dof)
     ctx = _Search(spec, band, vehicle_of(fit), 0.05, None, 300.0, 1, False, None)
-    angle = accept(run_refit(ctx.task(fit, [CATALOGUE["start_angle"]], ("start_angle",)))[0], band)
-    assert angle.accepted, angle.reason()
-    value, std = angle.refit.estimate("dgamma_start")
-    assert abs(math.degrees(value) - (RAIL_TRUE_DEG - 85.0)) < 0.02 and std < math.radians(0.01)
-    speed = accept(run_refit(ctx.task(fit, [CATALOGUE["start_speed"]], ("start_speed",)))[0], band)
-    assert not speed.check("noise").passed
+
+    def judged(*names):
+        return accept(run_refit(ctx.task(fit, [CATALOGUE[n] for n in names], names))[0], band)
+    judged.band = band
+    return fit, judged
 
 
 def test_the_data_prefer_a_thrust_error_to_the_ballast(spec):
@@ -256,21 +268,7 @@ def test_the_data_prefer_a_thrust_error_to_the_ballast(spec):
     coefficients scaled alike, and what is left to tell a constant 1.5 kg from a thrust scale is a 0.6 %
     drift of the ratio over the burn, which these data read the other way. When this test fails, the
     catalogue or the fit has changed what the data say: run the case again and revisit ``KNOWN_FAILURES``."""
-    from rocketid.diagnostics import CATALOGUE
-    from rocketid.diagnostics.accept import accept, noise_band
-    from rocketid.diagnostics.api import _noise_from_data
-    from rocketid.diagnostics.refit import run_refit
-    from rocketid.diagnostics.screen import vehicle_of
-    from rocketid.diagnostics.step import _Search
-    data = truth.measurements(Hidden(dm_payload=BALLAST), seed=BY_NAME["nose-ballast"].seed)
-    sigma, _ = _noise_from_data("estimate", data, [], {})
-    fit = ri.estimate(spec, data, sigma=sigma, mesh=ri.default_mesh(spec, refine_first=3))
-    band = noise_band(fit)
-    ctx = _Search(spec, band, vehicle_of(fit), 0.05, None, 300.0, 1, False, None)
-
-    def judged(*names):
-        return accept(run_refit(ctx.task(fit, [CATALOGUE[n] for n in names], names))[0], band)
-
+    _, judged = _refits_from_the_base_fit(spec, Hidden(dm_payload=BALLAST), "nose-ballast")
     thrust, truth_pair, thrust_pair = judged("thrust_level"), judged("start_mass", "start_speed"), \
         judged("thrust_level", "start_speed")
     assert thrust.accepted and thrust_pair.accepted, (thrust.reason(), thrust_pair.reason())
