@@ -140,7 +140,7 @@ def _throttle_knots(base, data):
 def test_the_late_altitude_misfit_of_crs12_is_the_attitude_bound():
     """CRS-12 with the throttle: under the shipped +-3 deg attitude bound the altitude after 110 s is far
     above its reading noise and the drag at Mach 2.5 sits at its upper bound (the fit bends the path with
-    drag because the attitude cannot); with a load-limited attitude (``q_alpha``: 3 deg at 30 kPa, at most
+    drag because the attitude cannot); with a load-limited attitude (``LOAD_LIMIT``: 2.5 deg at 30 kPa, at most
     15 deg in thin air) the altitude reaches its reading noise there, the speed is no worse, and every drag
     knot is plausible. Measured: 47.0 -> 31.5 m against 29.3 m; CD 0.22-1.50 -> 0.25-0.61."""
     data = falcon9_measurements("CRS-12")

@@ -77,8 +77,9 @@ AREA = math.pi * (3.7 / 2) ** 2
 #: Largest thrust direction off the velocity, rad: a launcher flies near zero attack angle through
 #: the dense atmosphere (structural loads), 3 degrees allows for steering and winds.
 ALPHA_MAX = math.radians(3.0)
-#: A load-limited attitude instead (``falcon9_model(data, **LOAD_LIMIT)``): ``qbar |alpha| <= 1571 Pa rad``
-#: (3 degrees at 30 kPa, about max-q), at most 15 degrees where the air is thin. On CRS-12 it takes the
+#: A load-limited attitude instead (``falcon9_model(data, **LOAD_LIMIT)``): the bound ``q_alpha / (qbar +
+#: q_alpha / alpha_max)`` with ``q_alpha`` = 1571 Pa rad and ``alpha_max`` = 15 degrees: 2.5 degrees at 30 kPa
+#: (about max-q), 8 at 5 kPa, 15 in vacuum. On CRS-12 it takes the
 #: altitude after 110 s to its reading noise with a plausible drag table, where the +-3 degree bound holds
 #: the drag at Mach 2.5 at its upper bound (docs/real-telemetry.md).
 LOAD_LIMIT = {"q_alpha": math.radians(3.0) * 30_000.0, "alpha_max": math.radians(15.0)}
