@@ -477,8 +477,7 @@ class SolutionPredictor:
         held = np.flatnonzero((a < lo) | (a > hi))
         lower = a[held] < lo[held]
         meq = nlp.layout.equality_rows.stop
-        s_d = max(1.0, float(np.mean(np.abs(self.solution.mult_g))) / 100.0)
-        dual_tol, primal_tol = min(1.0, tol * s_d) / 10.0, tol / 10.0
+        dual_tol, primal_tol = self._tolerances(tol)
         for _ in range(self.ACTIVE_ROUNDS):
             if held.size == 0:
                 return None
@@ -541,13 +540,18 @@ class SolutionPredictor:
                 x, lam, mu = x + d[:n], lam + d[n:], mu + dmu
         return None
 
+    def _tolerances(self, tol: float) -> tuple[float, float]:
+        """``(dual, primal)`` tolerances of the steps (:meth:`predict`): a tenth of IPOPT's, the dual one on
+        IPOPT's dual scaling ``max(1, mean |lambda| / 100)`` at the reference."""
+        s_d = max(1.0, float(np.mean(np.abs(self.solution.mult_g))) / 100.0)
+        return min(1.0, tol * s_d) / 10.0, tol / 10.0
+
     def _steps(self, nlp: CollocationNLP, x: np.ndarray, lam: np.ndarray, tol: float,
                max_steps: int) -> Prediction | None:
         """Simplified Newton steps from ``(x, lam)`` with the reference factors; the point with
         the smallest constraint violation (None when the first residual is not finite)."""
         n, meq = nlp.n, nlp.layout.equality_rows.stop
-        s_d = max(1.0, float(np.mean(np.abs(self.solution.mult_g))) / 100.0)
-        dual_tol, primal_tol = min(1.0, tol * s_d) / 10.0, tol / 10.0
+        dual_tol, primal_tol = self._tolerances(tol)
         best = None
         with np.errstate(all="ignore"):
             for step in range(max_steps + 1):
