@@ -241,13 +241,12 @@ def _refits_from_the_base_fit(spec, hidden: Hidden, case: str):
     (``judged.band`` the noise band)."""
     from rocketid.diagnostics import CATALOGUE
     from rocketid.diagnostics.accept import accept, noise_band
-    from rocketid.diagnostics.api import _noise_from_data
+    from rocketid.diagnostics.api import base_fit
     from rocketid.diagnostics.refit import run_refit
     from rocketid.diagnostics.screen import vehicle_of
     from rocketid.diagnostics.step import _Search
     data = truth.measurements(hidden, seed=BY_NAME[case].seed)
-    sigma, _ = _noise_from_data("estimate", data, [], {})
-    fit = ri.estimate(spec, data, sigma=sigma, mesh=ri.default_mesh(spec, refine_first=3))
+    fit, _, counts, _ = base_fit(spec, data, "estimate")
     band = noise_band(fit)
     ctx = _Search(spec, band, vehicle_of(fit), 0.05, None, 300.0, 1, False, None)
 

@@ -34,7 +34,7 @@ for extra in (HERE.parent, HERE.parent / "vehicles"):
 
 from rocketid.diagnostics import CATALOGUE, burn_rate_effect, throttle_effect  # noqa: E402
 from rocketid.diagnostics.accept import accept, noise_band  # noqa: E402
-from rocketid.diagnostics.api import _fit_base, _noise_from_data, _read_data, resolve_model  # noqa: E402
+from rocketid.diagnostics.api import _read_data, base_fit, resolve_model  # noqa: E402
 from rocketid.diagnostics.effects import Effect, _role_definition, piecewise_linear  # noqa: E402
 from rocketid.diagnostics.screen import vehicle_of  # noqa: E402
 from rocketid.diagnostics.step import _Search  # noqa: E402
@@ -86,8 +86,7 @@ def main(argv: list[str]) -> None:
     case, sets = BY_NAME[argv[0]], [s.split("+") for s in argv[1:]]
     spec, _ = resolve_model(str(STUDY.model_file))
     meas, _ = _read_data(str(STUDY.make_data(case)), spec)
-    sigma, counts = _noise_from_data("estimate", meas, [], {})
-    fit = _fit_base(spec, meas, None, None, None, [], sigma)
+    fit, _, counts, _ = base_fit(spec, meas, "estimate")
     band = noise_band(fit, estimated=counts)
     print(f"{case.name}: base chi2/dof {fit.chi2_per_dof:.4g}, noise band <= {band.upper:.4g}")
     ctx = _Search(fit.spec, band, vehicle_of(fit), 0.05, None, 600.0, 2, True, None)

@@ -72,12 +72,16 @@ __all__ = ["command"]
 @click.option("--column", "columns", multiple=True, type=NameValue(str, "CSV column name"),
               metavar="NAME=CSVCOL", help="Read output NAME from column CSVCOL (repeatable).")
 @click.option("--time-column", default="t", show_default=True, help="Name of the time column.")
+@click.option("--wild-points", "wild_points", type=click.Choice(["drop", "keep"]), default="drop", show_default=True,
+              help="Isolated samples no model can follow (a GPS multipath jump, a radar wild point), found on the "
+                   "base fit's residuals: 'drop' removes them before the diagnosis, 'keep' only lists them. The "
+                   "report names every one.")
 @sigma_option_decl()
 @sigma_column_option_decl()
 @unmeasured_option_decl()
 @verbose_option
 def command(data_files, out, model, level, confirm_top, holdout, max_effects, workers, refit_timeout, locate_window,
-            window_text, columns, time_column, sigmas, sigma_columns, unmeasured):
+            window_text, columns, time_column, wild_points, sigmas, sigma_columns, unmeasured):
     """Fit a model to DATA.csv and diagnose what it misses; write DIR/report.html.
 
     The report compares each channel with the model, locates where the
@@ -121,7 +125,7 @@ def command(data_files, out, model, level, confirm_top, holdout, max_effects, wo
                  sigma_columns=sigma_columns, unmeasured=unmeasured,
                  settings=dict(level=level, confirm_top=confirm_top, window=window, holdout=holdout,
                                max_effects=max_effects, workers=workers, refit_timeout=refit_timeout,
-                               candidates=candidates))
+                               candidates=candidates, wild_points=wild_points))
         return
     data_file = data_files[0]
     data = read_data(data_file, spec, time_column=time_column, columns=assignments(columns, "--column"),
@@ -133,7 +137,7 @@ def command(data_files, out, model, level, confirm_top, holdout, max_effects, wo
         t0 = time.perf_counter()
         report = diagnose(data, spec, level=level, confirm_top=confirm_top, window=window, holdout=holdout,
                           max_effects=max_effects, workers=workers, refit_timeout=refit_timeout, sigma=sigma,
-                          flight_window=flight, candidates=candidates)
+                          flight_window=flight, candidates=candidates, wild_points=wild_points)
         report = _relabel(report, label, str(data_file))
         path = report.write(out)
     for line in report.verdict():

@@ -274,7 +274,8 @@ def diagnose_flights(datas: Sequence, labels: Sequence[str], spec, *, files: Seq
         ``on_flight(label, report)`` after each flight's diagnosis (progress).
     **settings
         Passed to :func:`rocketid.diagnostics.diagnose` for each flight (``level``,
-        ``confirm_top``, ``holdout``, ``max_effects``, ``workers``, ``refit_timeout``, ``window``).
+        ``confirm_top``, ``holdout``, ``max_effects``, ``workers``, ``refit_timeout``, ``window``,
+        ``wild_points``). The joint fit leaves out the wild points each flight's diagnosis dropped.
     """
     from ..cli import windowed_inputs
     from ..diagnostics import diagnose
@@ -301,6 +302,9 @@ def diagnose_flights(datas: Sequence, labels: Sequence[str], spec, *, files: Seq
         reports.append(rep)
     t1 = time.perf_counter()
     joint, failed = None, ""
+    # the joint fit sees each flight's data as its diagnosis did: without the wild points it dropped
+    flights = [replace(fl, data=rep.wild_points.without(fl.data))
+               if rep.wild_points and rep.wild_points.action == "drop" else fl for fl, rep in zip(flights, reports)]
     flights, joint_sigma, noise = _noise_of_the_flights(flights, reports, sigma)
     try:
         joint = joint_estimate(flights, sigma=joint_sigma)

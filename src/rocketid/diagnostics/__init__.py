@@ -1,6 +1,10 @@
 """Diagnostics: compare the model with the measurements, find where it fails, learn which
 physical effect is missing, add it and watch the error fall (``docs/effects.md``).
 
+Before anything is judged, the data's wild points (isolated samples no model can follow):
+
+``wild``     :func:`find_wild_points` -> :class:`WildPoints` (on the base fit's residuals; dropped by default)
+
 Part A -- candidate effects, their ranking by the score test, confirmation by refit, model history:
 
 ``effects``  :class:`Effect`, :data:`CATALOGUE`, :func:`with_effects`, :func:`custom_effect`
@@ -53,7 +57,9 @@ from .refit import Refit, refit_all
 from .accept import Acceptance, NoiseBand, accept, noise_band
 from .step import Discovery, Step, discover
 from .variant import mach_variant
+from .wild import WildPoint, WildPoints, find_wild_points
 
 __all__ += ["compare", "Comparison", "locate", "Location", "check_plausibility", "Plausibility",
             "diagnose", "DiagnosisReport", "FinalModel", "screen", "Screen", "vehicle_of", "refit_all", "Refit",
-            "accept", "Acceptance", "NoiseBand", "noise_band", "discover", "Discovery", "Step", "mach_variant"]
+            "accept", "Acceptance", "NoiseBand", "noise_band", "discover", "Discovery", "Step", "mach_variant",
+            "find_wild_points", "WildPoints", "WildPoint"]

@@ -123,6 +123,10 @@ class DiagnosisReport:
     noise_from_data : dict
         ``{channel: (sigma, number of differences)}`` of the channels whose noise was estimated from the
         data alone (``sigma="estimate"``; :func:`rocketid.data.difference_noise`); empty otherwise.
+    wild_points : WildPoints or None
+        The isolated samples no model can follow, found on the first base fit
+        (:mod:`rocketid.diagnostics.wild`); dropped before the diagnosis unless
+        ``wild_points="keep"``. None when the test was not made.
     """
 
     model: str
@@ -145,6 +149,7 @@ class DiagnosisReport:
     variant: Any = None
     ranking_failed: str = ""
     noise_from_data: dict = field(default_factory=dict)
+    wild_points: Any = None
 
     # ---- verdicts
     @property
@@ -180,6 +185,8 @@ class DiagnosisReport:
         out = []
         c = self.comparison
         base_ok = self._base_fits()
+        if self.wild_points:
+            out.append(self.wild_points.note()[0].upper() + self.wild_points.note()[1:] + ".")
         if base_ok:
             out.append(f"The residuals of {self.fit.spec.name} are white noise at the stated sigma "
                        f"(chi2/dof {c.chi2_per_dof:.3f}).")
@@ -242,11 +249,13 @@ class DiagnosisReport:
         confirmations, history) and numbered notes: a :class:`~rocketid.summary.Summary`
         (as :class:`~rocketid.summary.SummaryText`, so it prints and joins as text)."""
         from ..summary import Section, Summary, SummaryText
-        sections = [Section("Verdict", tuple(self.verdict())),
-                    Section("", (self.comparison.summary(),)),
+        sections = [Section("Verdict", tuple(self.verdict()))]
+        if self.wild_points:
+            sections.append(Section("", (self.wild_points.summary(),)))
+        sections += [Section("", (self.comparison.summary(),)),
                     Section("", (self.location.summary() if self.location is not None
                                  else "Location: not available (see notes)",)),
-                    Section("", (self.plausibility.summary(),))]
+                     Section("", (self.plausibility.summary(),))]
         if self.ranking is not None:
             sections.append(Section("", (self.ranking.summary(),)))
         if self.steps:
@@ -305,6 +314,7 @@ class DiagnosisReport:
                    "steps": [s.to_dict() for s in self.variant.steps]},
                "noise_from_data": {c: {"sigma": float(v), "differences": int(n)}
                                    for c, (v, n) in self.noise_from_data.items()},
+               "wild_points": None if self.wild_points is None else self.wild_points.to_dict(),
                "timings": dict(self.timings), "notes": list(self.notes)}
         return out
 
@@ -386,6 +396,41 @@ def _noise_from_data(sigma, meas, notes: list, from_data: dict) -> tuple:
                                                             for n in wanted)
                  + "; the models are judged against it, and the noise band is widened for its uncertainty")
     return values, counts
+
+
+def base_fit(spec, meas, sigma=None, *, guess=None, mesh=None, options=None, notes: list | None = None,
+             from_data: dict | None = None, wild_points: str = "drop") -> tuple:
+    """The diagnosis's base fit: the noise (from the data alone where it is to be estimated), the fit, the
+    wild points on its residuals (:func:`~rocketid.diagnostics.wild.find_wild_points`) and, when they are
+    dropped, the noise and the fit again without them.
+
+    Returns
+    -------
+    fit : EstimationResult
+    sigma
+        The ``sigma`` request with numbers in place of ``"estimate"``.
+    counts : dict
+        ``{channel: number of differences}`` of the channels whose noise was estimated.
+    wild : WildPoints
+    """
+    from .wild import WILD_POINT_ACTIONS, find_wild_points
+
+    if wild_points not in WILD_POINT_ACTIONS:
+        raise SettingsError(f"wild_points must be one of {', '.join(WILD_POINT_ACTIONS)}, got {wild_points!r}")
+    notes = notes if notes is not None else []
+    from_data = from_data if from_data is not None else {}
+    first: list = []
+    values, counts = _noise_from_data(sigma, meas, first, from_data)
+    fit = _fit_base(spec, meas, guess, mesh, options, first, values)
+    wild = find_wild_points(fit, action=wild_points)
+    if wild and wild_points == "drop":
+        first = []
+        values, counts = _noise_from_data(sigma, wild.without(meas), first, from_data)
+        fit = _fit_base(spec, wild.without(meas), fit.p, fit.prepared.transcription.mesh, options, first, values)
+    notes.extend(first)
+    if wild:
+        notes.append(wild.note())
+    return fit, values, counts, wild
 
 
 def _fit_base(spec, meas, guess, mesh, options, notes: list, sigma=None) -> EstimationResult:
@@ -624,7 +669,7 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
              max_effects: int = 3, workers: int | None = None, refit_timeout: float = 180.0,
              refine: bool = True, variant: bool | str = "auto",
              sigma: str | Mapping[str, float | str] | None = None,
-             flight_window: Sequence[float] | None = None) -> DiagnosisReport:
+             flight_window: Sequence[float] | None = None, wild_points: str = "drop") -> DiagnosisReport:
     """Fit ``model`` to ``data`` and find what it misses::
 
         fit -> compare -> locate -> plausibility
@@ -682,6 +727,12 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
         Diagnose only the flight window ``(T0, T1)`` (s): the model and the data are cut to
         it (:func:`rocketid.start.apply_window`; a window that starts in flight estimates the
         initial states the data determine), and everything after works on the windowed model.
+    wild_points : {"drop", "keep"}
+        Isolated samples no model of the flight can follow (a GPS multipath jump, a radar wild
+        point; :mod:`rocketid.diagnostics.wild`) are found on the base fit's residuals. ``"drop"``
+        removes them, takes the noise from the data again when it is estimated, and fits the base
+        model again before anything is judged; ``"keep"`` only lists them. Either way the report
+        names every one.
 
     Returns
     -------
@@ -717,9 +768,9 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
 
     from_data: dict = {}
     asked = sigma
-    sigma, counts = _noise_from_data(sigma, meas, notes, from_data)
-    fit = timed("fit_s", _fit_base, spec, meas, guess, mesh, options, notes, sigma)
-    meas = fit.prepared.measurements  # with the sigmas of the fit
+    fit, sigma, counts, wild = timed("fit_s", base_fit, spec, meas, asked, guess=guess, mesh=mesh, options=options,
+                                     notes=notes, from_data=from_data, wild_points=wild_points)
+    meas = fit.prepared.measurements  # with the sigmas of the fit (and without the wild points dropped)
     comp, loc, plaus = timed("describe_s", _describe, fit, level, window, notes)
     effects = _candidate_effects(candidates)
     disc, ranking, failed = None, None, ""
@@ -757,7 +808,7 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
                              plausibility=plaus, ranking=ranking, confirmations=confs, confirmed=names,
                              refit_plausibility=pls, after=after, history=history, level=float(level),
                              timings=timings, notes=tuple(notes), discovery=disc, final=final, variant=var,
-                             ranking_failed=failed, noise_from_data=from_data)
+                             ranking_failed=failed, noise_from_data=from_data, wild_points=wild)
     if out is not None:
         report.write(out)
     return report

@@ -1,0 +1,123 @@
+"""How often the wild-point test flags a point where there is none: on Gaussian noise, and on every case of
+the vehicle studies (``docs/telemetry.md``, "Wild points").
+
+::
+
+    python benchmarks/wild_points_scan.py gaussian                  # the false-alarm share, Monte Carlo
+    python benchmarks/wild_points_scan.py wren sounding air unseen telemetry blind discovery
+
+A study's data come from its directory (the study's own environment variable, as its ``run.py``; made from
+its truth when missing). Each case gets the diagnosis's base fit (``rocketid.diagnostics.api.base_fit``:
+the noise from the data where the study estimates it, the study's flight window) and the test; the line
+per case names the points flagged. Nothing is diagnosed further.
+"""
+
+from __future__ import annotations
+
+import glob
+import importlib
+import os
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+for extra in (ROOT / "tests", ROOT / "tests" / "vehicles"):
+    if str(extra) not in sys.path:
+        sys.path.insert(0, str(extra))
+
+from rocketid.cli import flight_window  # noqa: E402
+from rocketid.diagnostics.api import _read_data, base_fit, resolve_model  # noqa: E402
+from rocketid.diagnostics.wild import LEVEL, series_points  # noqa: E402
+
+STUDIES = {"wren": "wren_study.run", "sounding": "sounding_study.run", "air": "airlaunch_study.run",
+           "unseen": "unseen_study.run", "telemetry": "telemetry_study.run"}
+
+
+def gaussian(reps_small: int = 4000, reps_large: int = 300) -> None:
+    """Share of data sets of 3 channels of white unit noise with a point flagged (the level is 1 %)."""
+    rng = np.random.default_rng(0)
+    for n, reps in ((377, reps_small), (6600, reps_large)):
+        t = 0.1 * np.arange(n)
+        hits = sum(any(series_points(t, rng.standard_normal(n), n_total=3 * n) for _ in range(3))
+                   for _ in range(reps))
+        print(f"3 x {n} samples: {hits} of {reps} data sets flagged ({100 * hits / reps:.2f} %; level "
+              f"{100 * LEVEL:g} %)", flush=True)
+
+
+def _line(label: str, name: str, spec, meas, sigma, guess=None) -> bool:
+    t0 = time.perf_counter()
+    fit, _, _, wild = base_fit(spec, meas, sigma, guess=guess)
+    print(f"{label} {name}: {len(wild)} wild, base chi2/dof {fit.chi2_per_dof:.4g}, {time.perf_counter() - t0:.1f} s"
+          + (f" -- {wild.note()}" if wild else ""), flush=True)
+    return bool(wild)
+
+
+def study(key: str) -> tuple[int, int]:
+    S = importlib.import_module(STUDIES[key]).STUDY
+    spec0, _ = resolve_model(str(S.model_file))
+    args = list(S.extra_args)
+    sigma = "estimate" if "--sigma" in args else None
+    win = flight_window(args[args.index("--window") + 1]) if "--window" in args else None
+    flagged = 0
+    for case in S.cases:
+        spec, guess = spec0, None
+        meas, _ = _read_data(str(S.make_data(case)), spec)
+        if win is not None:
+            from rocketid.start import apply_window, window_guess
+            p_full = spec.parameter_vector(None)
+            spec_w, meas, _ = apply_window(spec, meas, win, p_full)
+            spec, guess = spec_w, window_guess(spec0, spec_w, p_full)
+        flagged += _line(key, case.name, spec, meas, sigma, guess)
+    return flagged, len(S.cases)
+
+
+def blind() -> tuple[int, int]:
+    """Halcyon-8's cases, as ``tests/blind_study/run.py`` made them (``$ROCKETID_BLIND_DIR``)."""
+    folder = os.environ.get("ROCKETID_BLIND_DIR", "/tmp/rocketid-blind")
+    files = sorted(glob.glob(os.path.join(folder, "*.csv")))
+    if not files:
+        raise SystemExit(f"no Halcyon-8 data in {folder}: run tests/blind_study/run.py first (ROCKETID_BLIND_DIR)")
+    spec, _ = resolve_model(str(ROOT / "tests" / "vehicles" / "halcyon.py"))
+    flagged = sum(_line("blind", Path(f).stem, spec, _read_data(f, spec)[0], None) for f in files)
+    return flagged, len(files)
+
+
+def discovery() -> tuple[int, int]:
+    """The hidden-effect study's 49 cases (``$ROCKETID_STUDY_DIR``)."""
+    from discovery_study import harness as H
+    from discovery_study.cases import ALL
+    flagged = 0
+    for c in ALL:
+        spec, _ = resolve_model(H.model_of(c))
+        flagged += _line("discovery", c.id, spec, _read_data(str(H.case_data(c)), spec)[0], None)
+    return flagged, len(ALL)
+
+
+def main(argv: list[str]) -> None:
+    warnings.simplefilter("ignore")
+    if not argv:
+        raise SystemExit(__doc__)
+    total = flagged = 0
+    for key in argv:
+        if key == "gaussian":
+            gaussian()
+            continue
+        if key in STUDIES:
+            f, n = study(key)
+        elif key == "blind":
+            f, n = blind()
+        elif key == "discovery":
+            f, n = discovery()
+        else:
+            raise SystemExit(f"unknown: {key!r} (gaussian, {', '.join(STUDIES)}, blind, discovery)")
+        flagged, total = flagged + f, total + n
+    if total:
+        print(f"{flagged} of {total} data sets with a point flagged")
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
