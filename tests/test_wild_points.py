@@ -204,3 +204,19 @@ def test_dropping_matches_by_time_so_a_window_cut_keeps_them_apart(wren, logs):
     for c in cut.channels:
         gone = set(c.times) - set(less[c.name].times)
         assert gone == ({times[c.name]} if 10.0 <= times[c.name] <= 40.0 else set())
+
+
+def test_the_fit_command_warns_of_them_and_keeps_them(logs, tmp_path):
+    """`rocketid estimate` fits the data as given and says which samples look wild (FIT.json lists them)."""
+    from click.testing import CliRunner
+
+    from rocketid.cli import main as cli
+    _, glitched, times = logs
+    csv = glitched.to_csv(tmp_path / "gps.csv")
+    fit_json = tmp_path / "fit.json"
+    res = CliRunner().invoke(cli, ["estimate", str(csv), "--model", str(HERE / "vehicles" / "wren.py"), "--out",
+                                   str(fit_json), *[a for n, s in STATED.items() for a in ("--sigma", f"{n}={s}")]])
+    assert res.exit_code == 0, res.output
+    assert "Warning: 3 sample(s) look like wild points" in res.output and "The fit keeps them" in res.output
+    d = json.loads(fit_json.read_text())
+    assert sorted((p["channel"], p["t"]) for p in d["wild_points"]) == sorted(times.items())

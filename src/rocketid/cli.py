@@ -975,11 +975,27 @@ def estimate_command(data_files, model, columns, time_column, sigmas, sigma_colu
     if result.success:
         payload["std_err"] = _print_standard_errors(result, coloured=errors == "coloured")
         payload["std_err_residuals"] = errors
+        payload["wild_points"] = _print_wild_points(result)
     if out is not None:
         path = write_json(out, payload)
         status(f"wrote {path}")
     if not result.success or result.sanity:
         click.get_current_context().exit(EXIT_NOT_CONVERGED)
+
+
+def _print_wild_points(result) -> list:
+    """Warn of samples the fit cannot follow (:mod:`rocketid.diagnostics.wild`); the fit keeps them. Returns
+    them for FIT.json (empty when there are none)."""
+    from .diagnostics.wild import find_wild_points
+
+    wild = find_wild_points(result, action="keep")
+    if wild:
+        click.echo(f"\nWarning: {len(wild)} sample(s) look like wild points, isolated and more than "
+                   f"{wild.threshold:.2f} robust standard deviations off their neighbours: "
+                   + "; ".join(p.text() for p in wild.points[:6]) + (" ..." if len(wild) > 6 else "")
+                   + ". The fit keeps them; `rocketid diagnose` drops them, or remove those rows to fit without "
+                   "them.")
+    return [p.to_dict() for p in wild.points]
 
 
 def _print_joint_coloured(result) -> dict:
