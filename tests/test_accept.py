@@ -71,6 +71,26 @@ def test_an_implausible_size_is_not_accepted_and_loses_to_a_plausible_rival():
     assert _choose([wrong]) == (None, "no refit is significant with a plausible size")
 
 
+def test_an_oversized_refit_is_told_apart_from_other_implausible_ones():
+    """RA-66M flown with its thrust 12 % above the stated value (measured: thrust_level at chi2/dof 0.984,
+    eps_thrust 0.1201, 6 times its realistic 0.02) passes every check but its size: ``oversized``, the mark of a
+    finding (``step._finding``), whose verdict is "partly explained" with the size named, never "explained". It
+    is never chosen at a step (a plausible rival wins; alone, nothing is), and a refit held at a bound, far from
+    the noise or with implausible coefficients is no finding."""
+    from rocketid.diagnostics.step import final_verdict
+    big = accept(refit("thrust_level", 0.9838, value=0.1201, size=0.02, base_chi2=1.5e5), BAND)
+    assert big.oversized and not big.accepted and not big.admissible
+    verdict, notes = final_verdict(True, True, False, big)
+    assert verdict == "partly explained" and "6.0 times its realistic size" in notes[0]
+    assert _choose([big]) == (None, "no refit is significant with a plausible size")
+    for other in (accept(refit("e", 0.99, value=0.12, size=0.02, at_bound=("p_e",)), BAND),
+                  accept(refit("e", 3.0, value=0.12, size=0.02), BAND),
+                  accept(refit("e", 0.99, value=0.12, size=0.02, plausible=False), BAND),
+                  accept(refit("e", 0.99, value=0.05, size=0.02), BAND),       # plausible: accepted
+                  accept(refit("e", 0.99, value=0.25, size=0.02), BAND)):      # 12.5 times: not a finding
+        assert not other.oversized
+
+
 def test_size_limit_is_five_realistic_sizes():
     assert SIZE_FACTOR == 5.0
     assert accept(refit("e", 0.992, value=0.099, size=0.02), BAND).check("size").passed

@@ -76,12 +76,16 @@ __all__ = ["command"]
               help="Isolated samples no model can follow (a GPS multipath jump, a radar wild point), found on the "
                    "base fit's residuals: 'drop' removes them before the diagnosis, 'keep' only lists them. The "
                    "report names every one.")
+@click.option("--size", "size_opts", multiple=True, type=NameValue(float), metavar="NAME=VALUE",
+              help="Realistic size of an effect parameter (repeatable; a name or a pattern such as 'eps_P*'), in "
+                   "place of the catalogue's: an effect beyond 5 times it is implausible. A model file's "
+                   "realistic_sizes() states them too; the option wins.")
 @sigma_option_decl()
 @sigma_column_option_decl()
 @unmeasured_option_decl()
 @verbose_option
 def command(data_files, out, model, level, confirm_top, holdout, max_effects, workers, refit_timeout, locate_window,
-            window_text, columns, time_column, wild_points, sigmas, sigma_columns, unmeasured):
+            window_text, columns, time_column, wild_points, size_opts, sigmas, sigma_columns, unmeasured):
     """Fit a model to DATA.csv and diagnose what it misses; write DIR/report.html.
 
     The report compares each channel with the model, locates where the
@@ -119,13 +123,14 @@ def command(data_files, out, model, level, confirm_top, holdout, max_effects, wo
     check_folder(out, "--out")  # before the work: a bad --out fails at once, not after the fits
     spec, label = resolve_model(model)
     candidates = _file_candidates(model)
+    sizes = {**_file_sizes(model), **assignments(size_opts, "--size")}
     sigma = sigma_argument(sigmas, spec)
     if len(data_files) > 1:
         _several(data_files, out, spec, label, sigma, flight, columns=columns, time_column=time_column,
                  sigma_columns=sigma_columns, unmeasured=unmeasured,
                  settings=dict(level=level, confirm_top=confirm_top, window=window, holdout=holdout,
                                max_effects=max_effects, workers=workers, refit_timeout=refit_timeout,
-                               candidates=candidates, wild_points=wild_points))
+                               candidates=candidates, wild_points=wild_points, sizes=sizes))
         return
     data_file = data_files[0]
     data = read_data(data_file, spec, time_column=time_column, columns=assignments(columns, "--column"),
@@ -137,7 +142,7 @@ def command(data_files, out, model, level, confirm_top, holdout, max_effects, wo
         t0 = time.perf_counter()
         report = diagnose(data, spec, level=level, confirm_top=confirm_top, window=window, holdout=holdout,
                           max_effects=max_effects, workers=workers, refit_timeout=refit_timeout, sigma=sigma,
-                          flight_window=flight, candidates=candidates, wild_points=wild_points)
+                          flight_window=flight, candidates=candidates, wild_points=wild_points, sizes=sizes)
         report = _relabel(report, label, str(data_file))
         path = report.write(out)
     for line in report.verdict():
@@ -174,6 +179,25 @@ def _several(data_files, out, spec, model_label, sigma, flight, *, columns, time
                f"{Path(out)}/<flight>/ ({time.perf_counter() - t0:.1f} s)")
     if not result.success:
         click.get_current_context().exit(EXIT_NOT_CONVERGED)
+
+
+def _file_sizes(model: str) -> dict:
+    """The model file's ``realistic_sizes()``: ``{parameter name or pattern: size}`` the vehicle's engineers
+    state for its effects (empty without one)::
+
+        def realistic_sizes():
+            return {"eps_thrust": 0.10, "eps_burn": 0.10}   # a hybrid: the N2O tank's temperature moves both
+    """
+    from ..cases.files import optional_hook
+    if not str(model).endswith(".py"):
+        return {}
+    value = optional_hook(model, "realistic_sizes")
+    if value is None:
+        return {}
+    if not isinstance(value, dict):
+        raise ModelError(f"model file {model!r}: realistic_sizes() must return a dict {{parameter: size}}, got "
+                         f"{type(value).__name__}")
+    return dict(value)
 
 
 def _file_candidates(model: str):

@@ -58,13 +58,20 @@ from ..solve import EstimationResult
 from .refit import Refit
 
 __all__ = ["Check", "Acceptance", "NoiseBand", "noise_band", "accept", "whiteness_ok", "fits_to_noise",
-           "WHITE_LEVEL", "SIZE_FACTOR", "BAND_LEVEL"]
+           "WHITE_LEVEL", "SIZE_FACTOR", "FINDING_FACTOR", "BAND_LEVEL"]
 
 WHITE_LEVEL = 0.001
 """Holm-corrected Ljung-Box p (over the channels) below which residuals are not white."""
 
 SIZE_FACTOR = 5.0
 """An added parameter beyond this many realistic sizes is implausible."""
+
+FINDING_FACTOR = 10.0
+"""An effect that explains the data at more than :data:`SIZE_FACTOR` times its realistic size, but at most this,
+is a finding when nothing plausible explains them (:attr:`Acceptance.oversized`): a stated number off by that
+much (a thrust 12 % off, 6 times the realistic 2 %). Beyond it the shape stands in for something else -- the
+studies' refits that reached the noise at 12-300 times their sizes were density profiles of -176 % and winds
+of 2800 m/s."""
 
 BAND_LEVEL = 0.001
 """Upper tail of chi2(dof)/dof that bounds the noise band."""
@@ -257,6 +264,22 @@ class Acceptance:
         """Converged, significant and a plausible size: a step toward the explanation (the
         coefficients may still be distorted by another missing effect)."""
         return all(self.check(n).passed for n in ADMISSIBLE)
+
+    @property
+    def oversized(self) -> bool:
+        """Passes every check of an explanation but the size, and fails that only by magnitude: an estimate
+        beyond :data:`SIZE_FACTOR` times its realistic size but none beyond :data:`FINDING_FACTOR`, none held at
+        a bound, below its physics' least or changing too steeply between knots. It explains the data at a size the vehicle's stated numbers
+        make implausible (a thrust 12 % off its stated value) -- a finding, not an explanation."""
+        r = self.refit
+        if self.failed != ["size"] or not r.success or r.at_bound:
+            return False
+        if any(abs(r.estimate(k)[0]) < m for k, m in r.least.items()):
+            return False
+        if any(v > SIZE_FACTOR for v in r.change_ratio().values()):
+            return False
+        ratios = r.size_ratio().values()
+        return any(v > SIZE_FACTOR for v in ratios) and all(v <= FINDING_FACTOR for v in ratios)
 
     @property
     def failed(self) -> list[str]:

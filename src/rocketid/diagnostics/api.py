@@ -457,6 +457,35 @@ def _describe(fit, level, window, notes: list) -> tuple:
     return comp, loc, check_plausibility(fit, level=level)
 
 
+def _oversized(refit, band) -> bool:
+    from .accept import accept
+    return accept(refit, band).oversized
+
+
+def _stated(effects: list, sizes: dict, fit: EstimationResult, notes: list) -> list:
+    """The candidates with the user's realistic sizes (:func:`~rocketid.diagnostics.effects.state_sizes`); an
+    entry that names no parameter of them or of their refined shapes on this vehicle is refused."""
+    if not sizes:
+        return effects
+    from .effects import state_sizes, stated_names
+    from .screen import vehicle_of
+    effects = state_sizes(effects, sizes)
+    named = stated_names(effects, sizes, vehicle_of(fit))
+    unused = [k for k, v in named.items() if not v]
+    if unused:
+        import difflib
+        known = sorted({n for e in effects for n in e.realistic})
+        close = difflib.get_close_matches(unused[0], known, n=3)
+        raise SettingsError(f"sizes: {', '.join(map(repr, unused))} names no parameter of the candidate effects"
+                            + (f"; did you mean {', '.join(close)}?" if close else "")
+                            + f" (their parameters include {', '.join(known[:12])}{' ...' if len(known) > 12 else ''}; "
+                            "a pattern such as 'eps_P*' names a profile's knots)")
+    notes.append("realistic sizes stated by the user, in place of the catalogue's: "
+                 + "; ".join(f"{k} {sizes[k]:g} ({', '.join(v[:4])}{' ...' if len(v) > 4 else ''})"
+                             for k, v in named.items()))
+    return effects
+
+
 def _candidate_effects(candidates) -> list:
     from .effects import CATALOGUE, resolve_effects
     return resolve_effects(list(CATALOGUE.values()) if candidates is None else list(candidates))
@@ -603,6 +632,10 @@ def _final(disc, ranking, level, window) -> FinalModel | None:
             why = disc.not_an_explanation
             text = (f"the model with {names} reaches the noise (chi2/dof {fit.chi2_per_dof:.4g}, band <= "
                     f"{band.upper:.4g}) but is not an explanation{': ' + why if why else ''}.{amb}")
+            if disc.refit is not None and _oversized(disc.refit, band):
+                text += (" The data find it at that size: check the vehicle's stated numbers, or, if they are that "
+                         "uncertain, state it (--size NAME=VALUE, diagnose(sizes={...})) and the same fit is judged "
+                         "against it.")
         else:
             text = (f"the model with {names} does not reach the noise ({disc.noise_detail}); the residual is "
                     f"located in: {_where(fit, level, window)}.{amb} Try {_suggest(ranking)}.")
@@ -669,7 +702,8 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
              max_effects: int = 3, workers: int | None = None, refit_timeout: float = 180.0,
              refine: bool = True, variant: bool | str = "auto",
              sigma: str | Mapping[str, float | str] | None = None,
-             flight_window: Sequence[float] | None = None, wild_points: str = "drop") -> DiagnosisReport:
+             flight_window: Sequence[float] | None = None, wild_points: str = "drop",
+             sizes: Mapping[str, float] | None = None) -> DiagnosisReport:
     """Fit ``model`` to ``data`` and find what it misses::
 
         fit -> compare -> locate -> plausibility
@@ -733,6 +767,12 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
         removes them, takes the noise from the data again when it is estimated, and fits the base
         model again before anything is judged; ``"keep"`` only lists them. Either way the report
         names every one.
+    sizes : mapping of str to float, optional
+        Realistic sizes the user states for effect parameters, by name or ``fnmatch`` pattern
+        (``{"eps_thrust": 0.10, "eps_P*": 0.10}``), in place of the catalogue's
+        (:func:`~rocketid.diagnostics.effects.state_sizes`): an effect is implausible beyond 5 times
+        its realistic size, so a vehicle whose numbers are less certain than the catalogue assumes
+        says so here. An entry that names no parameter of the candidates is refused.
 
     Returns
     -------
@@ -743,6 +783,8 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
     from .step import discover
 
     _check_settings(level, confirm_top, max_effects, refit_timeout)
+    from .effects import check_sizes
+    sizes = check_sizes(sizes)
     if variant not in (True, False, "auto"):
         raise SettingsError(f"variant must be 'auto', True or False, got {variant!r}")
     spec, label = resolve_model(model)
@@ -772,7 +814,7 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
                                      notes=notes, from_data=from_data, wild_points=wild_points)
     meas = fit.prepared.measurements  # with the sigmas of the fit (and without the wild points dropped)
     comp, loc, plaus = timed("describe_s", _describe, fit, level, window, notes)
-    effects = _candidate_effects(candidates)
+    effects = _stated(_candidate_effects(candidates), sizes, fit, notes)
     disc, ranking, failed = None, None, ""
     if confirm_top > 0:
         try:

@@ -1866,6 +1866,94 @@ def custom_effect(name: str, apply: Callable[[Model], Iterable[sp.Symbol]], *, t
 # ---------------------------------------------------------------------------
 
 
+def check_sizes(sizes: Mapping[str, float] | None, where: str = "sizes") -> dict[str, float]:
+    """``sizes`` as ``{parameter name or pattern: positive size}``; a SettingsError naming a bad entry."""
+    from ..errors import SettingsError
+    out = {}
+    for name, value in dict(sizes or {}).items():
+        if not isinstance(name, str) or not name.strip():
+            raise SettingsError(f"{where}: a realistic size needs a parameter name (or a pattern such as eps_P*), "
+                                f"got {name!r}")
+        try:
+            v = float(value)
+        except (TypeError, ValueError):
+            raise SettingsError(f"{where} {name}={value!r}: give a positive number (the parameter's realistic "
+                                "magnitude, in its own units)") from None
+        if not (v > 0 and math.isfinite(v)):
+            raise SettingsError(f"{where} {name}={value!r}: a realistic size must be positive and finite")
+        out[name.strip()] = v
+    return out
+
+
+def _stated_for(names: Iterable[str], sizes: Mapping[str, float]) -> dict[str, float]:
+    """The stated size of each of ``names`` that an entry of ``sizes`` names: its exact name first, else the
+    first pattern (``fnmatch``) that matches."""
+    import fnmatch
+    out = {}
+    for n in names:
+        if n in sizes:
+            out[n] = sizes[n]
+            continue
+        for pat, v in sizes.items():
+            if fnmatch.fnmatchcase(n, pat):
+                out[n] = v
+                break
+    return out
+
+
+def state_sizes(effects: Sequence[Effect], sizes: Mapping[str, float] | None) -> list[Effect]:
+    """``effects`` with the realistic sizes the user states in place of the catalogue's.
+
+    A vehicle's own numbers are known to its engineers better than to any catalogue: a hybrid motor whose
+    thrust moves 10 % with the oxidiser tank's temperature, a mass known to 5 %. ``sizes`` maps a parameter
+    name (``"eps_thrust"``) or an ``fnmatch`` pattern (``"eps_P*"``: every knot of a thrust profile) to its
+    realistic magnitude in the parameter's units; every judgement of size -- the acceptance test's
+    :data:`~rocketid.diagnostics.accept.SIZE_FACTOR`, the screen's starting values, the report's "realistic"
+    -- then uses it, for the effects and for the refined shapes they lead to.
+
+    Parameters
+    ----------
+    effects : sequence of Effect
+    sizes : mapping of str to float, optional
+
+    Returns
+    -------
+    list of Effect
+    """
+    sizes = check_sizes(sizes)
+    if not sizes:
+        return list(effects)
+
+    def wrap(e: Effect) -> Effect:
+        own = _stated_for(e.realistic, sizes)
+        base_relative, base_refine = e.relative, e.refine
+
+        def relative(vehicle):
+            out = dict(base_relative(vehicle)) if base_relative is not None else {}
+            out.update(_stated_for(set(e.realistic) | set(out), sizes))
+            return out
+
+        def refine(vehicle):
+            return [wrap(x) for x in base_refine(vehicle)]
+
+        return replace(e, realistic={**e.realistic, **own},
+                       relative=relative if (own or base_relative is not None) else None,
+                       refine=refine if base_refine is not None else None)
+
+    return [wrap(e) for e in effects]
+
+
+def stated_names(effects: Sequence[Effect], sizes: Mapping[str, float], vehicle: "Vehicle | None") -> dict:
+    """``{entry of sizes: parameter names it states}`` over ``effects`` and their refined shapes for
+    ``vehicle`` (an entry that names nothing is a mistake the caller reports)."""
+    names: set = set()
+    for e in effects:
+        names |= set(e.realistic)
+        for r in e.refinements(vehicle):
+            names |= set(r.realistic)
+    return {k: sorted(_stated_for(names, {k: v})) for k, v in sizes.items()}
+
+
 def resolve_effects(effects: Effect | str | Iterable[Effect | str]) -> list[Effect]:
     """Effects from names (of :data:`CATALOGUE`) or :class:`Effect` values."""
     if isinstance(effects, (Effect, str)):

@@ -11,8 +11,7 @@ Forward selection with a backward check, capped at ``max_effects``:
    (:func:`~rocketid.diagnostics.refit.refit_all`);
 3. test each (:func:`~rocketid.diagnostics.accept.accept`); choose by BIC among the
    accepted (they explain the data) or, when none is, among the admissible ones (a
-   step toward the explanation; a plausible effect always beats an implausible one,
-   which is never chosen);
+   step toward the explanation; a plausible effect always beats an implausible one);
 4. when the chosen effect leaves a residual and has more flexible shapes (a wind with a
    surface value and more basis functions, a density profile on more knots, a thrust
    error in time, a misalignment from an onset time), refit those and keep the shape with
@@ -29,7 +28,11 @@ Forward selection with a backward check, capped at ``max_effects``:
    check of an explanation with a lower BIC replaces the found one (sequential replacement, as
    in stepwise regression). Measured: a 0.3 deg misalignment with a drifting altitude bias was
    found as a 10-knot wind (BIC 4378 against the misalignment's 4401 at step 1, both far from
-   the noise) plus the drift, and called explained; the exchange finds the misalignment.
+   the noise) plus the drift, and called explained; the exchange finds the misalignment;
+8. finding: a search that ends without reaching the noise is replaced by the first step's
+   refit that passes every check but its size (:func:`_finding`: a thrust 12 % off its
+   stated value), its verdict "partly explained" with the size named -- the user checks
+   the vehicle's numbers or states the larger uncertainty (``diagnose(..., sizes=)``).
 
 The model each step keeps is fitted again here from the chosen refit's own solution (primal and dual), and
 is judged again when it lands anywhere else (:func:`_judged_again`): the verdict is the test of the model
@@ -732,6 +735,11 @@ def discover(fit: EstimationResult, candidates: Sequence[Effect], *, level: floa
         if swapped is not None:
             chosen, current, last = swapped
             ok, detail = fits_to_noise(current, band)
+    if not ok and not base_ok and not ambiguous:
+        found = _finding(ctx, fit, steps, notes)
+        if found is not None:
+            chosen, current, last = found
+            ok, detail = fits_to_noise(current, band)
     if ambiguous:
         notes.append(f"ambiguous: {ambiguous}")
     verdict, why = final_verdict(bool(chosen), bool(ok), base_ok, last, ambiguous)
@@ -740,6 +748,39 @@ def discover(fit: EstimationResult, candidates: Sequence[Effect], *, level: floa
                      last.refit if last is not None else None, bool(ok), detail,
                      verdict, tuple(notes), {"discover_s": time.perf_counter() - t_start}, ambiguous, rivals,
                      not_an_explanation(last) if verdict == "partly explained" and ok else "")
+
+
+def _finding(ctx: "_Search", base: EstimationResult, steps: list, notes: list) -> tuple | None:
+    """When the search ends without reaching the noise: the first step's refit that passes every check of an
+    explanation but its size (:attr:`~rocketid.diagnostics.accept.Acceptance.oversized`), as the final model --
+    a finding the user checks against the vehicle's numbers, its verdict "partly explained" with the size named
+    (:func:`final_verdict`). Returns ``(effects, fit, acceptance)`` (its step appended to ``steps``) or None.
+
+    Measured: RA-66M flown with its thrust 12 % above the stated value -- six times the realistic 2 %.
+    ``thrust_level`` reached chi2/dof 0.984 with white residuals and ``eps_thrust`` 0.1201, and was never chosen:
+    the search took a 0.02 deg misalignment that left chi2/dof at 1.5e5, stopped, and suggested a wind. Only a
+    search that fails to reach the noise is replaced, so a path that explains the data (a pair of plausible
+    effects) keeps its answer."""
+    first = next((st for st in steps if st.number == 1), None)
+    if first is None:
+        return None
+    big = [(j, a) for j, a in enumerate(first.acceptances) if j < len(first.screen.contenders) and a.oversized]
+    if not big:
+        return None
+    j, pick = min(big, key=lambda ja: ja[1].refit.bic[1])
+    effect = first.screen.contenders[j].effect
+    try:
+        fit, pick = _fit_chosen(ctx, base, [effect], effect, pick, False, notes, 1)
+    except RocketidError as exc:
+        notes.append(f"{effect.name} explains the data at an implausible size, but its model could not be fitted here "
+                     f"({exc})")
+        return None
+    why = (f"the search did not reach the noise; {effect.name} explains the data (the noise, white residuals, "
+           "plausible coefficients) but at an implausible size: a finding to check against the vehicle's stated "
+           "numbers, not an explanation")
+    notes.append(f"finding: {why}")
+    steps.append(Step(len(steps) + 1, first.screen, first.acceptances, pick, why, (), (effect.name,), fit))
+    return [effect], fit, pick
 
 
 @dataclass(frozen=True)
