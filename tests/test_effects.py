@@ -962,3 +962,38 @@ def test_a_thrust_level_reads_as_a_mass_error_exactly(ra66m_spec):
     text = _mass_reading({"eps_thrust": (eps, 1e-4)}, veh)
     assert "the thrust -3 % is the mass +3.1 % throughout (+1.86 kg at the start" in text, text
     assert _mass_reading({"eps_thrust": (eps, 1e-4)}, None) == "" and _mass_reading({}, veh) == ""
+
+
+def test_a_thrust_error_in_time_has_its_knots_over_the_burn():
+    """A vehicle that coasts after its burn (Tern-2: thrust until 10.2 s of a 60 s flight) gets its thrust
+    profiles, throttle step and window over the burn -- knots up to the first mesh boundary past the thrust's
+    end -- not over the coast, where a thrust error does nothing; a vehicle that burns to the end of its
+    horizon keeps knots over the whole of it."""
+    from rocketid.diagnostics.effects import Vehicle, _refine_thrust
+    bounds = tuple(0.5 + 1.25 * j for j in range(48)) + (60.0,)
+    coast = Vehicle(thrust=3e4, mass=800.0, mass_flow=20.0, speed=1200.0, start_speed=30.0, duration=59.5,
+                    altitude=(0.0, 3e4), mach=(0.1, 4.0), sigma={"x": 1.0}, sample_interval=0.05, knot_times=bounds,
+                    powered=(0.5, 10.2))
+    shapes = {e.name: e for e in _refine_thrust(coast)}
+    profile = shapes["thrust_profile_9"]
+    knots = [float(k) for k in profile.description.split(" on ")[1].split(" s")[0].split(", ")]
+    assert knots[0] == 0.5 and knots[-1] == 10.5 and len(knots) == 9        # 10.5: the boundary past 10.2 s
+    assert "10.5" in shapes["throttle_step"].description or shapes["throttle_step"].scan is not None
+    burning = Vehicle(**{**coast.__dict__, "powered": (0.5, 60.0)})
+    whole = {e.name: e for e in _refine_thrust(burning)}["thrust_profile_9"]
+    every = [float(k) for k in whole.description.split(" on ")[1].split(" s")[0].split(", ")]
+    assert every[0] == 0.5 and every[-1] == 60.0 and len(every) == 9
+
+
+def test_a_thrust_error_over_a_burn_inside_the_horizon_cannot_reverse_the_thrust():
+    """Knots that end before the horizon: eps flat after the last one and held at eps >= -1 (a burn-through
+    refitted with knots over the whole flight took -1.6 to -2.0 after burn-out); knots over the whole horizon:
+    the time family, as before."""
+    from rocketid.diagnostics import thrust_profile_effect, with_effects
+    inside = with_effects(ra66m(), [thrust_profile_effect([0.0, 20.0, 40.0])])
+    bounds = {str(p.symbol): (p.lower, p.upper) for p in inside.parameters if str(p.symbol).startswith("eps_P")}
+    assert bounds == {"eps_P0": (-1.0, math.inf), "eps_P1": (-1.0, math.inf), "eps_P2": (-1.0, math.inf)}
+    assert not any(str(f.symbol).startswith("eps_P") for f in inside.families)
+    whole = with_effects(ra66m(), [thrust_profile_effect([0.0, 33.0, 66.0])])
+    assert any(str(f.symbol).startswith("eps_P") for f in whole.families)
+    assert {str(p.symbol): (p.lower, p.upper) for p in whole.parameters}["eps_P1"] == (-math.inf, math.inf)

@@ -218,6 +218,9 @@ class Vehicle:
     time_families : bool
         The model has coefficients in time (time families: RA-66's drag), which an output cannot hold
         (no ``time_offset_2``).
+    powered : (float, float) or ()
+        First and last time the thrust role is above 0.1 % of its largest value along the fit, s (empty
+        when unknown): a thrust error in time has its knots there, not over a coast.
     """
 
     thrust: float
@@ -234,6 +237,7 @@ class Vehicle:
     mach_knots: tuple = ()
     aero_altitudes: tuple = ()
     time_families: bool = False
+    powered: tuple = ()
 
 
 # ---------------------------------------------------------------------------
@@ -1561,7 +1565,12 @@ def earth_rotation_site_effect(latitude_deg: float = 28.5, azimuth_deg: float = 
 def thrust_profile_effect(knot_times: Sequence[float], *, name: str | None = None) -> Effect:
     """A thrust error that varies in time: ``P (1 + eps(t))``, ``eps`` piecewise linear on ``knot_times``.
 
-    The knots should be element boundaries of the fit's mesh (``Vehicle.knot_times``).
+    The knots should be element boundaries of the fit's mesh (``Vehicle.knot_times``). Knots from the
+    model's start to its end make ``eps`` a time family (:meth:`~rocketid.model.Model.piecewise_linear`);
+    knots that end before it -- over a burn that stops inside the horizon -- make it flat after the last
+    knot, each ``eps_Pj >= -1`` (a thrust error cannot turn the thrust around: measured on Wren-H's burn
+    through, a profile over the whole flight took -1.6 to -2.0 after burn-out, a negative thrust standing in
+    for drag).
     """
     knots = tuple(float(k) for k in knot_times)
     name = name or f"thrust_profile_{len(knots)}"
@@ -1569,9 +1578,13 @@ def thrust_profile_effect(knot_times: Sequence[float], *, name: str | None = Non
 
     def apply(m: Model) -> tuple:
         sym, thrust = _role_definition(m, "thrust", name)
-        eps = m.piecewise_linear("eps_P", knots, 0.0, nominal=0.02)
-        m.redefine(sym, thrust * (1 + eps))
-        return tuple(getattr(m, n) for n in names)
+        if abs(knots[0] - float(m.t0)) < 1e-9 and abs(knots[-1] - float(m.tf)) < 1e-9:
+            eps = m.piecewise_linear("eps_P", knots, 0.0, nominal=0.02)
+            m.redefine(sym, thrust * (1 + eps))
+            return tuple(getattr(m, n) for n in names)
+        ps = tuple(m.parameter(n, 0.0, bounds=(-1.0, math.inf), nominal=0.02) for n in names)
+        m.redefine(sym, thrust * (1 + piecewise_linear(m.t, knots, ps)))
+        return ps
 
     return Effect(name, f"thrust error in time ({len(knots)} knots)", "propulsion", apply,
                   f"thrust P (1 + eps(t)), eps piecewise linear in time on {', '.join(f'{k:g}' for k in knots)} s",
@@ -1707,10 +1720,26 @@ def _refine_drag(vehicle: "Vehicle | None") -> list[Effect]:
     return out + ([drag_bump_effect(lo, hi)] if hi > lo else [])
 
 
+def _powered_knots(vehicle: "Vehicle") -> np.ndarray:
+    """The mesh's element boundaries over the burn: from the start to the first boundary at or after the
+    thrust's end (:attr:`Vehicle.powered`), all of them when the burn lasts the horizon or is unknown."""
+    bounds = np.asarray(vehicle.knot_times, float)
+    if len(vehicle.powered) != 2 or not vehicle.powered[1] < bounds[-1]:
+        return bounds
+    end = bounds[min(int(np.searchsorted(bounds, vehicle.powered[1] - 1e-9)), bounds.size - 1)]
+    return bounds[bounds <= end]
+
+
 def _refine_thrust(vehicle: "Vehicle | None") -> list[Effect]:
+    """The thrust's refined shapes: a faster or slower burn (:func:`burn_rate_effect`), a thrust error in time
+    on 3, 5 and 9 knots and a throttle step or window, each over the burn (the mesh's boundaries up to the
+    thrust's end, :func:`_powered_knots`): on a vehicle that coasts two thirds of its flight, knots over the
+    whole horizon left the burn one segment (Wren-H: knots at 0.59, 22 and 44 s for a 15.5 s burn)."""
     if vehicle is None or len(vehicle.knot_times) < 3:
         return [burn_rate_effect()]
-    bounds = np.asarray(vehicle.knot_times, float)
+    bounds = _powered_knots(vehicle)
+    if bounds.size < 3:
+        return [burn_rate_effect()]
     out = []
     for n in (3, 5, 9):
         want = np.linspace(bounds[0], bounds[-1], n)

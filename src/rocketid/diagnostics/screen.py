@@ -146,7 +146,15 @@ def vehicle_of(fit: EstimationResult) -> Vehicle:
         sigma=sig, sample_interval=dt,
         knot_times=tuple(float(b) for b in fit.prepared.transcription.mesh.boundaries),
         mach_knots=_mach_knots(spec), aero_altitudes=_aero_altitudes(np.asarray(t, float), alt, qbar),
-        time_families=bool(spec.families))
+        time_families=bool(spec.families), powered=_powered(np.asarray(t, float), thrust))
+
+
+def _powered(t, thrust) -> tuple:
+    """First and last time the thrust is above 0.1 % of its largest value (empty without the role)."""
+    if thrust is None or not np.all(np.isfinite(thrust)):
+        return ()
+    on = np.abs(np.asarray(thrust, float)) > 1e-3 * float(np.max(np.abs(thrust)))
+    return (float(t[on][0]), float(t[on][-1])) if on.any() else ()
 
 
 def _aero_altitudes(t, alt, qbar) -> tuple:
