@@ -424,9 +424,9 @@ def base_fit(spec, meas, sigma=None, *, guess=None, mesh=None, options=None, not
     fit = _fit_base(spec, meas, guess, mesh, options, first, values)
     wild = find_wild_points(fit, action=wild_points)
     if wild and wild_points == "drop":
-        first = []
-        values, counts = _noise_from_data(sigma, wild.without(meas), first, from_data)
-        fit = _fit_base(spec, wild.without(meas), fit.p, fit.prepared.transcription.mesh, options, first, values)
+        first, kept = [], wild.without(meas)
+        values, counts = _noise_from_data(sigma, kept, first, from_data)
+        fit = _fit_base(spec, kept, fit.p, fit.prepared.transcription.mesh, options, first, values)
     notes.extend(first)
     if wild:
         notes.append(wild.note())
