@@ -260,7 +260,8 @@ def departures(t: np.ndarray, e: np.ndarray) -> np.ndarray:
         w = np.where(np.abs(u) < 1.0, (1.0 - u * u) ** 2, 0.0)
         # a window left with fewer than 3 weighted samples keeps its least-squares fit
         w[np.count_nonzero(w, axis=1) < 3] = 1.0
-    # the variance factor of the fitted value under the final weights (1 when every neighbour counts)
+    # the variance factor of the fitted value under the final weights (the least-squares one when every
+    # neighbour counts: 0.21 inside a series for 12 neighbours, 1.07 at its first sample)
     second = np.einsum("nm,nmi,nmj->nij", w * w, basis, basis)
     var = np.einsum("ni,nij,nj->n", inv[:, 0, :], second, inv[:, 0, :])
     return (e - coef[:, 0]) / np.sqrt(1.0 + np.maximum(var, 0.0))
@@ -282,9 +283,10 @@ def _channel_points(t: np.ndarray, e: np.ndarray, k: float, cap: int) -> tuple[l
     """``[(index, z)]`` of one channel's wild points and the series' robust scale.
 
     The worst sample beyond ``k`` is taken out and the test made again without it, until none is left (at most
-    ``cap``). A run of more than :data:`MAX_RUN` adjacent samples taken out is an edge walking along a step -- a sensor switching, a GPS solution jumping and staying -- not wild
-    points: they are put back, and no sample within :data:`NEIGHBOURS` of that run is taken out (the location
-    step describes the segment). A run kept must stand apart from both sides (:func:`_stands_apart`)."""
+    ``cap``). A run of more than :data:`MAX_RUN` adjacent samples taken out is an edge walking along a step --
+    a sensor switching, a GPS solution jumping and staying -- not wild points: they are put back, and no sample
+    within :data:`NEIGHBOURS` of that run is taken out (the location step describes the segment). A run kept
+    must stand apart from both sides (:func:`_stands_apart`)."""
     n = e.size
     active = np.ones(n, bool)
     barred = np.zeros(n, bool)
