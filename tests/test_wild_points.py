@@ -220,3 +220,18 @@ def test_the_fit_command_warns_of_them_and_keeps_them(logs, tmp_path):
     assert "Warning: 3 sample(s) look like wild points" in res.output and "The fit keeps them" in res.output
     d = json.loads(fit_json.read_text())
     assert sorted((p["channel"], p["t"]) for p in d["wild_points"]) == sorted(times.items())
+
+
+def test_several_flights_leave_out_each_flights_wild_points(wren, logs):
+    """Two GPS logs of the same rocket, one with the glitches: each flight's diagnosis finds its own, and the
+    joint fit of the flights leaves out the ones dropped (matched by channel and time)."""
+    from rocketid.commands.diagnose_flights import diagnose_flights
+    clean, glitched, times = logs
+    other = truth.measurements(Hidden(), seed=321)
+    res = diagnose_flights([glitched, other], ["glitched", "clean"], wren, sigma=STATED, confirm_top=0, workers=1)
+    first, second = res.reports
+    assert sorted((p.channel, p.time) for p in first.wild_points.points) == sorted(times.items())
+    assert not second.wild_points
+    assert res.joint is not None and res.joint.success
+    used = [f.prepared.measurements.n_samples for f in res.joint.flights]
+    assert used == [glitched.n_samples - 3, other.n_samples]
