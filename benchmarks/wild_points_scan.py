@@ -4,6 +4,7 @@ the vehicle studies (``docs/telemetry.md``, "Wild points").
 ::
 
     python benchmarks/wild_points_scan.py gaussian                  # the false-alarm share, Monte Carlo
+    python benchmarks/wild_points_scan.py cost                      # its time beside the base fit's
     python benchmarks/wild_points_scan.py wren sounding air unseen telemetry blind discovery
 
 A study's data come from its directory (the study's own environment variable, as its ``run.py``; made from
@@ -46,6 +47,27 @@ def gaussian(reps_small: int = 4000, reps_large: int = 300) -> None:
                    for _ in range(reps))
         print(f"3 x {n} samples: {hits} of {reps} data sets flagged ({100 * hits / reps:.2f} %; level "
               f"{100 * LEVEL:g} %)", flush=True)
+
+
+def cost(repeats: int = 5) -> None:
+    """The test's time against the base fit's, on Stage-30's 19 800 samples (the hidden-effect study's
+    s30-thrust_level case; best of ``repeats``, the code cache warm after the first fit)."""
+    from discovery_study import harness as H
+    from discovery_study.cases import BY_ID
+    from rocketid.diagnostics.api import _fit_base
+    from rocketid.diagnostics.wild import find_wild_points
+    case = BY_ID["s30-thrust_level"]
+    spec, _ = resolve_model(H.model_of(case))
+    meas, _ = _read_data(str(H.case_data(case)), spec)
+    fits, tests = [], []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fit = _fit_base(spec, meas, None, None, None, [])
+        t1 = time.perf_counter()
+        find_wild_points(fit)
+        fits.append(t1 - t0)
+        tests.append(time.perf_counter() - t1)
+    print(f"{meas.n_samples} samples: the test {min(tests):.3f} s, the base fit {min(fits):.3f} s (best of {repeats})")
 
 
 def _line(label: str, name: str, spec, meas, sigma, guess=None) -> bool:
@@ -106,6 +128,9 @@ def main(argv: list[str]) -> None:
         if key == "gaussian":
             gaussian()
             continue
+        if key == "cost":
+            cost()
+            continue
         if key in STUDIES:
             f, n = study(key)
         elif key == "blind":
@@ -113,7 +138,7 @@ def main(argv: list[str]) -> None:
         elif key == "discovery":
             f, n = discovery()
         else:
-            raise SystemExit(f"unknown: {key!r} (gaussian, {', '.join(STUDIES)}, blind, discovery)")
+            raise SystemExit(f"unknown: {key!r} (gaussian, cost, {', '.join(STUDIES)}, blind, discovery)")
         flagged, total = flagged + f, total + n
     if total:
         print(f"{flagged} of {total} data sets with a point flagged")
