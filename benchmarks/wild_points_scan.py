@@ -6,6 +6,7 @@ the vehicle studies (``docs/telemetry.md``, "Wild points").
     python benchmarks/wild_points_scan.py gaussian                  # the false-alarm share, Monte Carlo
     python benchmarks/wild_points_scan.py cost                      # its time beside the base fit's
     python benchmarks/wild_points_scan.py wren sounding air unseen telemetry blind discovery
+    python benchmarks/wild_points_scan.py falcon9                   # the two real flights
 
 A study's data come from its directory (the study's own environment variable, as its ``run.py``; made from
 its truth when missing). Each case gets the diagnosis's base fit (``rocketid.diagnostics.api.base_fit``:
@@ -108,6 +109,20 @@ def blind() -> tuple[int, int]:
     return flagged, len(files)
 
 
+def falcon9() -> tuple[int, int]:
+    """The two real Falcon 9 first-stage flights (``rocketid.examples.falcon9``), with their quantization
+    sigmas and with the noise from the data."""
+    from rocketid.examples.falcon9 import FLIGHTS, falcon9_measurements, falcon9_model
+    flagged = n = 0
+    for flight in FLIGHTS:
+        data = falcon9_measurements(flight)
+        spec = falcon9_model(data)
+        for sigma in (None, "estimate"):
+            flagged += _line("falcon9", f"{flight} (sigma {sigma or 'stated'})", spec, data, sigma)
+            n += 1
+    return flagged, n
+
+
 def discovery() -> tuple[int, int]:
     """The hidden-effect study's 49 cases (``$ROCKETID_STUDY_DIR``)."""
     from discovery_study import harness as H
@@ -137,8 +152,10 @@ def main(argv: list[str]) -> None:
             f, n = blind()
         elif key == "discovery":
             f, n = discovery()
+        elif key == "falcon9":
+            f, n = falcon9()
         else:
-            raise SystemExit(f"unknown: {key!r} (gaussian, cost, {', '.join(STUDIES)}, blind, discovery)")
+            raise SystemExit(f"unknown: {key!r} (gaussian, cost, {', '.join(STUDIES)}, blind, discovery, falcon9)")
         flagged, total = flagged + f, total + n
     if total:
         print(f"{flagged} of {total} data sets with a point flagged")
