@@ -235,3 +235,22 @@ def test_several_flights_leave_out_each_flights_wild_points(wren, logs):
     assert res.joint is not None and res.joint.success
     used = [f.prepared.measurements.n_samples for f in res.joint.flights]
     assert used == [glitched.n_samples - 3, other.n_samples]
+
+
+def test_the_joint_fit_command_warns_of_each_flights_wild_points(logs, tmp_path):
+    """`rocketid estimate F1.csv F2.csv` (a joint fit) names the wild points of each flight; FIT.json lists
+    them by flight."""
+    from click.testing import CliRunner
+
+    from rocketid.cli import main as cli
+    _, glitched, times = logs
+    a = glitched.to_csv(tmp_path / "glitched.csv")
+    b = truth.measurements(Hidden(), seed=321).to_csv(tmp_path / "clean.csv")
+    fit_json = tmp_path / "fit.json"
+    res = CliRunner().invoke(cli, ["estimate", str(a), str(b), "--model", str(HERE / "vehicles" / "wren.py"), "--out",
+                                   str(fit_json), *[x for n, s in STATED.items() for x in ("--sigma", f"{n}={s}")]])
+    assert res.exit_code == 0, res.output
+    assert "Warning: flight glitched: 3 sample(s) look like wild points" in res.output
+    assert "flight clean:" not in res.output
+    d = json.loads(fit_json.read_text())["wild_points"]
+    assert sorted((p["channel"], p["t"]) for p in d["glitched"]) == sorted(times.items()) and d["clean"] == []

@@ -950,6 +950,9 @@ def estimate_command(data_files, model, columns, time_column, sigmas, sigma_colu
         payload = result.to_dict()
         if errors == "coloured" and result.success:
             payload["standard_errors_coloured"] = _print_joint_coloured(result)
+        if result.success:
+            payload["wild_points"] = {fl.label: _print_wild_points(fit, fl.label)
+                                      for fl, fit in zip(flights, result.flights)}
         payload["std_err_residuals"] = errors
         if out is not None:
             write_json(out, payload)
@@ -983,15 +986,15 @@ def estimate_command(data_files, model, columns, time_column, sigmas, sigma_colu
         click.get_current_context().exit(EXIT_NOT_CONVERGED)
 
 
-def _print_wild_points(result) -> list:
+def _print_wild_points(result, flight: str = "") -> list:
     """Warn of samples the fit cannot follow (:mod:`rocketid.diagnostics.wild`); the fit keeps them. Returns
-    them for FIT.json (empty when there are none)."""
+    them for FIT.json (empty when there are none). ``flight`` names the flight of a joint fit."""
     from .diagnostics.wild import find_wild_points
 
     wild = find_wild_points(result, action="keep")
     if wild:
-        click.echo(f"\nWarning: {len(wild)} sample(s) look like wild points, isolated and more than "
-                   f"{wild.threshold:.2f} robust standard deviations off their neighbours: "
+        click.echo(f"\nWarning: {f'flight {flight}: ' if flight else ''}{len(wild)} sample(s) look like wild points, "
+                   f"isolated and more than {wild.threshold:.2f} robust standard deviations off their neighbours: "
                    + "; ".join(p.text() for p in wild.points[:6]) + (" ..." if len(wild) > 6 else "")
                    + ". The fit keeps them; `rocketid diagnose` drops them, or remove those rows to fit without "
                    "them.")
