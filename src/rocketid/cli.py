@@ -995,9 +995,8 @@ def _print_wild_points(result, flight: str = "") -> list:
     if wild:
         click.echo(f"\nWarning: {f'flight {flight}: ' if flight else ''}{len(wild)} sample(s) look like wild points, "
                    f"isolated and more than {wild.threshold:.2f} robust standard deviations off their neighbours: "
-                   + "; ".join(p.text() for p in wild.points[:6]) + (" ..." if len(wild) > 6 else "")
-                   + ". The fit keeps them; `rocketid diagnose` drops them, or remove those rows to fit without "
-                   "them.")
+                   f"{wild.listed()}. The fit keeps them; `rocketid diagnose` drops them, or remove those rows to "
+                   "fit without them.")
     return [p.to_dict() for p in wild.points]
 
 

@@ -413,10 +413,9 @@ def base_fit(spec, meas, sigma=None, *, guess=None, mesh=None, options=None, not
         ``{channel: number of differences}`` of the channels whose noise was estimated.
     wild : WildPoints
     """
-    from .wild import WILD_POINT_ACTIONS, find_wild_points
+    from .wild import check_action, find_wild_points
 
-    if wild_points not in WILD_POINT_ACTIONS:
-        raise SettingsError(f"wild_points must be one of {', '.join(WILD_POINT_ACTIONS)}, got {wild_points!r}")
+    check_action(wild_points)          # before the first fit
     notes = notes if notes is not None else []
     from_data = from_data if from_data is not None else {}
     first: list = []

@@ -172,12 +172,16 @@ class WildPoints:
             chans.append(c if keep.all() else c.select(keep))
         return Measurements(tuple(chans))
 
+    def listed(self, most: int = 6) -> str:
+        """The first ``most`` points in words, and how many more."""
+        return "; ".join(p.text() for p in self.points[:most]) + (
+            f"; and {len(self.points) - most} more" if len(self.points) > most else "")
+
     def note(self) -> str:
         """One sentence for the report (empty when there are none)."""
         if not self.points:
             return ""
-        shown = "; ".join(p.text() for p in self.points[:6]) + (f"; and {len(self.points) - 6} more"
-                                                                if len(self.points) > 6 else "")
+        shown = self.listed()
         done = ("dropped before the diagnosis" if self.action == "drop" else
                 "kept (--wild-points keep): the diagnosis judges them with the rest")
         with_ = f" (chi2/dof with them {self.chi2_with:.4g})" if self.action == "drop" and \
@@ -372,10 +376,23 @@ def series_points(t, e, *, n_total: int | None = None, level: float = LEVEL) -> 
     t, e = np.asarray(t, float), np.asarray(e, float)
     if t.shape != e.shape or t.ndim != 1:
         raise SettingsError(f"series_points needs times and residuals of one length, got {t.shape} and {e.shape}")
+    return _series(t, e, n_total or e.size, level)[0]
+
+
+def _series(t: np.ndarray, e: np.ndarray, n_total: int, level: float) -> tuple[list, float, bool]:
+    """One series' ``(points, robust scale, capped)``: the limit for ``n_total`` samples, at most
+    :data:`MAX_SHARE` of the series (and at least 5) taken out; nothing for a series too short to test."""
     if e.size <= NEIGHBOURS + 1:
-        return []
-    k = threshold(n_total or e.size, level, e.size)
-    return _channel_points(t, e, k, max(5, int(MAX_SHARE * e.size)))[0]
+        return [], math.nan, False
+    cap = max(5, int(MAX_SHARE * e.size))
+    found, scale = _channel_points(t, e, threshold(n_total, level, e.size), cap)
+    return found, scale, len(found) >= cap
+
+
+def check_action(action: str) -> None:
+    """A SettingsError unless ``action`` is one of :data:`WILD_POINT_ACTIONS`."""
+    if action not in WILD_POINT_ACTIONS:
+        raise SettingsError(f"wild_points must be one of {', '.join(WILD_POINT_ACTIONS)}, got {action!r}")
 
 
 def find_wild_points(fit: EstimationResult, *, level: float = LEVEL, action: str = "drop") -> WildPoints:
@@ -397,8 +414,7 @@ def find_wild_points(fit: EstimationResult, *, level: float = LEVEL, action: str
     """
     if not 0.0 < level < 1.0:
         raise SettingsError(f"wild-point level must be in (0, 1), got {level}")
-    if action not in WILD_POINT_ACTIONS:
-        raise SettingsError(f"wild_points must be one of {', '.join(WILD_POINT_ACTIONS)}, got {action!r}")
+    check_action(action)
     meas = fit.prepared.measurements
     norm, resid = fit.normalized_residuals, fit.residuals
     n = sum(np.asarray(norm[c.name]).size for c in meas.channels)
@@ -408,9 +424,8 @@ def find_wild_points(fit: EstimationResult, *, level: float = LEVEL, action: str
         e = np.asarray(norm[c.name], float)
         if e.size <= NEIGHBOURS + 1:
             continue
-        cap = max(5, int(MAX_SHARE * e.size))
-        found, scale[c.name] = _channel_points(np.asarray(c.times, float), e, threshold(n, level, e.size), cap)
-        if len(found) >= cap:
+        found, scale[c.name], full = _series(np.asarray(c.times, float), e, n, level)
+        if full:
             capped.append(c.name)
         r = np.asarray(resid[c.name], float)
         points += [WildPoint(c.name, float(c.times[i]), i, float(c.values[i]), float(r[i]), z)
