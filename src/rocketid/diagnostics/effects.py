@@ -555,35 +555,62 @@ def _input_table(u) -> type:
     return table_function(u.times, u.values, str(u.symbol))
 
 
-def _burn_rate(m: Model) -> tuple:
-    """The motor on a clock ``(1 + eps_burn)`` times faster (module notes of :func:`burn_rate_effect`)."""
-    t_sym, thrust = _role_definition(m, "thrust", "burn_rate")
-    m_sym, mass = _role_definition(m, "mass", "burn_rate")
+@dataclass(frozen=True)
+class _Motor:
+    """What a motor-clock edit reads: the ``thrust`` and ``mass`` definitions (their symbols and expanded
+    expressions), a mass state's flow (``{state: f}`` of ``d state/dt = f``), the inputs they read, and those
+    inputs' values at the model's start (``at_start``: a substitution that also sets ``t = t0``)."""
+
+    thrust_symbol: sp.Symbol
+    thrust: sp.Expr
+    mass_symbol: sp.Symbol
+    mass: sp.Expr
+    flows: dict
+    inputs: tuple
+    at_start: dict
+
+    def warp(self, clock: sp.Expr, t: sp.Symbol) -> dict:
+        """The substitution that reads the motor at ``clock``: time, and each sampled input through its table
+        function (one function, not a sum of a ramp per sample -- a 249-sample static-firing table made CSE
+        70 % of a Wren-H diagnosis that way)."""
+        out = {t: clock}
+        for u in self.inputs:
+            out[u.symbol] = u.expr.xreplace({t: clock}) if u.expr is not None else _input_table(u)(clock)
+        return out
+
+    def flow_at_start(self) -> sp.Expr:
+        """The mass states' rate at the start (negative: burning)."""
+        return sum((f.xreplace(self.at_start) for f in self.flows.values()), sp.S.Zero)
+
+
+def _motor(m: Model, effect: str) -> _Motor:
+    t_sym, thrust = _role_definition(m, "thrust", effect)
+    m_sym, mass = _role_definition(m, "mass", effect)
     thrust_x, mass_x = _expanded(m, thrust), _expanded(m, mass)
     states = {s.symbol for s in m._states}
-    flows = {s: _expanded(m, _explicit_rhs(m, s, "burn_rate")) for s in mass_x.free_symbols & states}
+    flows = {s: _expanded(m, _explicit_rhs(m, s, effect)) for s in mass_x.free_symbols & states}
     read = thrust_x.free_symbols | mass_x.free_symbols | set().union(*(f.free_symbols for f in flows.values()))
-    motor = [u for u in m._inputs if u.symbol in read]
-    # the motor's clock starts at ignition: where its sampled curve starts (a window cut in flight keeps it),
-    # else at the model's start
-    origin = min([m.t0] + [u.times[0] for u in motor if u.expr is None])
-    eps = m.parameter("eps_burn", 0.0, bounds=(-0.3, 0.3), nominal=0.02)
-    k = 1 + eps
-    clock = origin + k * (m.t - origin)
-    warp = {m.t: clock}
-    for u in motor:
-        # a sampled curve on the motor's clock: one table function (rocketid.tables), not a sum of a ramp per
-        # sample -- a 249-sample static-firing table made CSE 70 % of a Wren-H diagnosis that way
-        warp[u.symbol] = u.expr.xreplace({m.t: clock}) if u.expr is not None else _input_table(u)(clock)
-    # a mass state starts at its declared value, which is what the stated curve leaves at t0; on the faster
-    # clock the motor has burnt for (1 + eps)(t0 - t_i) by then: eps (t0 - t_i) dm/dt(t0) more (to first order)
+    inputs = tuple(u for u in m._inputs if u.symbol in read)
     at_start = {m.t: sp.Float(m.t0), **{u.symbol: (u.expr.xreplace({m.t: m.t0}) if u.expr is not None
                                                     else sp.Float(np.interp(m.t0, u.times, u.values)))
-                                         for u in motor}}
-    burnt_before = sum((flow.xreplace(at_start) for flow in flows.values()), sp.S.Zero) * (m.t0 - origin)
-    m.redefine(t_sym, k * thrust_x.xreplace(warp))
-    m.redefine(m_sym, mass_x.xreplace(warp) + eps * burnt_before)
-    for state, flow in flows.items():
+                                         for u in inputs}}
+    return _Motor(t_sym, thrust_x, m_sym, mass_x, flows, inputs, at_start)
+
+
+def _burn_rate(m: Model) -> tuple:
+    """The motor on a clock ``(1 + eps_burn)`` times faster (module notes of :func:`burn_rate_effect`)."""
+    mo = _motor(m, "burn_rate")
+    # the motor's clock starts at ignition: where its sampled curve starts (a window cut in flight keeps it),
+    # else at the model's start
+    origin = min([m.t0] + [u.times[0] for u in mo.inputs if u.expr is None])
+    eps = m.parameter("eps_burn", 0.0, bounds=(-0.3, 0.3), nominal=0.02)
+    k = 1 + eps
+    warp = mo.warp(origin + k * (m.t - origin), m.t)
+    # a mass state starts at its declared value, which is what the stated curve leaves at t0; on the faster
+    # clock the motor has burnt for (1 + eps)(t0 - t_i) by then: eps (t0 - t_i) dm/dt(t0) more (to first order)
+    m.redefine(mo.thrust_symbol, k * mo.thrust.xreplace(warp))
+    m.redefine(mo.mass_symbol, mo.mass.xreplace(warp) + eps * mo.flow_at_start() * (m.t0 - origin))
+    for state, flow in mo.flows.items():
         m.ode({state: k * flow.xreplace(warp)})
     return (eps,)
 
@@ -905,17 +932,23 @@ def _onset_width(vehicle: "Vehicle") -> float:
     return max(1.0, float(np.median(np.diff(np.asarray(vehicle.knot_times, float)))))
 
 
+def _moving(vehicle: "Vehicle | None") -> bool:
+    return vehicle is not None and math.isfinite(vehicle.start_speed) and vehicle.start_speed > 0
+
+
 def _refine_start_mass(vehicle: "Vehicle | None") -> list[Effect]:
-    """A mass change at an estimated time (:func:`mass_jettison_effect`) on a vehicle with a mesh."""
-    if vehicle is None or len(vehicle.knot_times) < 2:
-        return []
-    return [mass_jettison_effect(vehicle.knot_times[0], vehicle.knot_times[-1], _onset_width(vehicle))]
+    """On a declared moving start, the mass with the start's speed and time (:func:`start_mass_exit_effect`);
+    a mass change at an estimated time (:func:`mass_jettison_effect`) on a vehicle with a mesh."""
+    out = [start_mass_exit_effect(vehicle)] if _moving(vehicle) else []
+    if vehicle is not None and len(vehicle.knot_times) >= 2:
+        out.append(mass_jettison_effect(vehicle.knot_times[0], vehicle.knot_times[-1], _onset_width(vehicle)))
+    return out
 
 
 def _refine_misalignment(vehicle: "Vehicle | None") -> list[Effect]:
     """From rest the misalignment is phased in at lift-off, and its fade time is estimated; on every vehicle
     it may also appear at an estimated time inside the flight (:func:`misalignment_onset_effect`)."""
-    moving = vehicle is not None and math.isfinite(vehicle.start_speed) and vehicle.start_speed > 0
+    moving = _moving(vehicle)
     out = [] if moving else [
         Effect("misalignment_fade", "thrust misalignment, fade time estimated", "propulsion", _misalignment_fade,
                "thrust direction alpha_thrust = alpha + delta_thrust t^4 / (t^4 + (t_r exp(s_fade))^4), "
@@ -1017,9 +1050,10 @@ def _second_derivative(m: Model, expr: sp.Expr, effect: str) -> sp.Expr:
     return second.xreplace({u: value for u, (value, _) in inputs.items()})
 
 
-def _time_offset_edit(m: Model, effect: str, *, second: bool) -> tuple:
+def _time_offset_edit(m: Model, effect: str, *, second: bool, tau: sp.Symbol | None = None) -> tuple:
     """``z(t) = y(t - tau)``: to first order ``y - tau dy/dt`` (``dy/dt`` through the state derivatives, the
-    collocation polynomial's), with ``second`` also ``+ tau^2/2 d2y/dt2`` (:func:`_second_derivative`)."""
+    collocation polynomial's), with ``second`` also ``+ tau^2/2 d2y/dt2`` (:func:`_second_derivative`).
+    ``tau`` an existing parameter (a start delay's), else one named ``tau`` is declared."""
     if not m.output_names:
         raise ModelError(f"effect {effect!r} needs measured outputs; model {m.name!r} has none yet")
     states = {}
@@ -1040,7 +1074,7 @@ def _time_offset_edit(m: Model, effect: str, *, second: bool) -> tuple:
                              "needs outputs that are functions of the states")
         exprs[name] = expr
     curvature = {name: _second_derivative(m, expr, effect) for name, expr in exprs.items()} if second else {}
-    tau = m.parameter("tau", 0.0, nominal=0.01)
+    tau = m.parameter("tau", 0.0, nominal=0.01) if tau is None else tau
     for name, expr in exprs.items():
         dydt = sp.diff(expr, m.t) + sum((sp.diff(expr, s) * d for s, d in states.items()), sp.S.Zero)
         m.redefine_output(name, expr - tau * dydt + (tau ** 2 / 2 * curvature[name] if second else 0))
@@ -1779,14 +1813,98 @@ def _start_offset(effect: str, role: str, name: str, nominal: float) -> Callable
     """``apply`` of a correction to the declared start of the state playing ``role`` (a moving start only:
     from rest the start is the launcher's, held by it, and other effects describe its release)."""
     def apply(m: Model) -> tuple:
-        sym = _role_state(m, role, effect)
-        v0 = _initial_value(m, _role_state(m, "speed", effect))
-        if not v0 > 0:
-            raise ModelError(f"effect {effect!r} corrects a declared moving start (a rail exit, a release); model "
-                             f"{m.name!r} starts at rest, where the launcher holds the vehicle")
-        return (m.start_offset(sym, name, nominal=nominal),)
+        _moving_start(m, effect)
+        return (m.start_offset(_role_state(m, role, effect), name, nominal=nominal),)
     apply.__name__ = f"_{effect}"
     return apply
+
+
+START_TIME = 0.05
+"""Realistic error of a declared moving start's time, s: when a rail exit worked out for the stated mass and
+thrust really came (a vehicle 2.5 % heavier leaves a 6 m rail 7.5 ms later), a release's time."""
+
+
+def _moving_start(m: Model, effect: str) -> None:
+    """Raise ModelError unless the model's declared start moves (speed > 0)."""
+    v0 = _initial_value(m, _role_state(m, "speed", effect))
+    if not v0 > 0:
+        raise ModelError(f"effect {effect!r} corrects a declared moving start (a rail exit, a release); model "
+                         f"{m.name!r} starts at rest, where the launcher holds the vehicle")
+
+
+def _start_delay(m: Model, effect: str) -> sp.Symbol:
+    """The vehicle leaves its declared (moving) start ``dt_start`` later than declared, on the motor's clock.
+
+    In the model's time ``s`` the flight starts from the declared state at ``t0``; the motor had been running
+    ``dt_start`` longer then, so every time-dependent part of the ``thrust`` and ``mass`` definitions and of a
+    mass state's equation is read at ``s + dt_start`` (a sampled curve through its table function); a mass
+    state's declared start is what the stated curve leaves at ``t0``, and the later start has burnt
+    ``dt_start |dm/dt(t0)|`` more by then. The measurements are on the motor's clock ``t = s + dt_start``:
+    every output is read at ``t - dt_start``, to first order ``y - dt_start dy/dt`` (as ``time_offset``).
+    Returns the parameter."""
+    _moving_start(m, effect)
+    mo = _motor(m, effect)
+    dt = m.parameter("dt_start", 0.0, bounds=(-1.0, 1.0), nominal=0.01)
+    warp = mo.warp(m.t + dt, m.t)
+    m.redefine(mo.thrust_symbol, mo.thrust.xreplace(warp))
+    m.redefine(mo.mass_symbol, mo.mass.xreplace(warp) + mo.flow_at_start() * dt)
+    for state, flow in mo.flows.items():
+        m.ode({state: flow.xreplace(warp)})
+    _time_offset_edit(m, effect, second=False, tau=dt)
+    return dt
+
+
+def _start_exit(m: Model) -> tuple:
+    _moving_start(m, "start_exit")
+    dv = m.start_offset(_role_state(m, "speed", "start_exit"), "dv_start", nominal=1.0)
+    return (dv, _start_delay(m, "start_exit"))
+
+
+def _start_mass_exit(m: Model) -> tuple:
+    _moving_start(m, "start_mass_exit")
+    (dm,) = _start_mass(m)
+    dv = m.start_offset(_role_state(m, "speed", "start_mass_exit"), "dv_start", nominal=1.0)
+    return (dm, dv, _start_delay(m, "start_mass_exit"))
+
+
+def _exit_sizes(vehicle: "Vehicle | None") -> dict[str, float]:
+    speed = vehicle.start_speed if vehicle is not None and math.isfinite(vehicle.start_speed) else 0.0
+    return {"dv_start": max(0.3, START_SPEED_SHARE * speed), "dt_start": START_TIME}
+
+
+def start_exit_effect(vehicle: "Vehicle | None" = None) -> Effect:
+    """The declared moving start's speed **and time** corrected: a rail exit worked out for another mass or
+    thrust.
+
+    A rail exit (or a release) is a computed start: the team integrates the stated thrust and mass along
+    the rail. When those are off, the vehicle leaves the rail at another speed *and* at another time on the
+    motor's clock -- 1.5 kg more on Wren-H's 60 kg leaves its 6.1 m rail 0.37 m/s slower and 7.5 ms later.
+    The refined shape of ``start_speed``: ``v(t0) + dv_start``, and the flight from the declared start
+    ``dt_start`` later than declared (:func:`_start_delay`: the motor's curves read ``dt_start`` on, the
+    outputs ``dt_start`` back). A moving start only."""
+    return Effect("start_exit", "declared start's speed and time", "kinematics", _start_exit,
+                  "speed at the start v(t0) + dv_start, m/s, and the start dt_start s later on the motor's clock "
+                  "(thrust and mass read at t + dt_start, every output at t - dt_start): a rail exit worked out "
+                  "for another mass or thrust", _exit_sizes(vehicle))
+
+
+def start_mass_exit_effect(vehicle: "Vehicle | None" = None) -> Effect:
+    """A start-mass error on a vehicle whose declared moving start was worked out for the stated mass.
+
+    ``start_mass`` with the consequence for such a start: the heavier (lighter) vehicle leaves its rail
+    slower (faster) and later (sooner), so the declared start's speed and time are corrected with it
+    (``dm_start``, ``dv_start``, ``dt_start``; :func:`start_exit_effect`). Measured on Wren-H with 1.5 kg
+    of nose ballast (its noise-free GPS log, the truth simulator's own rail: 7.5 ms later, 0.367 m/s
+    slower): ``start_mass`` + ``start_speed`` leave 2J = 54 and ``thrust_level`` + ``start_speed`` 27 -- a
+    thrust error, acting through the same thrust/mass ratio, imitated the ballast better than the half
+    of its physics --; this shape leaves 2J = 0.13 (the clean log's own is 0.19) with 1.498 kg, -0.368
+    m/s and 7.54 ms."""
+    sizes = {"dm_start": 0.01 * vehicle.mass if vehicle is not None and math.isfinite(vehicle.mass) else 200.0,
+             **_exit_sizes(vehicle)}
+    return Effect("start_mass_exit", "start-mass error with its rail exit", "mass", _start_mass_exit,
+                  "mass m(t) + dm_start, kg, the declared moving start's speed v(t0) + dv_start and its time "
+                  "dt_start s later on the motor's clock: a heavier vehicle leaves its rail slower and later",
+                  sizes)
 
 
 def _build_catalogue() -> dict[str, Effect]:
@@ -1839,7 +1957,8 @@ def _build_catalogue() -> dict[str, Effect]:
                "speed at the start v(t0) + dv_start, m/s: a moving start declared too fast or too slow (a rail-exit "
                "speed worked out for another mass, a release speed)", {"dv_start": 1.0},
                relative=lambda veh: {"dv_start": max(0.3, START_SPEED_SHARE * veh.start_speed)}
-               if math.isfinite(veh.start_speed) and veh.start_speed > 0 else {}),
+               if math.isfinite(veh.start_speed) and veh.start_speed > 0 else {},
+               refine=lambda veh: [start_exit_effect(veh)] if _moving(veh) else []),
         Effect("time_offset", "time-tag offset", "sensor", _time_offset,
                "every output z(t) = y(t - tau) ~ y - tau dy/dt, tau in s", {"tau": 0.01},
                relative=lambda veh: {"tau": max(0.01, float(veh.sample_interval))},

@@ -450,13 +450,23 @@ the choice's fall of the objective, 90 %, was tried first: on Stage-30 with a +2
 
 def _near_rivals(accs: Sequence[Acceptance], scr: Screen, vehicle: Vehicle, chosen: int, band: NoiseBand) -> list[int]:
     """Indices of the significant refits of other families, with refined shapes, whose chi2/dof is within
-    :data:`NEAR_RIVAL` band excesses of 1 (best objective first; :data:`REFINE_FAMILIES` at most)."""
+    :data:`NEAR_RIVAL` band excesses of 1, or that share the choice's confounded group at the screen (best
+    objective first; :data:`REFINE_FAMILIES` at most).
+
+    A confounded mate is a rival whatever its own refit left: the screen could not tell the two apart, so the
+    mate's more complete shape may be the physics the choice only imitates (Wren-H with 1.5 kg of nose ballast:
+    ``thrust_level`` -3 % snug, ``start_mass`` at chi2/dof 1.275 just past the near line 1.267 because the
+    declared rail exit was worked out for the stated mass; its shape with the start's speed and time,
+    ``start_mass_exit``, reaches 1.006 at a BIC 45 lower, 1.499 kg for 1.5)."""
     n = min(len(scr.contenders), len(accs))
     limit = 1.0 + NEAR_RIVAL * max(0.0, band.upper - 1.0)
     own = _family(scr.contenders[chosen].effect.name)
+    name = scr.contenders[chosen].effect.name
+    ranked = scr.ranking is not None and any(c.name == name for c in scr.ranking.candidates)
+    mates = set(scr.ranking.group_of(name)) if ranked else set()
     near = sorted((j for j in range(n) if j != chosen and accs[j].refit.success and accs[j].check("significant").passed
                    and _family(scr.contenders[j].effect.name) != own
-                   and accs[j].refit.chi2_per_dof <= limit
+                   and (accs[j].refit.chi2_per_dof <= limit or scr.contenders[j].effect.name in mates)
                    and scr.contenders[j].effect.refinements(vehicle)),
                   key=lambda j: accs[j].refit.objective)
     return near[:REFINE_FAMILIES]
