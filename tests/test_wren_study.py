@@ -281,6 +281,28 @@ def test_the_ballast_is_a_mass_with_its_rail_exit(spec):
     assert not pair.accepted and not pair.check("white").passed
 
 
+def test_a_confounded_mate_s_fuller_shape_replaces_a_snug_choice(spec):
+    """The search's side of the ballast: ``thrust_level`` reaches the noise first (snug), and ``start_mass``,
+    which the screen puts in its confounded group, refits just past the near-rival line -- only as a confounded
+    mate are its refined shapes tried, and ``start_mass_exit`` replaces the choice by BIC (measured: chi2/dof
+    1.275 against a line of 1.267; the shape at 1.006, BIC 45 below the thrust error's)."""
+    from rocketid.diagnostics import CATALOGUE, discover
+    from rocketid.diagnostics.accept import noise_band
+    from rocketid.diagnostics.api import base_fit
+    from rocketid.diagnostics.step import NEAR_RIVAL
+    fit, _, _, _ = base_fit(spec, truth.measurements(Hidden(dm_payload=BALLAST), seed=BY_NAME["nose-ballast"].seed),
+                            "estimate")
+    band = noise_band(fit)
+    found = discover(fit, [CATALOGUE["thrust_level"], CATALOGUE["start_mass"]], workers=1)
+    step = found.steps[0]
+    by_name = {a.refit.name: a for a in step.acceptances}
+    assert step.screen.ranking.group_of("thrust_level") == step.screen.ranking.group_of("start_mass")
+    assert by_name["thrust_level"].accepted
+    assert by_name["start_mass"].refit.chi2_per_dof > 1 + NEAR_RIVAL * (band.upper - 1)
+    assert found.effect_names == ("start_mass_exit",) and found.verdict == "explained", (found.effect_names, found.verdict)
+    assert by_name["start_mass_exit"].refit.bic[1] < by_name["thrust_level"].refit.bic[1] - 20
+
+
 @pytest.mark.parametrize("name", sorted(MEASURED_2J))
 def test_visibility(spec, name):
     """Each case's ``visible`` is what the base model's fit to its noise-free GPS log (the truth's sigmas) leaves:
