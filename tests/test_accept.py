@@ -10,6 +10,8 @@ lowest channel has an uncorrected Ljung-Box p of 0.012 still reaches the noise).
 from __future__ import annotations
 
 import math
+from dataclasses import replace
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -95,6 +97,18 @@ def test_size_limit_is_five_realistic_sizes():
     assert SIZE_FACTOR == 5.0
     assert accept(refit("e", 0.992, value=0.099, size=0.02), BAND).check("size").passed
     assert not accept(refit("e", 0.992, value=-0.101, size=0.02), BAND).check("size").passed
+
+
+def test_every_effect_of_the_model_keeps_a_plausible_size():
+    """An effect of an earlier step is judged by its size too when the next is added: Wren-H's cold tank had
+    burn_rate at -0.08 at step 1 and -0.1017 at step 3 (5.1 times its realistic 0.02), and the model was called
+    explained on the added effect's sizes alone."""
+    r = replace(refit("b", 0.992, value=0.03, size=0.02), effects=("a", "b"), parameter_names=("CD", "p_a", "p_b"),
+                p=np.array([0.3, -0.1017, 0.03]), std=np.array([0.01, 0.0007, 0.0003]),
+                sizes={"p_a": 0.02, "p_b": 0.02})
+    size = accept(r, BAND).check("size")
+    assert not size.passed and "p_a = -0.1017 is 5.1 times" in size.detail
+    assert accept(replace(r, p=np.array([0.3, -0.09, 0.03])), BAND).check("size").passed
 
 
 def test_an_effect_held_at_a_bound_is_not_plausible():
@@ -402,6 +416,10 @@ def test_a_snug_choice_still_tries_the_shapes_of_a_near_rival():
     # far above the band (Stage-30's density at chi2/dof 56 after a base of 23 209) is no near rival
     accs[1] = accept(refit("misalignment", 1.19, base_chi2=3.84), band)
     assert S._near_rivals(accs, scr, veh, 0, band) == []
+    # ... unless the screen put it in the choice's confounded group: it could not tell the two apart
+    ranking = SimpleNamespace(candidates=tuple(SimpleNamespace(name=n) for n in names),
+                              group_of=lambda n: ["wind", "misalignment"] if n in ("wind", "misalignment") else [n])
+    assert S._near_rivals(accs, replace(scr, ranking=ranking), veh, 0, band) == [1]
 
 
 def test_a_shape_with_several_starts_is_represented_by_its_best_refit(monkeypatch):

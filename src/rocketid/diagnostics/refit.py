@@ -797,13 +797,9 @@ class Refit:
         return worst
 
     def size_ratio(self) -> dict:
-        """``{parameter: |estimate| / realistic size}`` of the added parameters with a stated size."""
-        out = {}
-        for n in self.effect_parameters:
-            s = self.sizes.get(n)
-            if s:
-                out[n] = abs(self.estimate(n)[0]) / s
-        return out
+        """``{parameter: |estimate| / realistic size}`` of the effects' parameters with a stated size: the added
+        effects' and those of earlier steps (every effect of the model must keep a plausible size)."""
+        return {n: abs(self.estimate(n)[0]) / s for n, s in self.sizes.items() if s and n in self.parameter_names}
 
     def change_ratio(self) -> dict:
         """``{(a, b): |estimate b - estimate a| / realistic size}`` of the changes with a stated size."""
@@ -979,7 +975,7 @@ def summarize_refit(new: EstimationResult, base_objective: float, base_n_estimat
                  std=std, effect_parameters=eff_params, objective=float(new.objective), n_data=int(new.n_data),
                  n_estimated=int(new.n_estimated), chi2_per_dof=float(new.chi2_per_dof),
                  base_objective=float(base_objective), base_n_estimated=int(base_n_estimated), whiteness=white,
-                 sizes={k: float(v) for k, v in sizes.items() if k in eff_params}, at_bound=bound,
+                 sizes={k: float(v) for k, v in sizes.items() if k in declared}, at_bound=bound,
                  plausible_coefficients=plaus, implausible=failing, identifiability=ident, seconds=float(seconds),
                  notes=tuple(notes), least={k: float(v) for k, v in (least or {}).items() if k in eff_params},
                  base_values={k: float(v) for k, v in (base_values or {}).items()},
@@ -989,7 +985,7 @@ def summarize_refit(new: EstimationResult, base_objective: float, base_n_estimat
                                  ((n, float(e.scan.times[1] - e.scan.times[0])) for n in e.locations)
                                  if n in names},
                  solution=new.solution if new.success else None,
-                 changes={(a, b): float(v) for (a, b), v in (changes or {}).items() if a in eff_params and b in eff_params})
+                 changes={(a, b): float(v) for (a, b), v in (changes or {}).items() if a in declared and b in declared})
 
 
 #: IPOPT's return status when its maximum CPU or wall time was exceeded.
