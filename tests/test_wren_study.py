@@ -281,6 +281,31 @@ def test_the_ballast_is_a_mass_with_its_rail_exit(spec):
     assert not pair.accepted and not pair.check("white").passed
 
 
+def test_an_earlier_step_s_effect_is_judged_by_its_size_at_the_next(spec):
+    """A step's refit holds the effects of earlier steps, and those keep a plausible size too (Wren-H's cold tank
+    was called explained with burn_rate at 5.1 times its realistic size, reached only at step 3). Here a
+    thrust error is the first step and a start-speed error the second, from the first step's fit; with the
+    thrust error's realistic size stated at 0.1 % its -3 % fails the second step's size check by name."""
+    from rocketid.diagnostics import CATALOGUE
+    from rocketid.diagnostics.accept import accept, noise_band
+    from rocketid.diagnostics.api import base_fit
+    from rocketid.diagnostics.effects import state_sizes
+    from rocketid.diagnostics.refit import run_refit
+    from rocketid.diagnostics.screen import vehicle_of
+    from rocketid.diagnostics.step import _Search, _fit_of
+    fit, _, _, _ = base_fit(spec, truth.measurements(Hidden(dm_payload=BALLAST), seed=BY_NAME["nose-ballast"].seed),
+                            "estimate")
+    band = noise_band(fit)
+    ctx = _Search(spec, band, vehicle_of(fit), 0.05, None, 300.0, 1, False, None)
+    thrust, speed = state_sizes([CATALOGUE["thrust_level"], CATALOGUE["start_speed"]], {"eps_thrust": 0.001})
+    first = run_refit(ctx.task(fit, [thrust], ("thrust_level",)))[0]
+    step1 = _fit_of(spec, [thrust], first, fit.prepared.measurements, fit.prepared.transcription.mesh, None)
+    second = accept(run_refit(ctx.task(step1, [thrust, speed], ("start_speed",)))[0], band)
+    size = second.check("size")
+    assert "eps_thrust" in second.refit.sizes and not size.passed and "eps_thrust" in size.detail, size.detail
+    assert "dv_start" not in size.detail
+
+
 def test_a_confounded_mate_s_fuller_shape_replaces_a_snug_choice(spec):
     """The search's side of the ballast: ``thrust_level`` reaches the noise first (snug), and ``start_mass``,
     which the screen puts in its confounded group, refits just past the near-rival line -- only as a confounded

@@ -942,6 +942,10 @@ def summarize_refit(new: EstimationResult, base_objective: float, base_n_estimat
     gave_up = (not new.success) and _timed_out(new)
     added_set = set(added)
     declared = tuple(n for n in names if n not in set(base_parameters))
+    # every effect's parameter (those of earlier steps are in ``base_parameters``, not in the user's model's):
+    # each keeps a plausible size
+    own = base_parameters if model_parameters is None else model_parameters
+    all_effects = set(n for n in names if n not in set(own))
     eff_params = tuple(n for e in effects if e.name in added_set for n in declared if n in _declared_by(e, declared))
     if not eff_params:
         eff_params = declared
@@ -953,7 +957,6 @@ def summarize_refit(new: EstimationResult, base_objective: float, base_n_estimat
         ident = identifiability(list(names), np.asarray(unc.parameter_covariance), eff_params, sizes,
                                 values=np.asarray(new.p, float))
         try:
-            own = base_parameters if model_parameters is None else model_parameters
             pl = check_plausibility(new, uncertainty=unc, level=level,
                                     realistic=effect_sizes(names, own, effects, sizes=sizes))
             base_flags = [f for f in pl.flagged(severity="fail") if not set(f.parameters) & set(declared)]
@@ -975,7 +978,7 @@ def summarize_refit(new: EstimationResult, base_objective: float, base_n_estimat
                  std=std, effect_parameters=eff_params, objective=float(new.objective), n_data=int(new.n_data),
                  n_estimated=int(new.n_estimated), chi2_per_dof=float(new.chi2_per_dof),
                  base_objective=float(base_objective), base_n_estimated=int(base_n_estimated), whiteness=white,
-                 sizes={k: float(v) for k, v in sizes.items() if k in declared}, at_bound=bound,
+                 sizes={k: float(v) for k, v in sizes.items() if k in all_effects}, at_bound=bound,
                  plausible_coefficients=plaus, implausible=failing, identifiability=ident, seconds=float(seconds),
                  notes=tuple(notes), least={k: float(v) for k, v in (least or {}).items() if k in eff_params},
                  base_values={k: float(v) for k, v in (base_values or {}).items()},
@@ -985,7 +988,7 @@ def summarize_refit(new: EstimationResult, base_objective: float, base_n_estimat
                                  ((n, float(e.scan.times[1] - e.scan.times[0])) for n in e.locations)
                                  if n in names},
                  solution=new.solution if new.success else None,
-                 changes={(a, b): float(v) for (a, b), v in (changes or {}).items() if a in declared and b in declared})
+                 changes={(a, b): float(v) for (a, b), v in (changes or {}).items() if a in all_effects and b in all_effects})
 
 
 #: IPOPT's return status when its maximum CPU or wall time was exceeded.
