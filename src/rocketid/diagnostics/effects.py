@@ -55,7 +55,7 @@ from ..errors import ModelError
 from ..model import ROLES, Model, ModelSpec, missing_role_message
 from ..tables import table_function
 from ..physics.atmosphere import us76_offset_log_pressure_ratio, us76_pressure, us76_temperature
-from ..physics.gravity import EARTH_RADIUS
+from ..physics.gravity import EARTH_RADIUS, G0
 
 __all__ = ["Effect", "Vehicle", "back_pressure_effect", "thrust_profile_effect", "throttle_effect", "wind_profile_effect",
            "density_profile_effect", "drag_mach_effect", "piecewise_linear", "CATALOGUE", "KINDS", "custom_effect", "with_effects", "apply_effect", "resolve_effects",
@@ -394,19 +394,30 @@ def _stated_thrust_levels(m: Model, thrust: sp.Expr) -> np.ndarray | None:
     None when it is constant or depends on more than time, known inputs, the states and the parameters (or is
     never positive). States are held at their start values and parameters at their guesses (an effect applied
     before, a nozzle term in altitude: the level judged is whether the motor runs, not its exact value)."""
+    x = _held(m, thrust)
+    inputs = [u for u in m._inputs if u.symbol in x.free_symbols]
+    if x.free_symbols - {m.t} - {u.symbol for u in inputs} or not x.free_symbols:
+        return None
+    samples = [t for u in inputs for t in u.times if m.t0 <= t <= m.tf]
+    tt = np.union1d(np.linspace(m.t0, m.tf, 801), samples)       # a sampled curve's peak is at a sample
+    level = np.abs(_along(m, x, inputs, tt))
+    return level if level.max() > 0 else None
+
+
+def _held(m: Model, expr: sp.Expr) -> sp.Expr:
+    """``expr`` expanded, with the constants at their values, the states at their start values and the
+    parameters at their guesses: what is left depends on time and the known inputs."""
     held = {c: sp.Float(v) for c, v in m._constants}
     held.update({st.symbol: sp.Float(st.initial) for st in m._states})
     held.update({ps.symbol: sp.Float(ps.guess) for ps in m._parameters})
-    x = _expanded(m, thrust).xreplace(held)
-    inputs = {u.symbol: u for u in m._inputs if u.symbol in x.free_symbols}
-    if x.free_symbols - {m.t} - set(inputs) or not x.free_symbols:
-        return None
-    samples = [t for u in inputs.values() for t in u.times if m.t0 <= t <= m.tf]
-    tt = np.union1d(np.linspace(m.t0, m.tf, 801), samples)       # a sampled curve's peak is at a sample
+    return _expanded(m, expr).xreplace(held)
+
+
+def _along(m: Model, x: sp.Expr, inputs: Sequence, tt: np.ndarray) -> np.ndarray:
+    """The values of ``x`` (of time and ``inputs`` only, :func:`_held`) at the times ``tt``."""
     values = [np.interp(tt, u.times, u.values) if u.expr is None
-              else np.broadcast_to(sp.lambdify(m.t, u.expr, "numpy")(tt), tt.shape) for u in inputs.values()]
-    level = np.abs(np.broadcast_to(sp.lambdify([m.t, *inputs], x, "numpy")(tt, *values), tt.shape))
-    return level if level.max() > 0 else None
+              else np.broadcast_to(sp.lambdify(m.t, u.expr, "numpy")(tt), tt.shape) for u in inputs]
+    return np.broadcast_to(sp.lambdify([m.t, *(u.symbol for u in inputs)], x, "numpy")(tt, *values), tt.shape)
 
 
 MOTOR_OFF_SHARE = 0.01
@@ -1819,9 +1830,9 @@ def _start_offset(effect: str, role: str, name: str, nominal: float) -> Callable
     return apply
 
 
-START_TIME = 0.05
-"""Realistic error of a declared moving start's time, s: when a rail exit worked out for the stated mass and
-thrust really came (a vehicle 2.5 % heavier leaves a 6 m rail 7.5 ms later), a release's time."""
+RAIL_CONSISTENCY = 0.25
+"""The declared start's speed and what the stated thrust gives along a rail from ignition may differ by at most
+this share for the start to be taken as a rail exit (:func:`_rail_exit_ratio`)."""
 
 
 def _moving_start(m: Model, effect: str) -> None:
@@ -1832,79 +1843,149 @@ def _moving_start(m: Model, effect: str) -> None:
                          f"{m.name!r} starts at rest, where the launcher holds the vehicle")
 
 
-def _start_delay(m: Model, effect: str) -> sp.Symbol:
-    """The vehicle leaves its declared (moving) start ``dt_start`` later than declared, on the motor's clock.
+def _rail_exit_ratio(m: Model, effect: str) -> float:
+    """``dt/dv``: how much later a rail exit comes per m/s it is slower, from the model's own motor.
+
+    A declared moving start after ignition is taken as the exit of a rail of fixed length, reached from rest
+    along the start's flight-path angle: ``a(t) = P(t)/m(t) - g sin(gamma0)`` from the first instant it is
+    positive (the launcher holds the vehicle until the thrust exceeds the weight's component), the thrust
+    and mass as stated (states held at their start values, parameters at their guesses; a mass state
+    integrated back from its start value), the drag neglected (a few per cent of the weight at rail-exit
+    speeds). A change of the acceleration shaped like ``P/m`` -- a mass or a thrust off its stated value --
+    moves the exit speed by ``dv_r = int f`` and the distance covered by ``t0`` by ``ds = int (t0 - t) f``;
+    the rail's end is then reached ``dt = -ds/v0`` later, at ``dv = dv_r + a(t0) dt``. Wren-H's rail: -0.02028
+    s per m/s (its truth simulator's own rail gives -0.02047 for 1.5 kg of ballast).
+
+    Raises ModelError when the start is not such an exit: no sampled thrust curve starting before the
+    model's start (a release before ignition, a motor declared only from the start), or a declared start
+    speed more than :data:`RAIL_CONSISTENCY` off what the stated thrust gives along a rail."""
+    mo = _motor(m, effect)
+    sampled = [u for u in mo.inputs if u.expr is None]
+    t_i = min((u.times[0] for u in sampled), default=math.inf)
+    if not t_i < m.t0:
+        raise ModelError(f"effect {effect!r} moves a rail exit along the motor's curve from ignition; model "
+                         f"{m.name!r} has no sampled thrust curve that starts before its start at t = {m.t0:g}")
+    samples = [t for u in sampled for t in u.times if t_i <= t <= m.t0]
+    tt = np.union1d(np.linspace(t_i, m.t0, 4001), samples)
+    thrust = _held(m, mo.thrust)
+    inputs = [u for u in m._inputs if u.symbol in thrust.free_symbols]
+    P = _along(m, thrust, inputs, tt)
+    if mo.flows:
+        rate = _held(m, sum(mo.flows.values(), sp.S.Zero))
+        flow = _along(m, rate, [u for u in m._inputs if u.symbol in rate.free_symbols], tt)
+        burnt_after = np.concatenate([[0.0], np.cumsum(np.diff(tt) * (flow[1:] + flow[:-1]) / 2)])
+        mass = float(_held(m, mo.mass)) - (burnt_after[-1] - burnt_after)
+    else:
+        held = _held(m, mo.mass)
+        mass = _along(m, held, [u for u in m._inputs if u.symbol in held.free_symbols], tt)
+    gamma0 = _initial_value(m, _role_state(m, "flight_path_angle", effect))
+    v0 = _initial_value(m, _role_state(m, "speed", effect))
+    acc = P / mass - G0 * math.sin(gamma0)
+    moving = np.cumsum(acc > 0) > 0
+    acc, shape = np.where(moving, acc, 0.0), np.where(moving, P / mass, 0.0)
+    v_rail = float(np.trapezoid(acc, tt))
+    if not abs(v_rail - v0) <= RAIL_CONSISTENCY * v0:
+        raise ModelError(f"effect {effect!r}: model {m.name!r}'s declared start speed {v0:.4g} m/s is not what its "
+                         f"stated thrust gives along a rail from ignition ({v_rail:.4g} m/s): not a rail exit")
+    dv_r, ds = float(np.trapezoid(shape, tt)), float(np.trapezoid((m.t0 - tt) * shape, tt))
+    dt = -ds / v0
+    return dt / (dv_r + float(acc[-1]) * dt)
+
+
+def _start_delay(m: Model, effect: str, dt: sp.Expr) -> None:
+    """The vehicle leaves its declared (moving) start ``dt`` later than declared, on the motor's clock.
 
     In the model's time ``s`` the flight starts from the declared state at ``t0``; the motor had been running
-    ``dt_start`` longer then, so every time-dependent part of the ``thrust`` and ``mass`` definitions and of a
-    mass state's equation is read at ``s + dt_start`` (a sampled curve through its table function); a mass
-    state's declared start is what the stated curve leaves at ``t0``, and the later start has burnt
-    ``dt_start |dm/dt(t0)|`` more by then. The measurements are on the motor's clock ``t = s + dt_start``:
-    every output is read at ``t - dt_start``, to first order ``y - dt_start dy/dt`` (as ``time_offset``).
-    Returns the parameter."""
-    _moving_start(m, effect)
+    ``dt`` longer then, so every time-dependent part of the ``thrust`` and ``mass`` definitions and of a mass
+    state's equation is read at ``s + dt`` (a sampled curve through its table function); a mass state's
+    declared start is what the stated curve leaves at ``t0``, and the later start has burnt ``dt |dm/dt(t0)|``
+    more by then. The measurements are on the motor's clock ``t = s + dt``: every output is read at
+    ``t - dt``, to first order ``y - dt dy/dt`` (as ``time_offset``)."""
     mo = _motor(m, effect)
-    dt = m.parameter("dt_start", 0.0, bounds=(-1.0, 1.0), nominal=0.01)
     warp = mo.warp(m.t + dt, m.t)
     m.redefine(mo.thrust_symbol, mo.thrust.xreplace(warp))
     m.redefine(mo.mass_symbol, mo.mass.xreplace(warp) + mo.flow_at_start() * dt)
     for state, flow in mo.flows.items():
         m.ode({state: flow.xreplace(warp)})
     _time_offset_edit(m, effect, second=False, tau=dt)
-    return dt
+
+
+EXIT_AGREEMENT = 0.1
+"""Realistic disagreement between a rail exit's speed change and the speed change its time goes with along
+the rail (:func:`_start_exit_edit`), as a share of the realistic speed change: the rail model neglects the
+drag and takes the change shaped like ``P/m`` (on Wren-H it is within 1 % of the truth simulator's rail)."""
+
+
+def _start_exit_edit(m: Model, effect: str) -> tuple:
+    """``dv_start`` on the declared start's speed and the exit ``r dv_exit`` later (:func:`_start_delay`, ``r``
+    from :func:`_rail_exit_ratio`). The time is a parameter of its own, in the speed change it goes with
+    along the rail (``dv_exit``), because a start's value and the equations take different parameters (an
+    initial value cannot be an expression of another); the two must agree within :data:`EXIT_AGREEMENT`
+    of the realistic speed change (the effect's ``changes``) -- a free time took a 20 ms radar time-tag
+    offset on Tern-2, whose flat solid thrust cannot tell the two apart."""
+    _moving_start(m, effect)
+    ratio = _rail_exit_ratio(m, effect)
+    dv = m.start_offset(_role_state(m, "speed", effect), "dv_start", nominal=1.0)
+    q = m.parameter("dv_exit", 0.0, bounds=(-1.0 / abs(ratio), 1.0 / abs(ratio)), nominal=1.0)
+    _start_delay(m, effect, ratio * q)
+    return dv, q
 
 
 def _start_exit(m: Model) -> tuple:
-    _moving_start(m, "start_exit")
-    dv = m.start_offset(_role_state(m, "speed", "start_exit"), "dv_start", nominal=1.0)
-    return (dv, _start_delay(m, "start_exit"))
+    return _start_exit_edit(m, "start_exit")
 
 
 def _start_mass_exit(m: Model) -> tuple:
-    _moving_start(m, "start_mass_exit")
     (dm,) = _start_mass(m)
-    dv = m.start_offset(_role_state(m, "speed", "start_mass_exit"), "dv_start", nominal=1.0)
-    return (dm, dv, _start_delay(m, "start_mass_exit"))
+    return (dm, *_start_exit_edit(m, "start_mass_exit"))
 
 
-def _exit_sizes(vehicle: "Vehicle | None") -> dict[str, float]:
+def _exit_size(vehicle: "Vehicle | None") -> dict[str, float]:
     speed = vehicle.start_speed if vehicle is not None and math.isfinite(vehicle.start_speed) else 0.0
-    return {"dv_start": max(0.3, START_SPEED_SHARE * speed), "dt_start": START_TIME}
+    size = max(0.3, START_SPEED_SHARE * speed)
+    return {"dv_start": size, "dv_exit": size}
+
+
+def _exit_changes(vehicle: "Vehicle | None") -> dict:
+    return {("dv_start", "dv_exit"): EXIT_AGREEMENT * _exit_size(vehicle)["dv_start"]}
 
 
 def start_exit_effect(vehicle: "Vehicle | None" = None) -> Effect:
-    """The declared moving start's speed **and time** corrected: a rail exit worked out for another mass or
-    thrust.
+    """A rail exit's speed corrected **with its time**: the exit worked out for another mass or thrust.
 
-    A rail exit (or a release) is a computed start: the team integrates the stated thrust and mass along
-    the rail. When those are off, the vehicle leaves the rail at another speed *and* at another time on the
-    motor's clock -- 1.5 kg more on Wren-H's 60 kg leaves its 6.1 m rail 0.37 m/s slower and 7.5 ms later.
-    The refined shape of ``start_speed``: ``v(t0) + dv_start``, and the flight from the declared start
-    ``dt_start`` later than declared (:func:`_start_delay`: the motor's curves read ``dt_start`` on, the
-    outputs ``dt_start`` back). A moving start only."""
-    return Effect("start_exit", "declared start's speed and time", "kinematics", _start_exit,
-                  "speed at the start v(t0) + dv_start, m/s, and the start dt_start s later on the motor's clock "
-                  "(thrust and mass read at t + dt_start, every output at t - dt_start): a rail exit worked out "
-                  "for another mass or thrust", _exit_sizes(vehicle))
+    A rail exit is a computed start: the team integrates the stated thrust and mass along the rail. When
+    those are off, the vehicle leaves the rail at another speed *and* at another time on the motor's clock
+    -- 1.5 kg more on Wren-H's 60 kg leaves its 6.1 m rail 0.37 m/s slower and 7.5 ms later, and at
+    50 m/s^2 those 7.5 ms are another 0.37 m/s all through the burn. The shape of ``start_speed`` for such
+    a start: ``v(t0) + dv_start``, and the flight from the declared start ``dt = r dv_start`` later
+    (:func:`_start_delay`: the motor's curves read ``dt`` on, the outputs ``dt`` back), ``r`` from the
+    model's own motor along a rail (:func:`_rail_exit_ratio`). One parameter: the time is not free -- a free
+    one took a 20 ms radar time-tag offset on Tern-2, whose flat solid thrust cannot tell the two apart.
+    Only for a moving start after ignition that the stated thrust reaches along a rail."""
+    return Effect("start_exit", "rail exit's speed with its time", "kinematics", _start_exit,
+                  "speed at the start v(t0) + dv_start, m/s, and the start r dv_start s later on the motor's clock "
+                  "(thrust and mass read at t + r dv_start, every output at t - r dv_start), r the rail exit's "
+                  "dt/dv from the stated motor: a rail exit worked out for another mass or thrust", _exit_size(vehicle),
+                  changes=_exit_changes(vehicle))
 
 
 def start_mass_exit_effect(vehicle: "Vehicle | None" = None) -> Effect:
-    """A start-mass error on a vehicle whose declared moving start was worked out for the stated mass.
+    """A start-mass error on a vehicle whose declared rail exit was worked out for the stated mass.
 
-    ``start_mass`` with the consequence for such a start: the heavier (lighter) vehicle leaves its rail
-    slower (faster) and later (sooner), so the declared start's speed and time are corrected with it
-    (``dm_start``, ``dv_start``, ``dt_start``; :func:`start_exit_effect`). Measured on Wren-H with 1.5 kg
-    of nose ballast (its noise-free GPS log, the truth simulator's own rail: 7.5 ms later, 0.367 m/s
+    ``start_mass`` with its consequence for such a start: the heavier (lighter) vehicle leaves its rail
+    slower (faster) and later (sooner): ``dm_start``, and the exit's speed and time as
+    :func:`start_exit_effect` (``dv_start``, and ``dv_exit`` for the time, held to agree along the rail). Measured on Wren-H with
+    1.5 kg of nose ballast (its noise-free GPS log; the truth simulator's own rail: 7.51 ms later, 0.367 m/s
     slower): ``start_mass`` + ``start_speed`` leave 2J = 54 and ``thrust_level`` + ``start_speed`` 27 -- a
-    thrust error, acting through the same thrust/mass ratio, imitated the ballast better than the half
-    of its physics --; this shape leaves 2J = 0.13 (the clean log's own is 0.19) with 1.498 kg, -0.368
-    m/s and 7.54 ms."""
+    thrust error, acting through the same thrust/mass ratio, imitated the ballast better than the half of
+    its physics --; with the exit's time (free) the shape left 2J = 0.13 (the clean log's own is 0.19) at
+    1.498 kg, -0.368 m/s, 7.54 ms, which is -0.372 m/s along the rail (``tests/test_wren_study.py``)."""
     sizes = {"dm_start": 0.01 * vehicle.mass if vehicle is not None and math.isfinite(vehicle.mass) else 200.0,
-             **_exit_sizes(vehicle)}
+             **_exit_size(vehicle)}
     return Effect("start_mass_exit", "start-mass error with its rail exit", "mass", _start_mass_exit,
-                  "mass m(t) + dm_start, kg, the declared moving start's speed v(t0) + dv_start and its time "
-                  "dt_start s later on the motor's clock: a heavier vehicle leaves its rail slower and later",
-                  sizes)
+                  "mass m(t) + dm_start, kg, and the rail exit's speed v(t0) + dv_start with its time r dv_start "
+                  "(r from the stated motor along the rail): a heavier vehicle leaves its rail slower and later",
+                  sizes, changes=_exit_changes(vehicle))
 
 
 def _build_catalogue() -> dict[str, Effect]:
