@@ -101,10 +101,10 @@ def test_zero_gives_the_base_model_and_the_start_moves_with_dv():
     assert fast["v"][0] - speed["v"][0] == pytest.approx(-0.5 * _ratio(spec) * 50.0, rel=0.2)
 
 
-def _vehicle(start_speed: float) -> Vehicle:
+def _vehicle(start_speed: float, rail_exit: bool = False) -> Vehicle:
     return Vehicle(thrust=3.6e3, mass=60.0, mass_flow=1.0, speed=400.0, start_speed=start_speed, duration=44.0,
                    altitude=(1200.0, 10200.0), mach=(0.1, 1.35), sigma={"v": 0.25}, sample_interval=0.1,
-                   knot_times=tuple(np.linspace(0.6, 44.0, 30)))
+                   knot_times=tuple(np.linspace(0.6, 44.0, 30)), rail_exit=rail_exit)
 
 
 def _tiny(start_speed: float, thrust=None) -> ri.ModelSpec:
@@ -121,14 +121,19 @@ def _tiny(start_speed: float, thrust=None) -> ri.ModelSpec:
 
 
 def test_offered_for_a_rail_exit_only():
-    """The shapes are refinements of ``start_mass`` and ``start_speed`` for a declared moving start, with the
-    start's realistic sizes; applying them is refused, with the reason, from rest, without a thrust curve from
-    ignition, or when the stated thrust does not reach the declared speed along a rail."""
-    moving, rest = _vehicle(25.0), _vehicle(0.0)
+    """The shapes are refinements of ``start_mass`` and ``start_speed`` for a rail exit (``Vehicle.rail_exit``,
+    read off the fit: Wren-H's is, a start at rest or a moving start from t = 0 such as Kestrel-S's is not),
+    with the start's realistic sizes; applying them is refused, with the reason, from rest, without a thrust
+    curve from ignition, or when the stated thrust does not reach the declared speed along a rail."""
+    from rocketid.diagnostics.screen import _rail_exit
+    import kestrel
+    assert _rail_exit(wren.build_model()) and _rail_exit(tern.build_model()) and not _rail_exit(kestrel.build_model())
+    moving, rest = _vehicle(25.0, rail_exit=True), _vehicle(0.0)
     assert [e.name for e in CATALOGUE["start_mass"].refinements(moving)] == ["start_mass_exit", "mass_jettison"]
     assert [e.name for e in CATALOGUE["start_mass"].refinements(rest)] == ["mass_jettison"]
+    assert [e.name for e in CATALOGUE["start_mass"].refinements(_vehicle(25.0))] == ["mass_jettison"]
     assert [e.name for e in CATALOGUE["start_speed"].refinements(moving)] == ["start_exit"]
-    assert CATALOGUE["start_speed"].refinements(rest) == []
+    assert CATALOGUE["start_speed"].refinements(rest) == [] == CATALOGUE["start_speed"].refinements(_vehicle(25.0))
     exit_ = start_mass_exit_effect(moving)
     assert exit_.sizes(moving) == {"dm_start": 0.6, "dv_start": 0.75, "dv_exit": 0.75}
     assert dict(exit_.changes) == {("dv_start", "dv_exit"): pytest.approx(0.075)}

@@ -221,6 +221,10 @@ class Vehicle:
     powered : (float, float) or ()
         First and last time the thrust role is above 0.1 % of its largest value along the fit, s (empty
         when unknown): a thrust error in time has its knots there, not over a coast.
+    rail_exit : bool
+        The declared start is a rail exit: a moving start after ignition that the stated thrust reaches
+        along a rail (:func:`_rail_exit_ratio`); the exit's shapes (``start_exit``, ``start_mass_exit``)
+        are offered only then.
     """
 
     thrust: float
@@ -238,6 +242,7 @@ class Vehicle:
     aero_altitudes: tuple = ()
     time_families: bool = False
     powered: tuple = ()
+    rail_exit: bool = False
 
 
 # ---------------------------------------------------------------------------
@@ -948,9 +953,10 @@ def _moving(vehicle: "Vehicle | None") -> bool:
 
 
 def _refine_start_mass(vehicle: "Vehicle | None") -> list[Effect]:
-    """On a declared moving start, the mass with the start's speed and time (:func:`start_mass_exit_effect`);
+    """On a rail exit (:attr:`Vehicle.rail_exit`), the mass with the exit's speed and time
+    (:func:`start_mass_exit_effect`);
     a mass change at an estimated time (:func:`mass_jettison_effect`) on a vehicle with a mesh."""
-    out = [start_mass_exit_effect(vehicle)] if _moving(vehicle) else []
+    out = [start_mass_exit_effect(vehicle)] if vehicle is not None and vehicle.rail_exit else []
     if vehicle is not None and len(vehicle.knot_times) >= 2:
         out.append(mass_jettison_effect(vehicle.knot_times[0], vehicle.knot_times[-1], _onset_width(vehicle)))
     return out
@@ -2039,7 +2045,7 @@ def _build_catalogue() -> dict[str, Effect]:
                "speed worked out for another mass, a release speed)", {"dv_start": 1.0},
                relative=lambda veh: {"dv_start": max(0.3, START_SPEED_SHARE * veh.start_speed)}
                if math.isfinite(veh.start_speed) and veh.start_speed > 0 else {},
-               refine=lambda veh: [start_exit_effect(veh)] if _moving(veh) else []),
+               refine=lambda veh: [start_exit_effect(veh)] if veh is not None and veh.rail_exit else []),
         Effect("time_offset", "time-tag offset", "sensor", _time_offset,
                "every output z(t) = y(t - tau) ~ y - tau dy/dt, tau in s", {"tau": 0.01},
                relative=lambda veh: {"tau": max(0.01, float(veh.sample_interval))},

@@ -146,7 +146,18 @@ def vehicle_of(fit: EstimationResult) -> Vehicle:
         sigma=sig, sample_interval=dt,
         knot_times=tuple(float(b) for b in fit.prepared.transcription.mesh.boundaries),
         mach_knots=_mach_knots(spec), aero_altitudes=_aero_altitudes(np.asarray(t, float), alt, qbar),
-        time_families=bool(spec.families), powered=_powered(np.asarray(t, float), thrust))
+        time_families=bool(spec.families), powered=_powered(np.asarray(t, float), thrust),
+        rail_exit=speed is not None and float(speed[0]) > 0 and _rail_exit(spec))
+
+
+def _rail_exit(spec) -> bool:
+    """Whether the declared start is a rail exit (:func:`~rocketid.diagnostics.effects._rail_exit_ratio`)."""
+    from .effects import _rail_exit_ratio
+    try:
+        _rail_exit_ratio(spec.to_model(), "the rail exit")
+    except (ModelError, RocketidError, TypeError, ValueError, ZeroDivisionError):
+        return False
+    return True
 
 
 def _powered(t, thrust) -> tuple:
