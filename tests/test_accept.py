@@ -101,7 +101,7 @@ def test_size_limit_is_five_realistic_sizes():
 
 def test_every_effect_of_the_model_keeps_a_plausible_size():
     """An effect of an earlier step is judged by its size too when the next is added: Wren-H's cold tank had
-    burn_rate at -0.08 at step 1 and -0.1017 at step 3 (5.1 times its realistic 0.02), and the model was called
+    burn_rate at -0.09 at step 1 and -0.1017 at step 3 (5.1 times its realistic 0.02), and the model was called
     explained on the added effect's sizes alone."""
     r = replace(refit("b", 0.992, value=0.03, size=0.02), effects=("a", "b"), parameter_names=("CD", "p_a", "p_b"),
                 p=np.array([0.3, -0.1017, 0.03]), std=np.array([0.01, 0.0007, 0.0003]),

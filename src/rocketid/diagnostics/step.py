@@ -186,7 +186,7 @@ class Discovery:
 def _task(base_spec, fit: EstimationResult, effects: Sequence[Effect], added: Sequence[str], start: Mapping,
           vehicle: Vehicle, *, base: EstimationResult, options, timeout, level, band_upper=math.inf) -> RefitTask:
     # every effect of the model is judged by its size, not only the one added: an effect of an earlier step can
-    # move beyond its realistic size when the next is added (Wren-H's cold tank: burn_rate at step 1 -0.08, at
+    # move beyond its realistic size when the next is added (Wren-H's cold tank: burn_rate at step 1 -0.09, at
     # the third step -0.1017, 5.1 times the realistic 0.02, and the model was called explained)
     sizes, changes = {}, {}
     for e in effects:
