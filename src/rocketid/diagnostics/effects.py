@@ -50,6 +50,7 @@ from typing import Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 import sympy as sp
+from scipy.integrate import cumulative_trapezoid, trapezoid
 
 from ..errors import ModelError
 from ..model import ROLES, Model, ModelSpec, missing_role_message
@@ -1879,8 +1880,8 @@ def _rail_exit_ratio(m: Model, effect: str) -> float:
     if mo.flows:
         rate = _held(m, sum(mo.flows.values(), sp.S.Zero))
         flow = _along(m, rate, [u for u in m._inputs if u.symbol in rate.free_symbols], tt)
-        burnt_after = np.concatenate([[0.0], np.cumsum(np.diff(tt) * (flow[1:] + flow[:-1]) / 2)])
-        mass = float(_held(m, mo.mass)) - (burnt_after[-1] - burnt_after)
+        burnt = cumulative_trapezoid(flow, tt, initial=0.0)           # the flow is negative: mass falls
+        mass = float(_held(m, mo.mass)) - (burnt[-1] - burnt)
     else:
         held = _held(m, mo.mass)
         mass = _along(m, held, [u for u in m._inputs if u.symbol in held.free_symbols], tt)
@@ -1889,11 +1890,11 @@ def _rail_exit_ratio(m: Model, effect: str) -> float:
     acc = P / mass - G0 * math.sin(gamma0)
     moving = np.cumsum(acc > 0) > 0
     acc, shape = np.where(moving, acc, 0.0), np.where(moving, P / mass, 0.0)
-    v_rail = float(np.trapezoid(acc, tt))
+    v_rail = float(trapezoid(acc, tt))
     if not abs(v_rail - v0) <= RAIL_CONSISTENCY * v0:
         raise ModelError(f"effect {effect!r}: model {m.name!r}'s declared start speed {v0:.4g} m/s is not what its "
                          f"stated thrust gives along a rail from ignition ({v_rail:.4g} m/s): not a rail exit")
-    dv_r, ds = float(np.trapezoid(shape, tt)), float(np.trapezoid((m.t0 - tt) * shape, tt))
+    dv_r, ds = float(trapezoid(shape, tt)), float(trapezoid((m.t0 - tt) * shape, tt))
     dt = -ds / v0
     return dt / (dv_r + float(acc[-1]) * dt)
 
