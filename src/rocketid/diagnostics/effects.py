@@ -1850,7 +1850,7 @@ def _moving_start(m: Model, effect: str) -> None:
                          f"{m.name!r} starts at rest, where the launcher holds the vehicle")
 
 
-def _rail_exit_ratio(m: Model, effect: str) -> float:
+def _rail_exit_ratio(m: Model, effect: str, motor: "_Motor | None" = None) -> float:
     """``dt/dv``: how much later a rail exit comes per m/s it is slower, from the model's own motor.
 
     A declared moving start after ignition is taken as the exit of a rail of fixed length, reached from rest
@@ -1866,7 +1866,7 @@ def _rail_exit_ratio(m: Model, effect: str) -> float:
     Raises ModelError when the start is not such an exit: no sampled thrust curve starting before the
     model's start (a release before ignition, a motor declared only from the start), or a declared start
     speed more than :data:`RAIL_CONSISTENCY` off what the stated thrust gives along a rail."""
-    mo = _motor(m, effect)
+    mo = _motor(m, effect) if motor is None else motor
     sampled = [u for u in mo.inputs if u.expr is None]
     t_i = min((u.times[0] for u in sampled), default=math.inf)
     if not t_i < m.t0:
@@ -1899,7 +1899,7 @@ def _rail_exit_ratio(m: Model, effect: str) -> float:
     return dt / (dv_r + float(acc[-1]) * dt)
 
 
-def _start_delay(m: Model, effect: str, dt: sp.Expr) -> None:
+def _start_delay(m: Model, effect: str, dt: sp.Expr, motor: "_Motor | None" = None) -> None:
     """The vehicle leaves its declared (moving) start ``dt`` later than declared, on the motor's clock.
 
     In the model's time ``s`` the flight starts from the declared state at ``t0``; the motor had been running
@@ -1907,8 +1907,9 @@ def _start_delay(m: Model, effect: str, dt: sp.Expr) -> None:
     state's equation is read at ``s + dt`` (a sampled curve through its table function); a mass state's
     declared start is what the stated curve leaves at ``t0``, and the later start has burnt ``dt |dm/dt(t0)|``
     more by then. The measurements are on the motor's clock ``t = s + dt``: every output is read at
-    ``t - dt``, to first order ``y - dt dy/dt`` (as ``time_offset``)."""
-    mo = _motor(m, effect)
+    ``t - dt``, to first order ``y - dt dy/dt`` (as ``time_offset``). ``motor``: the model's motor parts when
+    already read (:func:`_motor`)."""
+    mo = _motor(m, effect) if motor is None else motor
     warp = mo.warp(m.t + dt, m.t)
     m.redefine(mo.thrust_symbol, mo.thrust.xreplace(warp))
     m.redefine(mo.mass_symbol, mo.mass.xreplace(warp) + mo.flow_at_start() * dt)
@@ -1931,10 +1932,11 @@ def _start_exit_edit(m: Model, effect: str) -> tuple:
     of the realistic speed change (the effect's ``changes``) -- a free time took a 20 ms radar time-tag
     offset on Tern-2, whose flat solid thrust cannot tell the two apart."""
     _moving_start(m, effect)
-    ratio = _rail_exit_ratio(m, effect)
+    mo = _motor(m, effect)              # a start offset and a new parameter leave the motor's definitions as they are
+    ratio = _rail_exit_ratio(m, effect, mo)
     dv = m.start_offset(_role_state(m, "speed", effect), "dv_start", nominal=1.0)
     q = m.parameter("dv_exit", 0.0, bounds=(-1.0 / abs(ratio), 1.0 / abs(ratio)), nominal=1.0)
-    _start_delay(m, effect, ratio * q)
+    _start_delay(m, effect, ratio * q, mo)
     return dv, q
 
 
@@ -1947,9 +1949,14 @@ def _start_mass_exit(m: Model) -> tuple:
     return (dm, *_start_exit_edit(m, "start_mass_exit"))
 
 
-def _exit_size(vehicle: "Vehicle | None") -> dict[str, float]:
+def _start_speed_size(vehicle: "Vehicle | None") -> float:
+    """Realistic error of a declared start's speed: :data:`START_SPEED_SHARE` of it, at least 0.3 m/s."""
     speed = vehicle.start_speed if vehicle is not None and math.isfinite(vehicle.start_speed) else 0.0
-    size = max(0.3, START_SPEED_SHARE * speed)
+    return max(0.3, START_SPEED_SHARE * speed)
+
+
+def _exit_size(vehicle: "Vehicle | None") -> dict[str, float]:
+    size = _start_speed_size(vehicle)
     return {"dv_start": size, "dv_exit": size}
 
 
@@ -2044,7 +2051,7 @@ def _build_catalogue() -> dict[str, Effect]:
                _start_offset("start_speed", "speed", "dv_start", 1.0),
                "speed at the start v(t0) + dv_start, m/s: a moving start declared too fast or too slow (a rail-exit "
                "speed worked out for another mass, a release speed)", {"dv_start": 1.0},
-               relative=lambda veh: {"dv_start": max(0.3, START_SPEED_SHARE * veh.start_speed)}
+               relative=lambda veh: {"dv_start": _start_speed_size(veh)}
                if math.isfinite(veh.start_speed) and veh.start_speed > 0 else {},
                refine=lambda veh: [start_exit_effect(veh)] if veh is not None and veh.rail_exit else []),
         Effect("time_offset", "time-tag offset", "sensor", _time_offset,
