@@ -36,7 +36,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 from discovery_study import cases as C  # noqa: E402
 from discovery_study import harness as H  # noqa: E402
 
-GROUPS = {"single": C.SINGLE, "pairs": C.PAIRS, "clean-ref": C.CLEAN_REF, "clean": C.CLEAN}
+GROUPS = {"single": C.SINGLE, "pairs": C.PAIRS, "clean-ref": C.CLEAN_REF, "clean": C.CLEAN, "varied": C.VARIED}
 
 
 def _fmt(x, digits=4):

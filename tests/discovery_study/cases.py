@@ -66,8 +66,8 @@ class Case:
             out["eps_mdot"] = e["mass_flow"]["eps_mdot"]
         if "misalignment" in e:
             out["delta_thrust"] = math.radians(e["misalignment"]["delta_deg"])
-        if "earth_rotation" in e:
-            out["k_rot"] = 1.0
+        if "earth_rotation" in e and e["earth_rotation"] == ROTATION:
+            out["k_rot"] = 1.0          # the catalogue's site; another site's is judged by its name
         for name, par in (("bias_x", "b_x"), ("bias_h", "b_h"), ("bias_v", "b_v"), ("scale_v", "k_v"),
                           ("time_offset", "tau")):
             if name in e:
@@ -183,5 +183,33 @@ CLEAN = [Case(f"s30-clean-{s}", "stage30", {}, seed=s, fast=(s == 100)) for s in
 #: clean data on the reference cases too
 CLEAN_REF = [Case("m-clean", "ra66m", {}, seed=60), Case("r-clean", "ra66", {}, seed=61)]
 
+#: Variations, not tuned on: other signs and sizes than the cases above, a headwind, another launch site,
+#: three effects at once (``benchmarks/discovery_study.py --group varied``; not in the main table).
+VARIED = [
+    Case("v-s30-thrust_level-neg", "stage30", {"thrust_level": {"eps_thrust": -0.03}}, seed=201),
+    Case("v-s30-back_pressure-small", "stage30", {"back_pressure": {"A_e": 0.3}}, seed=202),
+    Case("v-s30-misalignment-neg", "stage30", {"misalignment": {"delta_deg": -0.4}}, seed=203),
+    Case("v-s30-wind-head", "stage30", {"wind": {"surface": -6.0, "jet": -35.0, "core_km": 9.0, "width_km": 1.5}},
+         seed=204),
+    Case("v-s30-density-neg", "stage30", {"density": {"amplitude": -0.08}}, seed=205),
+    Case("v-s30-mass_flow-neg", "stage30", {"mass_flow": {"eps_mdot": -0.025}}, seed=206),
+    Case("v-s30-time_offset-neg", "stage30", {"time_offset": {"tau": -0.02}}, seed=207),
+    Case("v-s30-bias_h-neg", "stage30", {"bias_h": {"b_h": -8.0}}, seed=208),
+    Case("v-s30-scale_v-neg", "stage30", {"scale_v": {"k_v": -2e-3}}, seed=209),
+    Case("v-s30-thrust_drift-neg", "stage30", {"thrust_drift": {"eps_start": -0.01, "eps_end": -0.04}}, seed=210),
+    Case("v-s30-earth_rotation-north", "stage30", {"earth_rotation": {"latitude_deg": 45.0, "azimuth_deg": 0.0}},
+         seed=211),
+    Case("v-m-thrust_level", "ra66m", {"thrust_level": {"eps_thrust": 0.03}}, seed=212),
+    Case("v-m-back_pressure-big", "ra66m", {"back_pressure": {"A_e": 0.6}}, seed=213),
+    Case("v-r-wind-head", "ra66", {"wind": {"surface": -4.0, "jet": -30.0, "core_km": 12.0, "width_km": 2.0,
+                                            "layer_m": 300.0}}, seed=214),
+    Case("v-r-mass_flow", "ra66", {"mass_flow": {"eps_mdot": 0.02}}, seed=215),
+    Case("v-s30-thrust_level+wind+bias_h", "stage30",
+         {"thrust_level": {"eps_thrust": 0.015}, "wind": WIND30, "bias_h": {"b_h": 5.0}}, seed=216),
+    Case("v-s30-back_pressure+time_offset+bias_v", "stage30",
+         {"back_pressure": BP30, "time_offset": {"tau": 0.01}, "bias_v": {"b_v": 0.5}}, seed=217),
+    Case("v-m-transonic_drag+bias_x", "ra66m", {"transonic_drag": {"peak": 0.10}, "bias_x": {"b_x": -5.0}}, seed=218),
+]
+
 ALL = SINGLE + PAIRS + CLEAN_REF + CLEAN
-BY_ID = {c.id: c for c in ALL}
+BY_ID = {c.id: c for c in ALL + VARIED}
