@@ -615,3 +615,35 @@ def test_a_wind_profile_is_judged_by_its_shear_between_knots():
     assert "W_3 - W_2 = +210 is 7.0 times" in wiggle.check("size").detail
     # the knot values alone (at most 110/30 = 3.7 realistic speeds) would have passed
     assert max(wiggle.refit.size_ratio().values()) < SIZE_FACTOR
+
+
+def test_a_prediction_that_holds_a_parameter_at_its_guess_decides_no_tie(monkeypatch):
+    """On RA-66M with a +3 % thrust error the hold-out window (0-45 s) never reaches Mach 2, so its fits hold
+    ``CD_M_6`` at the model's guess: start_mass predicted 4.02 sigma^2 against the true thrust error's 24.2 --
+    "decisive" by the ratio -- and was called explained. A prediction whose window does not reach a parameter
+    decides nothing; the same numbers from windows that reach every parameter still decide."""
+    from types import SimpleNamespace
+    from rocketid.diagnostics import refit as R
+    from rocketid.diagnostics import step as S
+    from rocketid.diagnostics.effects import CATALOGUE
+
+    effects = [CATALOGUE["thrust_level"], CATALOGUE["start_mass"]]
+    accs = [accept(refit("thrust_level", 0.9887, value=0.03), BAND),
+            accept(refit("start_mass", 0.9884, value=-578.0, size=200.0), BAND)]
+    errors = {"thrust_level": 24.2, "start_mass": 4.02}
+
+    def run(blind):
+        def fake_confirm(fit, effs, **kw):
+            name = effs[-1].name
+            return SimpleNamespace(holdout_rms={"x": (1.0, 1.0)}, holdout_error=lambda which=1: errors[name],
+                                   holdout_blind=blind)
+        monkeypatch.setattr(R, "confirm", fake_confirm)
+        return S._tie_break(accs, 1, None, [], effects, (0.0, 45.0), 0.05, None, 60.0)
+
+    i, note = run(("CD_M_6",))
+    assert i is None
+    assert "cannot decide" in note and "do not reach CD_M_6" in note and "cannot tell them apart" in note
+    assert "start_mass 4.02, thrust_level 24.2" in note
+    i, note = run(())
+    assert i == 1 and "prefers start_mass" in note
+

@@ -234,6 +234,30 @@ def test_hidden_effect_case(case_id):
     check_case(record(case_id))
 
 
+#: The varied cases (other signs and sizes, a headwind, another launch site, three effects at once; not tuned
+#: on) the diagnosis did not pass when they were first run, each with its measured failure (docs/effects.md,
+#: "Varied cases").
+KNOWN_VARIED: dict[str, str] = {
+    "v-m-thrust_level": "thrust_level and start_mass both reach the noise (chi2/dof 0.989, BIC within 10); the "
+                        "hold-out window does not reach CD_M_6, so its predictions (start_mass 4.02, thrust_level "
+                        "24.2 sigma^2) decide nothing: 'not explained by the catalogue', the two named as rivals "
+                        "(before the rule: start_mass called explained)",
+    "v-s30-density-neg": "density explained (chi2/dof 1.004, the non-identifiable direction of its profile named), "
+                         "CD_6 0.239 for 0.27 (11 %, 5 std)",
+    "v-s30-thrust_level+wind+bias_h": "partly explained with wrong effects (misalignment + start_angle + "
+                                      "thrust_profile_5, chi2/dof 16.3): every single effect stays far from the "
+                                      "noise and the catalogue's wind does not converge from the distorted base; "
+                                      "the true families in the catalogue's shapes leave chi2/dof 5.56",
+}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case_id", [pytest.param(c.id, marks=pytest.mark.xfail(reason=KNOWN_VARIED[c.id], strict=False))
+                                     if c.id in KNOWN_VARIED else c.id for c in C.VARIED])
+def test_varied_case(case_id):
+    check_case(record(case_id))
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("case_id", [pytest.param(c.id, marks=pytest.mark.xfail(reason=KNOWN_WRONG[c.id], strict=False))
                                      if c.id in KNOWN_WRONG else c.id for c in C.SINGLE + C.PAIRS])

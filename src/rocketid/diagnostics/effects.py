@@ -1539,14 +1539,19 @@ def earth_rotation_effect(latitude_deg: float = 28.5, azimuth_deg: float = 90.0,
     ``k_rot`` = 1 is the real Earth; from rest the Coriolis term is phased in by the lift-off fade,
     from a moving start it acts from ``t0``. ``k_rot`` is fixed by physics: an estimate below
     0.2 (another latitude or azimuth changes it by a factor of order one, not by 100) is not
-    Earth's rotation (:attr:`Effect.least`). The catalogue's entry is at 28.5 N toward the east and, for a
+    Earth's rotation (:attr:`Effect.least`), and neither is one beyond ``SITE_RATE[1]`` (1.3) either
+    way, its bounds: no site turns the in-plane Coriolis term more than ``1 / cos(latitude)`` times the
+    stated site's (1.14 at 28.5 deg; a westward launch flips its sign), so a refit held at a bound is
+    implausible (:func:`~rocketid.diagnostics.accept.accept`). (Unbounded, Stage-30's thrust error,
+    jet-stream wind and altitude bias at once took ``k_rot`` = -4.18 in the second step of a search that
+    never reached the noise.) The catalogue's entry is at 28.5 N toward the east and, for a
     vehicle whose site is not stated, is refined by :func:`earth_rotation_site_effect` (the site estimated).
     """
     phi = math.radians(latitude_deg)
     az = math.radians(azimuth_deg)
 
     def apply(m: Model) -> tuple:
-        k = m.parameter("k_rot", 0.0, nominal=1.0)
+        k = m.parameter("k_rot", 0.0, bounds=(-SITE_RATE[1], SITE_RATE[1]), nominal=1.0)
         _rotation_terms(m, k, sp.Float(phi), sp.Float(az), name)
         return (k,)
 

@@ -115,6 +115,10 @@ class Confirmation:
     holdout_undetermined : tuple of str
         Effect parameters whose standard error in the hold-out window's fit exceeds one realistic
         size: the window's data do not determine them.
+    holdout_blind : tuple of str
+        Parameters of the model with the effect that the hold-out window's data do not reach at all
+        (a drag knot at a Mach number flown only later): its window fit and prediction hold them at
+        their guesses, so the prediction carries the guesses' errors.
     """
 
     effects: tuple
@@ -140,6 +144,7 @@ class Confirmation:
     effect_covariance: np.ndarray | None = field(default=None, repr=False)
     acceptance: Any = field(default=None, repr=False)
     holdout_undetermined: tuple = ()
+    holdout_blind: tuple = ()
 
     @property
     def confirmed(self) -> bool:
@@ -217,7 +222,8 @@ class Confirmation:
             "rms": {k: pair(v) for k, v in self.rms.items()},
             "holdout": list(self.holdout) if self.holdout else None,
             "holdout_rms": {k: pair(v) for k, v in self.holdout_rms.items()} if self.holdout_rms else None,
-            "holdout_undetermined": list(self.holdout_undetermined), "predicts": self.predicts,
+            "holdout_undetermined": list(self.holdout_undetermined), "holdout_blind": list(self.holdout_blind),
+            "predicts": self.predicts,
             "effect_estimates": {k: {"estimate": float(v), "std_err": float(s), "interval_95": [float(a), float(b)]}
                                  for k, (v, s, (a, b)) in self.effect_estimates.items()},
             "discretization": {k: float(v) for k, v in self.discretization.items()},
@@ -431,7 +437,8 @@ def confirm(fit: EstimationResult, effect: Effect | str | Sequence[Effect | str]
         notes=test.notes + est.notes + disc.notes + hold.notes,
         timings={"refit_s": t1 - t0, "checks_s": t2 - t1, "holdout_s": t3 - t2, "total_s": t3 - t0},
         holdout_fits=hold.fits, effect_covariance=est.covariance,
-        acceptance=_acceptance(fit, new, effects, fit.spec, disc.total, level), holdout_undetermined=hold.undetermined)
+        acceptance=_acceptance(fit, new, effects, fit.spec, disc.total, level), holdout_undetermined=hold.undetermined,
+        holdout_blind=hold.blind)
 
 
 class _Test(NamedTuple):
@@ -555,13 +562,15 @@ def _discretization_check(new: EstimationResult, data: Measurements, timeout: fl
 
 
 class _Holdout(NamedTuple):
-    """Both models fitted on the window, predicting the rest: ``{channel: (base RMS, new RMS)}``, and
-    the effect parameters the window's data do not determine."""
+    """Both models fitted on the window, predicting the rest: ``{channel: (base RMS, new RMS)}``, the
+    effect parameters the window's data do not determine, and the new model's parameters they do not
+    reach (held at their guesses)."""
 
     rms: dict | None
     fits: tuple | None
     notes: tuple
     undetermined: tuple = ()
+    blind: tuple = ()
 
 
 def _undetermined(window_fit: EstimationResult, sizes: Mapping[str, float]) -> tuple:
@@ -618,7 +627,7 @@ def _holdout(fit: EstimationResult, new: EstimationResult, window: tuple[float, 
         if loose:
             notes.append(f"the hold-out window's data do not determine {', '.join(loose)} (standard error above a "
                          "realistic size in its fit): the hold-out prediction does not judge the effect")
-        return _Holdout(rms, fits, tuple(notes), loose)
+        return _Holdout(rms, fits, tuple(notes), loose, tuple(blind_n))
     except RocketidError as exc:
         return _Holdout(None, fits, tuple(notes) + (f"the hold-out check failed: {exc}",))
 
