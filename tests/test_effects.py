@@ -130,6 +130,25 @@ def test_sensor_effects_edit_their_channel_only(ra66m_spec):
     assert sp.expand(out["v"] - (1 + spec.symbol("k_v")) * spec.symbol("v")) == 0
 
 
+def test_a_sensor_lag_delays_its_channel_only_and_adds_to_a_time_offset(ra66m_spec):
+    """``sensor_lag_effect("v")``: ``z_v = v - tau_v dv/dt``, x and h untouched; after ``time_offset`` the two
+    delays add on v (``v - (tau + tau_v) dv/dt``, to first order); an unknown channel is refused."""
+    from rocketid.diagnostics import sensor_lag_effect
+    from rocketid.errors import ModelError
+    dv = ra66m_spec.states[ra66m_spec.state_symbols.index(ra66m_spec.symbol("v"))].derivative
+    spec = with_effects(ra66m_spec, [sensor_lag_effect("v")])
+    out = {o.name: o.expr for o in spec.outputs}
+    assert out["x"] == spec.symbol("x") and out["h"] == spec.symbol("h")
+    assert sp.expand(out["v"] - (spec.symbol("v") - spec.symbol("tau_v") * dv)) == 0
+    both = with_effects(ra66m_spec, ["time_offset", sensor_lag_effect("v")])
+    out = {o.name: o.expr for o in both.outputs}
+    tau, tau_v = both.symbol("tau"), both.symbol("tau_v")
+    assert sp.expand(out["v"] - (both.symbol("v") - (tau + tau_v) * dv)) == 0
+    assert tau_v not in out["h"].free_symbols and tau in out["h"].free_symbols
+    with pytest.raises(ModelError, match="channel must be one of x, h, v"):
+        sensor_lag_effect("q")
+
+
 def test_liftoff_fade():
     t = sp.Symbol("t")
     f = sp.lambdify(t, liftoff_fade(t))

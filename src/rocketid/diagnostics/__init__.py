@@ -26,6 +26,7 @@ The discovery (issue 8), one module per step, each handing the next an immutable
 
 from .effects import (CATALOGUE, KINDS, Effect, Vehicle, apply_effect, back_pressure_effect, custom_effect,
                       density_effect, density_profile_effect, drag_mach_effect, earth_rotation_effect, is_present,
+                      sensor_lag_effect,
                       liftoff_fade, mass_jettison_effect, misalignment_onset_effect, resolve_effects, throttle_step_effect, throttle_window_effect, drag_bump_effect, thrust_profile_effect, throttle_effect, wind_effect,
                       wind_profile_effect, with_effects, temperature_effect,
                       burn_rate_effect, base_drag_mach_effect, earth_rotation_site_effect)
@@ -36,7 +37,7 @@ from .score import AugmentedModel, CandidateRanking, CandidateScore, augment, ra
 __all__ = [
     # part A: effects, ranking, confirmation, history
     "Effect", "CATALOGUE", "KINDS", "custom_effect", "with_effects", "apply_effect", "resolve_effects",
-    "is_present", "wind_effect", "density_effect", "earth_rotation_effect", "liftoff_fade", "Vehicle",
+    "is_present", "wind_effect", "density_effect", "earth_rotation_effect", "sensor_lag_effect", "liftoff_fade", "Vehicle",
     "back_pressure_effect", "thrust_profile_effect", "throttle_effect", "wind_profile_effect", "density_profile_effect",
     "drag_mach_effect", "misalignment_onset_effect", "mass_jettison_effect", "throttle_step_effect", "throttle_window_effect", "drag_bump_effect",
     "temperature_effect", "burn_rate_effect", "base_drag_mach_effect", "earth_rotation_site_effect", "rank_candidates", "CandidateRanking", "CandidateScore", "augment", "AugmentedModel",

@@ -545,7 +545,8 @@ def _suggest(ranking) -> str:
         return ("a drag correction piecewise linear in Mach on more knots (rocketid.diagnostics.drag_mach_effect, "
                 "or Model.table on the Mach role)")
     if kind == "sensor":
-        return "a sensor model of the failing channel (custom_effect redefining that output)"
+        return ("a sensor model of the failing channel: its own latency or lag (rocketid.diagnostics.sensor_lag_effect, "
+                "passed as a candidate beside the catalogue), or custom_effect redefining that output")
     return "a term of your own written with custom_effect"
 
 

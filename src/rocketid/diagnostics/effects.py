@@ -59,6 +59,7 @@ from ..physics.atmosphere import us76_offset_log_pressure_ratio, us76_pressure, 
 from ..physics.gravity import EARTH_RADIUS, G0
 
 __all__ = ["Effect", "Vehicle", "back_pressure_effect", "thrust_profile_effect", "throttle_effect", "wind_profile_effect",
+           "sensor_lag_effect",
            "density_profile_effect", "drag_mach_effect", "piecewise_linear", "CATALOGUE", "KINDS", "custom_effect", "with_effects", "apply_effect", "resolve_effects",
            "is_present", "check_effect_parameters", "effect_parameter_problems", "wind_effect", "density_effect", "earth_rotation_effect",
            "liftoff_fade", "EARTH_RATE", "LIFTOFF_FADE_TIME", "misalignment_onset_effect", "mass_jettison_effect", "throttle_step_effect", "onset_step",
@@ -1028,6 +1029,42 @@ def _time_offset(m: Model) -> tuple:
     return _time_offset_edit(m, "time_offset", second=False)
 
 
+def sensor_lag_effect(channel: str) -> Effect:
+    """The latency of one measured channel: ``z_c(t) = y_c(t - tau_c) ~ y_c - tau_c dy_c/dt``, the other
+    channels on time (``time_offset`` moves every channel).
+
+    A sensor's own delay or smoothing: a GPS receiver's velocity filter, a pitot-static system's pneumatic
+    lag, a barometric altimeter's. A first-order lag of time constant ``T`` reads, to first order in ``T``, as
+    a latency ``T``. Not in the catalogue's screen (three more candidates for every data set); pass it as a
+    candidate when the verdict locates the misfit in one channel (``diagnose(candidates=[*CATALOGUE.values(),
+    sensor_lag_effect("v")])``, or a model file's ``candidates()`` on the command line).
+
+    Parameters
+    ----------
+    channel : {"x", "h", "v"}
+        The output that reads the downrange, altitude or speed state (found by its role).
+
+    Returns
+    -------
+    Effect
+        ``sensor_lag_<channel>``, parameter ``tau_<channel>`` (s; realistic size the larger of 0.05 s and one
+        sample interval).
+    """
+    if channel not in _CHANNEL_ROLE:
+        raise ModelError(f"sensor_lag_effect: channel must be one of {', '.join(_CHANNEL_ROLE)}, got {channel!r}")
+    name = f"sensor_lag_{channel}"
+
+    def apply(m: Model) -> tuple:
+        out, _ = _output_of(m, _CHANNEL_ROLE[channel], channel, name)
+        tau = m.parameter(f"tau_{channel}", 0.0, nominal=0.05)
+        return _time_offset_edit(m, name, second=False, tau=tau, outputs=(out,), compose=True)
+
+    return Effect(name, f"latency of channel {channel}", "sensor", apply,
+                  f"output {channel} only: z(t) = y(t - tau_{channel}) ~ y - tau_{channel} dy/dt, tau in s",
+                  {f"tau_{channel}": 0.05},
+                  relative=lambda veh: {f"tau_{channel}": max(0.05, float(veh.sample_interval))})
+
+
 def _time_offset_second(m: Model) -> tuple:
     return _time_offset_edit(m, "time_offset_2", second=True)
 
@@ -1068,14 +1105,18 @@ def _second_derivative(m: Model, expr: sp.Expr, effect: str) -> sp.Expr:
     return second.xreplace({u: value for u, (value, _) in inputs.items()})
 
 
-def _time_offset_edit(m: Model, effect: str, *, second: bool, tau: sp.Symbol | None = None) -> tuple:
+def _time_offset_edit(m: Model, effect: str, *, second: bool, tau: sp.Symbol | None = None,
+                      outputs: Sequence[str] | None = None, compose: bool = False) -> tuple:
     """``z(t) = y(t - tau)``: to first order ``y - tau dy/dt`` (``dy/dt`` through the state derivatives, the
     collocation polynomial's), with ``second`` also ``+ tau^2/2 d2y/dt2`` (:func:`_second_derivative`).
-    ``tau`` an existing parameter (a start delay's), else one named ``tau`` is declared."""
+    ``tau`` an existing parameter (a start delay's), else one named ``tau`` is declared; ``outputs`` the
+    outputs delayed (default: every one). ``compose``: an output already delayed to first order
+    (``y - tau0 dy/dt``) is delayed further, ``- tau dy/dt`` with the same ``dy/dt`` (the two delays add, to
+    first order); otherwise such an output is refused."""
     if not m.output_names:
         raise ModelError(f"effect {effect!r} needs measured outputs; model {m.name!r} has none yet")
     states = {}
-    for name in m.output_names:
+    for name in (m.output_names if outputs is None else outputs):
         for s in m.output_expression(name).free_symbols:
             if m.has(str(s)):
                 try:
@@ -1083,18 +1124,19 @@ def _time_offset_edit(m: Model, effect: str, *, second: bool, tau: sp.Symbol | N
                 except ModelError:
                     pass
     derivs = set(states.values())
-    exprs = {}
-    for name in m.output_names:
+    exprs, bases = {}, {}
+    for name in (m.output_names if outputs is None else outputs):
         expr = m.output_expression(name)
-        if expr.free_symbols & derivs:
+        if expr.free_symbols & derivs and not compose:
             raise ModelError(f"effect {effect!r} cannot apply: a time offset is already present in model {m.name!r}, "
                              f"or output {name!r} uses a state derivative already: z(t) = y(t - tau) ~ y - tau dy/dt "
                              "needs outputs that are functions of the states")
-        exprs[name] = expr
-    curvature = {name: _second_derivative(m, expr, effect) for name, expr in exprs.items()} if second else {}
+        exprs[name], bases[name] = expr, expr.xreplace({d: 0 for d in derivs})
+    curvature = {name: _second_derivative(m, expr, effect) for name, expr in bases.items()} if second else {}
     tau = m.parameter("tau", 0.0, nominal=0.01) if tau is None else tau
     for name, expr in exprs.items():
-        dydt = sp.diff(expr, m.t) + sum((sp.diff(expr, s) * d for s, d in states.items()), sp.S.Zero)
+        base = bases[name]
+        dydt = sp.diff(base, m.t) + sum((sp.diff(base, s) * d for s, d in states.items()), sp.S.Zero)
         m.redefine_output(name, expr - tau * dydt + (tau ** 2 / 2 * curvature[name] if second else 0))
     return (tau,)
 
