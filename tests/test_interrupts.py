@@ -444,3 +444,32 @@ def test_sigkill_of_a_dask_client_leaves_nothing_processing(tmp_path):
             (str(k), ts.state) for k, ts in dask_worker.state.tasks.items())))
         clients = set(client.run_on_scheduler(lambda dask_scheduler: list(dask_scheduler.clients)))
         assert len(clients) < len(clients_before), "the killed client is still known to the scheduler"
+
+
+def test_an_interrupt_wrapped_by_python_is_still_an_interrupt():
+    """A Ctrl-C that lands while a class is being created (matplotlib's first import, in the report's
+    figures) comes back from Python 3.11 as ``RuntimeError`` whose cause is the KeyboardInterrupt (measured in
+    the suite: a traceback and exit 1 instead of 130). The command line reads the cause; a RuntimeError
+    without one is not swallowed."""
+    import click
+    from rocketid.cli import RocketidGroup
+
+    @click.group(cls=RocketidGroup)
+    def group():
+        pass
+
+    @group.command("wrapped")
+    def wrapped():
+        try:
+            raise KeyboardInterrupt()
+        except KeyboardInterrupt as exc:
+            raise RuntimeError("Error calling __set_name__ on '_deprecated_property'") from exc
+
+    @group.command("plain")
+    def plain():
+        raise RuntimeError("a bug")
+
+    res = CliRunner().invoke(group, ["wrapped"])
+    assert res.exit_code == 130 and "interrupted" in res.stderr, (res.exit_code, res.stderr)
+    res = CliRunner().invoke(group, ["plain"])
+    assert res.exit_code == 1 and isinstance(res.exception, RuntimeError)

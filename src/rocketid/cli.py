@@ -785,9 +785,7 @@ class RocketidGroup(click.Group):
                 ctx.meta[_GUARD] = guard
                 return super().invoke(ctx)
         except KeyboardInterrupt as exc:
-            signum = getattr(exc, "signum", signal.SIGINT)
-            click.echo(f"\nError: {self._interrupted_message(ctx)}", err=True)
-            ctx.exit(128 + int(signum))
+            self._exit_interrupted(ctx, exc)
         except RocketidError as exc:
             if _verbose(ctx):
                 raise
@@ -805,6 +803,29 @@ class RocketidGroup(click.Group):
             where = exc.ctx.command_path if exc.ctx is not None else ctx.command_path
             click.echo(f"Error: {_one_line(exc.format_message())} (see '{where} --help')", err=True)
             ctx.exit(exc.exit_code)
+        except RuntimeError as exc:
+            # an interrupt that arrived inside a class body being created comes back wrapped (Python 3.11
+            # re-raises an error of ``__set_name__`` as RuntimeError: a Ctrl-C during matplotlib's import)
+            cause = _interrupt_in(exc)
+            if cause is None:
+                raise
+            self._exit_interrupted(ctx, cause)
+
+    def _exit_interrupted(self, ctx, exc: KeyboardInterrupt) -> None:
+        signum = getattr(exc, "signum", signal.SIGINT)
+        click.echo(f"\nError: {self._interrupted_message(ctx)}", err=True)
+        ctx.exit(128 + int(signum))
+
+
+def _interrupt_in(exc: BaseException) -> KeyboardInterrupt | None:
+    """The interrupt in ``exc``'s chain of causes, or None."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return exc
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return None
 
 
 @click.group(cls=RocketidGroup, context_settings={"help_option_names": ["-h", "--help"]})
