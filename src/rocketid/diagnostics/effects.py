@@ -1115,8 +1115,9 @@ def _time_offset_edit(m: Model, effect: str, *, second: bool, tau: sp.Symbol | N
     first order); otherwise such an output is refused."""
     if not m.output_names:
         raise ModelError(f"effect {effect!r} needs measured outputs; model {m.name!r} has none yet")
+    names = tuple(m.output_names if outputs is None else outputs)
     states = {}
-    for name in (m.output_names if outputs is None else outputs):
+    for name in names:
         for s in m.output_expression(name).free_symbols:
             if m.has(str(s)):
                 try:
@@ -1125,7 +1126,7 @@ def _time_offset_edit(m: Model, effect: str, *, second: bool, tau: sp.Symbol | N
                     pass
     derivs = set(states.values())
     exprs, bases = {}, {}
-    for name in (m.output_names if outputs is None else outputs):
+    for name in names:
         expr = m.output_expression(name)
         if expr.free_symbols & derivs and not compose:
             raise ModelError(f"effect {effect!r} cannot apply: a time offset is already present in model {m.name!r}, "
