@@ -1947,7 +1947,7 @@ def _rail_exit_ratio(m: Model, effect: str, motor: "_Motor | None" = None) -> fl
     return dt / (dv_r + float(acc[-1]) * dt)
 
 
-def _start_delay(m: Model, effect: str, dt: sp.Expr, motor: "_Motor | None" = None) -> None:
+def _start_delay(m: Model, effect: str, dt: sp.Expr, motor: "_Motor") -> None:
     """The vehicle leaves its declared (moving) start ``dt`` later than declared, on the motor's clock.
 
     In the model's time ``s`` the flight starts from the declared state at ``t0``; the motor had been running
@@ -1955,13 +1955,12 @@ def _start_delay(m: Model, effect: str, dt: sp.Expr, motor: "_Motor | None" = No
     state's equation is read at ``s + dt`` (a sampled curve through its table function); a mass state's
     declared start is what the stated curve leaves at ``t0``, and the later start has burnt ``dt |dm/dt(t0)|``
     more by then. The measurements are on the motor's clock ``t = s + dt``: every output is read at
-    ``t - dt``, to first order ``y - dt dy/dt`` (as ``time_offset``). ``motor``: the model's motor parts when
-    already read (:func:`_motor`)."""
-    mo = _motor(m, effect) if motor is None else motor
-    warp = mo.warp(m.t + dt, m.t)
-    m.redefine(mo.thrust_symbol, mo.thrust.xreplace(warp))
-    m.redefine(mo.mass_symbol, mo.mass.xreplace(warp) + mo.flow_at_start() * dt)
-    for state, flow in mo.flows.items():
+    ``t - dt``, to first order ``y - dt dy/dt`` (as ``time_offset``). ``motor``: the model's motor parts
+    (:func:`_motor`)."""
+    warp = motor.warp(m.t + dt, m.t)
+    m.redefine(motor.thrust_symbol, motor.thrust.xreplace(warp))
+    m.redefine(motor.mass_symbol, motor.mass.xreplace(warp) + motor.flow_at_start() * dt)
+    for state, flow in motor.flows.items():
         m.ode({state: flow.xreplace(warp)})
     _time_offset_edit(m, effect, second=False, tau=dt)
 
