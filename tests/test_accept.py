@@ -422,6 +422,34 @@ def test_a_snug_choice_still_tries_the_shapes_of_a_near_rival():
     assert S._near_rivals(accs, replace(scr, ranking=ranking), veh, 0, band) == [1]
 
 
+def test_a_family_whose_refit_ran_out_of_iterations_is_still_refined():
+    """Stage-30 with a 45 m/s jet, a thrust error and an altitude bias: from chi2/dof 58 962 the four-function
+    wind stopped on IPOPT's iteration limit at 2371 while the misalignment converged at 1158. Not converging
+    says nothing against the family: its refined shapes are tried (its 10-knot profile reaches 12.4). A refit
+    that gave up on its time limit, or that stopped without lowering J, is not."""
+    from rocketid.diagnostics import step as S
+    from rocketid.diagnostics.effects import CATALOGUE, Vehicle
+    from rocketid.diagnostics.screen import Contender, Screen
+
+    veh = Vehicle(thrust=6.0e5, mass=3.0e4, mass_flow=230.0, speed=1500.0, start_speed=5.0, duration=66.0,
+                  altitude=(0.0, 30000.0), mach=(0.0, 4.5), sigma={"x": 1.0, "h": 1.0, "v": 1.0},
+                  sample_interval=0.1, knot_times=tuple(np.linspace(0.0, 66.0, 7)))
+    names = ("misalignment", "wind", "density")
+    scr = Screen(None, tuple(Contender(CATALOGUE[n], "") for n in names), ())
+    stopped = "Maximum number of iterations exceeded (can be specified by an option)."
+    accs = [accept(refit("misalignment", 1158.0, base_chi2=58962.0), BAND),
+            accept(refit("wind", 2371.0, base_chi2=58962.0, success=False, message=stopped), BAND),
+            accept(refit("density", 3000.0, base_chi2=58962.0), BAND)]
+    assert not accs[1].check("significant").passed      # no BIC for a refit that did not converge
+    assert S._stalled(accs[1], 0.05 / 3)
+    assert S._families_to_refine(accs, scr, veh, 0) == [0, 2, 1]
+    # the time limit is the refit's own verdict; a stop that did not lower J is no evidence for the family
+    timed = replace(accs[1].refit, gave_up=True, message="gave up after 60 s (time limit)")
+    flat = replace(accs[1].refit, objective=accs[1].refit.base_objective + 1.0)
+    for r in (timed, flat):
+        assert S._families_to_refine([accs[0], accept(r, BAND), accs[2]], scr, veh, 0) == [0, 2]
+
+
 def test_a_shape_with_several_starts_is_represented_by_its_best_refit(monkeypatch):
     """An onset time is refitted from every start (Effect.starts); the converged refit with the lowest
     objective stands for the shape, and the level's other families are refitted in the same batch."""
@@ -454,6 +482,36 @@ def test_a_shape_with_several_starts_is_represented_by_its_best_refit(monkeypatc
                                 (v, start), workers=1)
     assert made == [{"delta_thrust": 0.003, "t_misalign": t} for t in (8.0, 24.0, 40.0, 56.0)]
     assert r.chi2_per_dof == pytest.approx(0.99)
+
+
+def test_a_ladder_climbs_past_a_shape_ipopt_stopped_short(monkeypatch):
+    """A profile that stopped on IPOPT's iteration limit has no BIC to choose the knot count by: when it had
+    lowered J below the family's best so far the next shape is tried (Stage-30's 45 m/s jet: the wind's
+    6-knot profile stopped at chi2/dof 23.8, the 10-knot one converges at 12.4). A ladder stops at a shape
+    that stopped short above its best, or that gave up on its time limit."""
+    from rocketid.diagnostics import step as S
+    from rocketid.diagnostics.effects import wind_profile_effect
+
+    stopped = "Maximum number of iterations exceeded (can be specified by an option)."
+    ladder = [wind_profile_effect([0.0, 0.5, 3.0], name="w3"), wind_profile_effect([0.0, 0.5, 3.0, 6.0], name="w4"),
+              wind_profile_effect([0.0, 0.5, 3.0, 6.0, 9.0], name="w5")]
+
+    def climb(results):
+        monkeypatch.setattr(S, "refit_all", lambda tasks, workers=None: tuple(results[v.name] for v, _ in tasks))
+        found = S._refine_families([ladder], lambda v, start=None: (v, start), lambda r: accept(r, BAND), workers=1)
+        return [v.name for v, _ in found]
+
+    base = 58962.0
+    assert climb({"w3": refit("w3", 23.8, base_chi2=base, success=False, message=stopped),
+                  "w4": refit("w4", 12.4, base_chi2=base), "w5": refit("w5", 12.5, base_chi2=base)}) == \
+        ["w3", "w4", "w5"]
+    # stopped short above the best so far: the ladder stops there
+    assert climb({"w3": refit("w3", 12.4, base_chi2=base),
+                  "w4": refit("w4", 30.0, base_chi2=base, success=False, message=stopped),
+                  "w5": refit("w5", 1.0, base_chi2=base)}) == ["w3", "w4"]
+    # gave up on the time limit: no evidence either way, the ladder stops
+    assert climb({"w3": refit("w3", 23.8, base_chi2=base, success=False, gave_up=True, message="gave up"),
+                  "w4": refit("w4", 1.0, base_chi2=base), "w5": refit("w5", 1.0, base_chi2=base)}) == ["w3"]
 
 
 def test_a_step_and_a_window_share_one_scan(monkeypatch):
