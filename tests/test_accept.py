@@ -450,6 +450,55 @@ def test_a_family_whose_refit_ran_out_of_iterations_is_still_refined():
         assert S._families_to_refine([accs[0], accept(r, BAND), accs[2]], scr, veh, 0) == [0, 2]
 
 
+def test_a_second_path_starts_from_an_oversized_first_step_and_stands_only_when_it_explains(monkeypatch):
+    """Stage-30 with a 45 m/s jet, a +1.5 % thrust error and a 5 m altitude bias: at step 1 the wind's 10-knot
+    profile reached chi2/dof 12.4 but beyond a plausible size (it carried the thrust error too), and the
+    greedy search took a misalignment (1158). The second path starts from the lowest-BIC oversized refit --
+    converged, significant, no parameter at a bound -- and replaces the first only when it ends explained."""
+    from rocketid.diagnostics import step as S
+    from rocketid.diagnostics.effects import CATALOGUE, wind_profile_effect
+    from rocketid.diagnostics.screen import Contender, Screen
+
+    base = 58962.0
+    effects = [CATALOGUE["misalignment"], wind_profile_effect([0.0, 0.5, 3.0, 6.0], name="wind_pl_4"),
+               CATALOGUE["density"], CATALOGUE["time_offset"], CATALOGUE["start_angle"]]
+    accs = [accept(refit("misalignment", 1158.0, base_chi2=base), BAND),
+            accept(refit("wind_pl_4", 12.4, value=1.0, base_chi2=base), BAND),          # 50 realistic sizes
+            accept(refit("density", 85.8, value=1.0, base_chi2=base), BAND),
+            accept(refit("time_offset", 5.0, value=1.0, base_chi2=base, at_bound=("p_time_offset",)), BAND),
+            accept(refit("start_angle", 3.0, value=1.0, base_chi2=base, success=False,
+                         message="Maximum number of iterations exceeded"), BAND)]
+    assert [a.admissible for a in accs] == [True, False, False, False, False]
+    scr = Screen(None, tuple(Contender(e, "") for e in effects), ())
+    step1 = S.Step(1, scr, tuple(accs), accs[0], "", (), ("misalignment",), None)
+    first = S._Path((step1,), [effects[0]], SimpleNamespace(chi2_per_dof=16.3), accs[0], False, "")
+    assert S._provisional(first) == 1
+    # nothing below the choice's BIC: no second path
+    above = (accs[0], accept(refit("wind_pl_4", 2000.0, value=1.0, base_chi2=base), BAND))
+    assert S._provisional(replace(first, steps=(replace(step1, acceptances=above),))) is None
+
+    ends = {}
+
+    def fake_forward(ctx, fit, candidates, max_effects, notes, first=None):
+        assert first is not None and first[2] == 1
+        return ends["alt"]
+
+    monkeypatch.setattr(S, "_forward", fake_forward)
+    explained = accept(refit("bias_h", 1.0028, base_chi2=16.4), BAND)
+    assert explained.accepted
+    ends["alt"] = S._Path((step1,), [effects[1]], SimpleNamespace(chi2_per_dof=1.0028), explained, True, "")
+    notes = []
+    assert S._second_path(None, None, effects, 3, first, notes) is ends["alt"]
+    assert "replaces it" in notes[-1]
+    # at the noise but a size still beyond plausible (the last step not accepted): the first path stands
+    oversized = accept(refit("bias_h", 1.0028, value=1.0, base_chi2=16.4), BAND)
+    for last, ok in ((oversized, True), (explained, False)):
+        ends["alt"] = S._Path((step1,), [effects[1]], SimpleNamespace(chi2_per_dof=1.0028), last, ok, "")
+        notes = []
+        assert S._second_path(None, None, effects, 3, first, notes) is first
+        assert "the first search's model stands" in notes[-1]
+
+
 def test_a_shape_with_several_starts_is_represented_by_its_best_refit(monkeypatch):
     """An onset time is refitted from every start (Effect.starts); the converged refit with the lowest
     objective stands for the shape, and the level's other families are refitted in the same batch."""
