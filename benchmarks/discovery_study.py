@@ -49,9 +49,16 @@ def _fmt(x, digits=4):
 def sizes_text(rec: dict) -> str:
     out = []
     for par, v in rec["score"]["sizes"].items():
-        est = "not estimated" if v["estimate"] is None else f"{_fmt(v['estimate'])} +- {_fmt(v['std'], 2)}"
+        if v["estimate"] is None:
+            est = "not estimated"
+        elif isinstance(v["estimate"], list):     # a profile's knots stand for a constant (harness.PROFILE_OF)
+            est = "as a profile " + ", ".join(f"{_fmt(e)} +- {_fmt(sd, 2)}" for e, sd in zip(v["estimate"], v["std"]))
+        else:
+            est = f"{_fmt(v['estimate'])} +- {_fmt(v['std'], 2)}"
         out.append(f"{par} {est} (truth {_fmt(v['truth'])})")
     known = set(rec["score"]["sizes"]) | set(rec["score"].get("coefficients", {}))
+    known |= {k for par in rec["score"]["sizes"] if isinstance(rec["score"]["sizes"][par]["estimate"], list)
+              for k in rec["final"]["parameters"] if k.startswith(H.PROFILE_OF.get(par, "\0"))}
     bad = [f"{k} {_fmt(c['estimate'])} (truth {_fmt(c['truth'])})"
            for k, c in rec["score"].get("coefficients", {}).items() if not c["ok"]]
     if bad:

@@ -8,7 +8,9 @@ fits-to-noise, verdict) and scored against the truth:
 ``holds_truth``   every true effect's catalogue name is among the final effects
 ``wrong``         final effects that are not in the truth
 ``noise``         the final chi2/dof is below :data:`NOISE_LIMIT`
-``sizes``         each scalar effect's estimate against its true value
+``sizes``         each scalar effect's estimate against its true value; when the final model holds the
+                  effect in a refined shape (a thrust error as a profile in time), every value of that
+                  profile against it (:data:`PROFILE_OF`: a constant error is a flat profile)
 ``coefficients``  the final model's CD and CL (or CL_alpha) against the truth (:data:`COEF_TOL`)
 ``passed``        clean data: no effect added; otherwise holds_truth, no wrong effect, the noise
                   reached, verdict "explained", the scalar sizes within :data:`SIZE_TOL` and the
@@ -41,6 +43,10 @@ SIZE_TOL = 0.25
 #: the final model's aerodynamic coefficients agree with the truth within this fraction (or 3 std):
 #: an effect that "explains" the data by distorting CD is not the explanation
 COEF_TOL = 0.10
+#: a scalar effect parameter and the prefix of the knot values of its family's profile shape: a constant
+#: thrust error found as ``thrust_profile_5`` (the search chose the knot count by BIC) is scored knot by
+#: knot against the constant (each within SIZE_TOL or 3 std)
+PROFILE_OF = {"eps_thrust": "eps_P"}
 
 
 def true_coefficients(vehicle: str, effects=None) -> dict[str, float]:
@@ -216,6 +222,11 @@ def _drag_added_at_knots(vehicle: str, final: dict) -> dict[str, float]:
     return {p: dcd["value"] * math.exp(-((m - TRANSONIC_MACH) / TRANSONIC_WIDTH) ** 2 / 2) for p, m in knots.items()}
 
 
+def _near(v: float, std: float, truth: float) -> bool:
+    """An estimate agrees with the truth: within :data:`SIZE_TOL` of it, or within 3 standard errors."""
+    return bool(abs(v - truth) <= SIZE_TOL * abs(truth) or (math.isfinite(std) and abs(v - truth) <= 3 * std))
+
+
 def score(case: Case, final: dict) -> dict:
     """Score a final model against the case's truth (see the module docstring)."""
     effects = final["effects"]
@@ -226,12 +237,18 @@ def score(case: Case, final: dict) -> dict:
     sizes = {}
     for par, value in case.expect.items():
         est = final["parameters"].get(par)
+        knots = [e for n, e in sorted(final["parameters"].items()) if par in PROFILE_OF
+                 and n.startswith(PROFILE_OF[par]) and n[len(PROFILE_OF[par]):].isdigit()]
+        if est is None and knots:
+            ok = all(_near(e["value"], e["std"], value) for e in knots)
+            sizes[par] = {"truth": value, "estimate": [e["value"] for e in knots], "std": [e["std"] for e in knots],
+                          "ok": bool(ok)}
+            continue
         if est is None:
             sizes[par] = {"truth": value, "estimate": None, "std": None, "ok": False}
             continue
         v, s = est["value"], est["std"]
-        ok = abs(v - value) <= SIZE_TOL * abs(value) or (math.isfinite(s) and abs(v - value) <= 3 * s)
-        sizes[par] = {"truth": value, "estimate": v, "std": s, "ok": bool(ok)}
+        sizes[par] = {"truth": value, "estimate": v, "std": s, "ok": _near(v, s, value)}
     coefs = {}
     added = _drag_added_at_knots(case.vehicle, final)
     for par, value in true_coefficients(case.vehicle, case.effects).items():
