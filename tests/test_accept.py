@@ -472,10 +472,14 @@ def test_a_second_path_starts_from_an_oversized_first_step_and_stands_only_when_
     scr = Screen(None, tuple(Contender(e, "") for e in effects), ())
     step1 = S.Step(1, scr, tuple(accs), accs[0], "", (), ("misalignment",), None)
     first = S._Path((step1,), [effects[0]], SimpleNamespace(chi2_per_dof=16.3), accs[0], False, "")
-    assert S._provisional(first) == 1
-    # nothing below the choice's BIC: no second path
+    assert S._provisional(first) == [1]
+    # nothing below the choice's BIC and no other family admissible: no second path
     above = (accs[0], accept(refit("wind_pl_4", 2000.0, value=1.0, base_chi2=base), BAND))
-    assert S._provisional(replace(first, steps=(replace(step1, acceptances=above),))) is None
+    assert S._provisional(replace(first, steps=(replace(step1, acceptances=above),))) == []
+    # the runner-up, an admissible refit of another family, is tried after the oversized one (Stage-30 with a
+    # misalignment from t = 0 and an altitude bias: a 14-knot wind took the first step from the misalignment)
+    runner = accept(refit("start_angle", 1500.0, base_chi2=base), BAND)
+    assert S._provisional(replace(first, steps=(replace(step1, acceptances=tuple(accs[:4]) + (runner,)),))) == [1, 4]
 
     ends = {}
 

@@ -776,7 +776,9 @@ def _forward(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Effect]
             effect, pick = scr.contenders[i].effect, accs[i]
             why = (f"taken provisionally: the first step's lowest BIC beyond a plausible size "
                    f"({pick.refit.name}, chi2/dof {pick.refit.chi2_per_dof:.4g}; its size is judged again with the "
-                   "effects added after it)")
+                   "effects added after it)") if not pick.admissible else \
+                (f"taken in place of the first search's choice: the first step's best admissible refit of another "
+                 f"family ({pick.refit.name}, chi2/dof {pick.refit.chi2_per_dof:.4g})")
         else:
             choice = _next_choice(ctx, current, chosen, candidates, number, notes, steps)
             ambiguous, rivals = choice[5] or ambiguous, choice[6] or rivals
@@ -863,53 +865,64 @@ def _exchanged(ctx: "_Search", fit: EstimationResult, path: _Path, notes: list) 
     return replace(path, steps=tuple(steps), chosen=chosen, current=current, last=last, ok=bool(ok), detail=detail)
 
 
-def _provisional(path: _Path) -> int | None:
-    """The index, among the first step's refits, of the one a second path starts from: converged and
-    significant (LR) with a BIC below the first step's choice, but failing the size check alone among
-    the checks an admissible step needs -- no parameter held at a bound, not an event shape -- the lowest
-    BIC of those. None when there is none."""
+def _provisional(path: _Path) -> list[int]:
+    """The indices, among the first step's refits, of those a second path starts from, in the order tried:
+
+    1. the lowest BIC of the refits that are converged and significant (LR) with a BIC below the first
+       step's choice but fail the size check -- no parameter held at a bound, not an event shape;
+    2. the lowest BIC of the admissible refits of a family neither the choice's nor that one's (the
+       runner-up: the first step chose by a BIC that the effects still missing distorted).
+
+    Empty when there is neither."""
     if not path.steps or path.steps[0].number != 1:
-        return None
+        return []
     s1 = path.steps[0]
     accs, contenders = s1.acceptances, s1.screen.contenders
+    n = min(len(accs), len(contenders))
     taken = s1.chosen.refit.bic[1] if s1.chosen is not None and s1.chosen.refit.success else math.inf
-    pool = [j for j in range(min(len(accs), len(contenders)))
+    pool = [j for j in range(n)
             if accs[j].refit.success and accs[j].check("significant").passed and not accs[j].check("size").passed
             and not accs[j].refit.at_bound and contenders[j].effect.scan is None and accs[j].refit.bic[1] < taken]
-    return min(pool, key=lambda j: accs[j].refit.bic[1]) if pool else None
+    out = [min(pool, key=lambda j: accs[j].refit.bic[1])] if pool else []
+    used = {_family(s1.chosen.refit.name)} if s1.chosen is not None else set()
+    used |= {_family(accs[j].refit.name) for j in out}
+    other = [j for j in range(n) if accs[j].admissible and _family(accs[j].refit.name) not in used
+             and (contenders[j].effect.scan is None or accs[j].accepted)]
+    return out + ([min(other, key=lambda j: accs[j].refit.bic[1])] if other else [])
 
 
 def _second_path(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Effect], max_effects: int,
                  path: _Path, notes: list) -> _Path:
-    """When the search ended above the noise: a second forward search whose first step is the first step's
-    refit that lowered BIC most but was beyond a plausible size (:func:`_provisional`). One missing effect can
-    make another's refit oversized -- its shape absorbs what the other would explain -- and the size check
-    then keeps the greedy search from the right family. The second path replaces the first only when it ends
-    explained: at the noise, with every effect of its final model at a plausible size and every other check
-    passed; otherwise the first path stands and a note says what the second reached.
+    """When the search ended above the noise: forward searches whose first step is taken from another of the
+    first step's refits (:func:`_provisional`: the lowest BIC beyond a plausible size, then the best admissible
+    refit of another family), tried in turn. One missing effect can make the right family's refit oversized --
+    its shape absorbs what the other effect would explain -- and the size check then keeps the greedy search
+    from it; or a flexible shape of a wrong family can win the first step by BIC. A second path replaces the
+    first only when it ends explained: at the noise, with every effect of its final model at a plausible size
+    and every other check passed; otherwise the first path stands and a note says where each second path
+    ended.
 
     Measured: Stage-30 with a 45 m/s jet at 10.5 km, a +1.5 % thrust error and a 5 m altitude bias. At step 1
     the wind's 10-knot profile reached chi2/dof 12.4 with knot values beyond 5 realistic sizes (it carried
     the thrust error too), so the search took a misalignment (1158) and ended with a misalignment, a start
-    angle and a thrust profile at 16.3, "partly explained"."""
-    j = _provisional(path)
-    if j is None:
-        return path
-    s1 = path.steps[0]
-    mine: list = []
-    alt = _forward(ctx, fit, candidates, max_effects, mine, first=(s1.screen, s1.acceptances, j))
-    name = s1.acceptances[j].refit.name
-    if alt.ok and alt.last is not None and alt.last.accepted and not alt.ambiguous:
-        notes += mine
-        notes.append(f"second path: the first search ended at chi2/dof {path.current.chi2_per_dof:.4g} with "
-                     f"{', '.join(e.name for e in path.chosen) or 'nothing added'}; started from {name} (the first "
-                     f"step's lowest BIC, beyond a plausible size there), the search ends with "
-                     f"{', '.join(e.name for e in alt.chosen)} at {alt.current.chi2_per_dof:.4g}, every size "
-                     "plausible: that model replaces it")
-        return alt
-    notes.append(f"second path: started from {name} (the first step's lowest BIC, beyond a plausible size there), "
-                 f"the search ends with {', '.join(e.name for e in alt.chosen) or 'nothing added'} at chi2/dof "
-                 f"{alt.current.chi2_per_dof:.4g}, not an explanation: the first search's model stands")
+    angle and a thrust profile at 16.3, "partly explained"; from the oversized wind it ends explained."""
+    s1 = path.steps[0] if path.steps else None
+    for j in _provisional(path):
+        mine: list = []
+        alt = _forward(ctx, fit, candidates, max_effects, mine, first=(s1.screen, s1.acceptances, j))
+        name = s1.acceptances[j].refit.name
+        how = "the first step's best admissible refit of another family" if s1.acceptances[j].admissible else \
+            "the first step's lowest BIC, beyond a plausible size there"
+        if alt.ok and alt.last is not None and alt.last.accepted and not alt.ambiguous:
+            notes += mine
+            notes.append(f"second path: the first search ended at chi2/dof {path.current.chi2_per_dof:.4g} with "
+                         f"{', '.join(e.name for e in path.chosen) or 'nothing added'}; started from {name} ({how}), "
+                         f"the search ends with {', '.join(e.name for e in alt.chosen)} at "
+                         f"{alt.current.chi2_per_dof:.4g}, every size plausible: that model replaces it")
+            return alt
+        notes.append(f"second path: started from {name} ({how}), the search ends with "
+                     f"{', '.join(e.name for e in alt.chosen) or 'nothing added'} at chi2/dof "
+                     f"{alt.current.chi2_per_dof:.4g}, not an explanation: the first search's model stands")
     return path
 
 
