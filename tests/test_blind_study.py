@@ -160,10 +160,10 @@ def test_blind_case(name):
 
 def test_a_speed_sensor_lag_is_explained_by_that_channel_s_latency(tmp_path):
     """The blind ``v_lag`` case (the truth's speed sensor a first-order lag of 80 ms, written in
-    tests/blind_study/truth.py as a filter, not as a delay): the catalogue's sensor shapes leave it partly
-    explained (``bias_v_drift`` + ``time_offset_2``, chi2/dof 1.132), and the verdict points at a sensor model
-    of the failing channel. Given the opt-in ``sensor_lag_effect("v")`` beside the catalogue, the diagnosis
-    explains it as that channel's latency, 80 ms."""
+    tests/blind_study/truth.py as a filter, not as a delay): the catalogue's sensor shapes only approximate
+    it (the first search ends ``bias_v_drift`` + ``time_offset_2`` at chi2/dof 1.132; since fa0cdf5 the second
+    path's ``scale_v`` + ``bias_v`` reach 1.082, inside the band). Given the opt-in ``sensor_lag_effect("v")``
+    beside the catalogue, the diagnosis explains it as that channel's latency, 80 ms."""
     from rocketid.diagnostics import CATALOGUE, diagnose, sensor_lag_effect
 
     text, effects, seed, _ = C.CASES["v_lag"]
