@@ -30,9 +30,10 @@ Forward selection with a backward check, capped at ``max_effects``:
    found as a 10-knot wind (BIC 4378 against the misalignment's 4401 at step 1, both far from
    the noise) plus the drift, and called explained; the exchange finds the misalignment;
 8. second path: a search that ends above the noise is run again with its first step taken from the
-   first step's refit of lowest BIC that was beyond a plausible size (:func:`_second_path`: one missing
-   effect can make the right family's refit carry it, oversized); its model replaces the first search's
-   only when it ends explained, every size plausible;
+   first step's refit of lowest BIC that was beyond a plausible size (one missing effect can make the
+   right family's refit carry it, oversized), then from the best admissible refit of another family
+   (the runner-up; :func:`_second_path`); a second path's model replaces the first search's only when
+   it ends explained, every size plausible;
 9. finding: a search that ends without reaching the noise is replaced by the first step's
    refit that passes every check but its size (:func:`_finding`: a thrust 12 % off its
    stated value), its verdict "partly explained" with the size named -- the user checks
@@ -465,7 +466,7 @@ def _families_to_refine(accs: Sequence[Acceptance], scr: Screen, vehicle: Vehicl
                       and scr.contenders[j].effect.refinements(vehicle)),
                      key=lambda j: accs[j].refit.objective)
     first = [chosen] if chosen is not None and chosen < n and scr.contenders[chosen].effect.refinements(vehicle) else []
-    located = [j for j in range(min(n, len(accs))) if j != chosen and scr.contenders[j].located]
+    located = [j for j in range(m) if j != chosen and scr.contenders[j].located]
     seen, out = set(), []
     for j in first + located + helped:
         key = scr.contenders[j].effect.refinements(vehicle)[0].name
@@ -548,12 +549,12 @@ def _refine_families(families: Sequence[Sequence[Effect]], make_task, judge, wor
                 continue
             a = judge(r)
             out.append((v, a))
-            bic = r.bic[1] if r.success else math.inf
+            bic, stalled = (r.bic[1] if r.success else math.inf), _stalled(a, level)
             if bic < best[k]:
                 best[k] = bic
-            elif not (_stalled(a, level) and r.objective < lowest[k]):
+            elif not (stalled and r.objective < lowest[k]):
                 alive[k] = False
-            lowest[k] = min(lowest[k], r.objective if r.success or _stalled(a, level) else math.inf)
+            lowest[k] = min(lowest[k], r.objective if r.success or stalled else math.inf)
     return out
 
 
@@ -780,11 +781,11 @@ def _forward(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Effect]
                 (f"taken in place of the first search's choice: the first step's best admissible refit of another "
                  f"family ({pick.refit.name}, chi2/dof {pick.refit.chi2_per_dof:.4g})")
         else:
-            choice = _next_choice(ctx, current, chosen, candidates, number, notes, steps)
-            ambiguous, rivals = choice[5] or ambiguous, choice[6] or rivals
-            if choice[2] is None:
+            scr, accs, effect, pick, why, amb, riv = _next_choice(ctx, current, chosen, candidates, number, notes,
+                                                                  steps)
+            ambiguous, rivals = amb or ambiguous, riv or rivals
+            if effect is None:
                 break
-            scr, accs, effect, pick, why = choice[:5]
         if ok and not pick.accepted:
             # the model already reaches the noise: only an explanation may be added, never a step toward the
             # noise (measured: clean data of an air-launched stage, chi2/dof 0.993 with one channel's Ljung-Box
