@@ -887,8 +887,8 @@ def _provisional(path: _Path) -> list[int]:
     out = [min(pool, key=lambda j: accs[j].refit.bic[1])] if pool else []
     used = {_family(s1.chosen.refit.name)} if s1.chosen is not None else set()
     used |= {_family(accs[j].refit.name) for j in out}
-    other = [j for j in range(n) if accs[j].admissible and _family(accs[j].refit.name) not in used
-             and (contenders[j].effect.scan is None or accs[j].accepted)]
+    choosable = set(_choosable([(contenders[j].effect, accs[j]) for j in range(n)]))
+    other = [j for j in sorted(choosable) if accs[j].admissible and _family(accs[j].refit.name) not in used]
     return out + ([min(other, key=lambda j: accs[j].refit.bic[1])] if other else [])
 
 
