@@ -320,6 +320,58 @@ def test_the_exchange_swaps_an_effect_chosen_while_another_was_missing(monkeypat
                        workers=1) is None
 
 
+def test_a_refined_shape_is_put_back_in_its_family_shape_when_that_explains(monkeypatch):
+    """Stage-30 with a jet-stream wind, a +1.5 % thrust error and an altitude bias ended explained with a 10-knot
+    wind, a 5-knot thrust profile and the bias: the profile's knot count was chosen while the bias was still
+    missing. The simplification refits the found set with each refined shape put back in its family's catalogue
+    shape (a 4 parameters smaller model) and takes it when it passes every check with a lower BIC; a refined shape
+    whose family shape does not explain (here the wind's: residuals not white), or a catalogue shape, is kept."""
+    from rocketid.diagnostics import step as S
+    from rocketid.diagnostics.effects import CATALOGUE, Vehicle
+
+    veh = Vehicle(thrust=6.0e5, mass=3.0e4, mass_flow=230.0, speed=1500.0, start_speed=5.0, duration=66.0,
+                  altitude=(0.0, 30000.0), mach=(0.0, 4.5), sigma={"x": 1.0, "h": 1.0, "v": 1.0},
+                  sample_interval=0.1, knot_times=tuple(np.linspace(0.0, 66.0, 7)))
+    by_name = {v.name: v for n in ("wind", "thrust_level") for v in CATALOGUE[n].refinements(veh)}
+    chosen = [by_name["wind_pl_10"], by_name["thrust_profile_5"], CATALOGUE["bias_h"]]
+    candidates = [CATALOGUE[n] for n in ("wind", "thrust_level", "bias_h", "density")]
+    n_found = 8 + 10 + 5 + 1
+    last = accept(replace(refit("bias_h", 0.990), n_estimated=n_found), BAND)
+    assert last.accepted
+    tried = []
+
+    def fake_task(base_spec, fit, effects, added, *a, **k):
+        names = tuple(e.name for e in effects)
+        tried.append(names)
+        return names
+
+    def fake_refits(tasks, workers=None):
+        out = []
+        for names in tasks:
+            if "thrust_level" in names:        # a constant reaches the same noise with 4 parameters fewer
+                out.append(replace(refit("thrust_level", 0.9902), n_estimated=n_found - 4, effects=names))
+            else:                              # the catalogue wind misses the jet
+                out.append(replace(refit("wind", 0.995, white={"x": 0.0, "h": 0.0, "v": 0.0}), effects=names))
+        return tuple(out)
+
+    monkeypatch.setattr(S, "_task", fake_task)
+    monkeypatch.setattr(S, "refit_all", fake_refits)
+    ctx = S._Search(None, BAND, veh, 0.05, None, 60.0, 1, True, None)
+    effects, acc, why = S._simpler(chosen, last, None, candidates, ctx)
+    assert tried == [("wind", "thrust_profile_5", "bias_h"), ("wind_pl_10", "thrust_level", "bias_h")]
+    assert [e.name for e in effects] == ["wind_pl_10", "thrust_level", "bias_h"]
+    assert acc.accepted and "thrust_level in place of its refined shape thrust_profile_5" in why
+    # a constant that fits worse by more than its 4 parameters' BIC is not taken
+    monkeypatch.setattr(S, "refit_all", lambda tasks, workers=None: tuple(
+        replace(refit("thrust_level", 0.9925), n_estimated=n_found - 4, effects=names) for names in tasks))
+    assert S._simpler(chosen, last, None, candidates, ctx) is None
+    # nothing to simplify when the found set has no refined shape, or when it does not explain the data
+    tried.clear()
+    assert S._simpler([CATALOGUE["wind"], CATALOGUE["bias_h"]], last, None, candidates, ctx) is None and not tried
+    far = accept(refit("bias_h", 1.4, white={"x": 0.0, "h": 0.0, "v": 0.0}), BAND)
+    assert S._simpler(chosen, far, None, candidates, ctx) is None and not tried
+
+
 def test_when_the_ranking_cannot_be_made_every_candidate_is_refitted(monkeypatch):
     """A base fit that did not converge gives no sensitivities for the score test (Stage-30 with a misalignment
     from the start: locally infeasible at chi2/dof 1.4e6); the refits decide: every candidate is a contender."""
