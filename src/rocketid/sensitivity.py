@@ -566,18 +566,20 @@ class SolutionPredictor:
         The dual aim can lie below what double precision reaches. The residual ``grad f + J^T
         lambda`` sums terms as large as ``|J^T| |lambda|``: RA-66's multipliers reach 1e11, and a
         component's rounding error (from its terms and, through the Hessian, from the last bit
-        of ``x``) is 1e-4 to 7e-3 after the steps, against the aim 3.3e-3 (sampling draws of
-        the reference case, ``benchmarks/bench_predictor_floor.py``). There the steps, which
-        shrink the residual 10- to 100-fold each before, stop shrinking it and it jitters
-        from step to step; more steps make no better start."""
+        of ``x``) is 2e-4 to 4e-3 after the steps (a draw's median over its later steps; single
+        steps up to 7e-3), against the aim 3.3e-3 (sampling draws of the reference case,
+        ``benchmarks/bench_predictor_floor.py``). There the steps, which shrink the residual
+        5- to 700-fold each before, stop shrinking it and it jitters from step to step; more
+        steps make no better start."""
         converged = primal <= primal_tol and dual <= 10.0 * dual_tol
         done = converged and (dual <= dual_tol or (previous_dual is not None and dual > cls.STALL * previous_dual))
         return converged, done
 
     def _steps(self, nlp: CollocationNLP, x: np.ndarray, lam: np.ndarray, tol: float,
                max_steps: int) -> Prediction | None:
-        """Simplified Newton steps from ``(x, lam)`` with the reference factors; the point with
-        the smallest constraint violation (None when the first residual is not finite)."""
+        """Simplified Newton steps from ``(x, lam)`` with the reference factors; the converged point
+        with the smallest dual residual (:meth:`_judge`), or failing one the point with the smallest
+        constraint violation (None when the first residual is not finite)."""
         n, meq = nlp.n, nlp.layout.equality_rows.stop
         dual_tol, primal_tol = self._tolerances(tol)
         best, previous = None, None
