@@ -26,15 +26,21 @@ from rocketid.sampling.worker import WorkerContext, trial_parameters
 from rocketid.solve import fit_nlp
 
 
+def ra66_worker() -> WorkerContext:
+    """A sampling worker's context (reference solution, predictor) on RA-66's noisy data, seed 0, with the
+    study's sampling settings: what the benchmarks of the draws measure."""
+    spec = ri.ra66()
+    data = ri.simulate_measurements(spec, ri.ra66_truth(spec), ri.ra66_times(), seed=0)
+    prep = ri.prepare(spec, data)
+    return WorkerContext.build(prepare_sampling(prep, settings=SamplingSettings()).recipe, prep)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--draws", type=int, default=300)
     ap.add_argument("--seed", type=int, default=1)
     args = ap.parse_args()
-    spec = ri.ra66()
-    data = ri.simulate_measurements(spec, ri.ra66_truth(spec), ri.ra66_times(), seed=0)
-    prep = ri.prepare(spec, data)
-    ctx = WorkerContext.build(prepare_sampling(prep, settings=SamplingSettings()).recipe, prep)
+    ctx = ra66_worker()
     est, ref = ctx.recipe.estimability, ctx.reference
     rows = []
     within = collections.Counter()

@@ -20,9 +20,8 @@ from dataclasses import replace
 
 import numpy as np
 
-import rocketid as ri
-from rocketid.sampling import SamplingSettings, prepare_sampling
-from rocketid.sampling.worker import WorkerContext, evaluate_draw, trial_parameters
+from bench_draw_bounds import ra66_worker
+from rocketid.sampling.worker import evaluate_draw, trial_parameters
 
 
 def main() -> None:
@@ -31,10 +30,7 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=7)
     ap.add_argument("--steps", type=int, default=16)
     args = ap.parse_args()
-    spec = ri.ra66()
-    data = ri.simulate_measurements(spec, ri.ra66_truth(spec), ri.ra66_times(), seed=0)
-    prep = ri.prepare(spec, data)
-    ctx = WorkerContext.build(prepare_sampling(prep, settings=SamplingSettings()).recipe, prep)
+    ctx = ra66_worker()
     est, ref, pr = ctx.recipe.estimability, ctx.reference, ctx.predictor
     plain = replace(pr, surface=None)
     dual_aim, primal_aim = pr._tolerances(1e-8)

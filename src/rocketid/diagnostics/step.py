@@ -697,7 +697,8 @@ def _simpler(chosen: Sequence[Effect], last: Acceptance | None, base: Estimation
     names = {e.name for e in chosen}
     tries = []
     for k, e in enumerate(chosen):
-        parent = next((c for c in candidates if c.name == _family(e.name) and c.name not in names
+        family = _family(e.name)
+        parent = next((c for c in candidates if c.name == family and c.name not in names
                        and e.name in {v.name for v in c.refinements(ctx.vehicle)}), None)
         if parent is not None:
             tries.append((e.name, parent, list(chosen[:k]) + [parent] + list(chosen[k + 1:])))
