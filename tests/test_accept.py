@@ -524,14 +524,26 @@ def test_a_second_path_starts_from_an_oversized_first_step_and_stands_only_when_
     scr = Screen(None, tuple(Contender(e, "") for e in effects), ())
     step1 = S.Step(1, scr, tuple(accs), accs[0], "", (), ("misalignment",), None)
     first = S._Path((step1,), [effects[0]], SimpleNamespace(chi2_per_dof=16.3), accs[0], False, "")
-    assert S._provisional(first) == [1]
+    assert S._provisional(first, BAND) == [1]
     # nothing below the choice's BIC and no other family admissible: no second path
     above = (accs[0], accept(refit("wind_pl_4", 2000.0, value=1.0, base_chi2=base), BAND))
-    assert S._provisional(replace(first, steps=(replace(step1, acceptances=above),))) == []
+    assert S._provisional(replace(first, steps=(replace(step1, acceptances=above),)), BAND) == []
     # the runner-up, an admissible refit of another family, is tried after the oversized one (Stage-30 with a
     # misalignment from t = 0 and an altitude bias: a 14-knot wind took the first step from the misalignment)
-    runner = accept(refit("start_angle", 1500.0, base_chi2=base), BAND)
-    assert S._provisional(replace(first, steps=(replace(step1, acceptances=tuple(accs[:4]) + (runner,)),))) == [1, 4]
+    runner = accept(refit("start_angle", 40.0, base_chi2=base), BAND)
+    with_runner = replace(first, steps=(replace(step1, acceptances=tuple(accs[:4]) + (runner,)),))
+    assert S._provisional(with_runner, BAND) == [1, 4]
+    # ... within reach of where the first search ended: its excess over the band at most SECOND_PATH_REACH
+    # times the first's (Wren-H's hot tank: a time offset at 287 after a search that ended at 12.1, ratio 26)
+    far = replace(with_runner, steps=(replace(step1, acceptances=tuple(accs[:4]) + (
+        accept(refit("start_angle", 1500.0, base_chi2=base), BAND),)),))
+    assert S._provisional(far, BAND) == [1] and S._provisional(far, None) == [1, 4]
+    edge = BAND.upper + S.SECOND_PATH_REACH * (16.3 - BAND.upper)
+    assert S._within_reach(16.3, BAND)(edge - 0.01) and not S._within_reach(16.3, BAND)(edge + 0.01)
+    # a first search that ended inside the band (its residuals not white) reaches as far as 10 band widths
+    assert S._within_reach(1.0, BAND)(1.0 + 9.0 * (BAND.upper - 1.0))
+    assert not S._within_reach(1.0, BAND)(BAND.upper + 11.0 * (BAND.upper - 1.0))
+    assert not S._within_reach(16.3, BAND)(float("nan"))
 
     ends = {}
 
@@ -544,14 +556,19 @@ def test_a_second_path_starts_from_an_oversized_first_step_and_stands_only_when_
     assert explained.accepted
     ends["alt"] = S._Path((step1,), [effects[1]], SimpleNamespace(chi2_per_dof=1.0028), explained, True, "")
     notes = []
-    assert S._second_path(None, None, effects, 3, first, notes) is ends["alt"]
+    ctx = SimpleNamespace(band=BAND)
+    assert S._second_path(ctx, None, effects, 3, first, notes) is ends["alt"]
     assert "replaces it" in notes[-1]
+    # a start out of reach is not searched from, and a note names it
+    notes = []
+    assert S._second_path(ctx, None, effects, 3, far, notes) is ends["alt"]
+    assert any("not started from start_angle" in n and "out of a search's reach" in n for n in notes)
     # at the noise but a size still beyond plausible (the last step not accepted): the first path stands
     oversized = accept(refit("bias_h", 1.0028, value=1.0, base_chi2=16.4), BAND)
     for last, ok in ((oversized, True), (explained, False)):
         ends["alt"] = S._Path((step1,), [effects[1]], SimpleNamespace(chi2_per_dof=1.0028), last, ok, "")
         notes = []
-        assert S._second_path(None, None, effects, 3, first, notes) is first
+        assert S._second_path(ctx, None, effects, 3, first, notes) is first
         assert "the first search's model stands" in notes[-1]
 
 

@@ -32,8 +32,9 @@ Forward selection with a backward check, capped at ``max_effects``:
 8. second path: a search that ends above the noise is run again with its first step taken from the
    first step's refit of lowest BIC that was beyond a plausible size (one missing effect can make the
    right family's refit carry it, oversized), then from the best admissible refit of another family
-   (the runner-up; :func:`_second_path`); a second path's model replaces the first search's only when
-   it ends explained, every size plausible;
+   (the runner-up; :func:`_second_path`), each only within reach of where the first search ended (its
+   excess over the noise band at most :data:`SECOND_PATH_REACH` times the first's); a second path's model
+   replaces the first search's only when it ends explained, every size plausible;
 9. simpler shape: a search that ends explained with a refined shape (module note 4) is refitted with that
    shape put back in its family's catalogue shape (a thrust profile as a constant thrust error), the other
    effects kept; the simpler set replaces it when it passes every check of an explanation with a lower BIC
@@ -96,6 +97,15 @@ do not reach (:attr:`~rocketid.diagnostics.refit.Confirmation.holdout_blind`, e.
 number flown only after the window): the rivals then differ in how they carry the guesses' errors, not in
 their physics. (On RA-66M with a +3 % thrust error, ``CD_M_6`` held at its guess, a start-mass error
 predicted at 4.02 sigma^2 against the true thrust error's 24.2 and was called explained.)"""
+
+SECOND_PATH_REACH = 10.0
+"""A second path starts only from a first-step refit whose chi2/dof excess over the noise band is at most this
+many times the excess where the first search ended (:func:`_within_reach`) -- the factor within which the screen
+keeps a contender's predicted fall of the leader's. Measured on Wren-H's motor cases, which no catalogue effect
+explains: the runner-up starts sat 15 and 26 times the first search's excess (a time offset at chi2/dof 287
+against 12.1), and their second paths ended further from the noise than the first, each a whole search's time;
+the starts that found an explanation sat at 0.7 (Stage-30: a wind at 12.4 against 16.3), about 3 (a misalignment at
+2.65 against 1.56) and 2.6 (a speed scale at 1.33 against 1.13, both near a band of 1.09)."""
 
 VERDICTS = ("nothing missing", "explained", "partly explained", "not explained by the catalogue")
 
@@ -926,7 +936,7 @@ def _landed(ctx: "_Search", path: _Path, steps: list, swapped: tuple | None) -> 
     return replace(path, steps=tuple(steps), chosen=chosen, current=current, last=last, ok=bool(ok), detail=detail)
 
 
-def _provisional(path: _Path) -> list[int]:
+def _provisional(path: _Path, band: NoiseBand | None) -> list[int]:
     """The indices, among the first step's refits, of those a second path starts from, in the order tried:
 
     1. the lowest BIC of the refits that are converged and significant (LR) with a BIC below the first
@@ -934,29 +944,44 @@ def _provisional(path: _Path) -> list[int]:
     2. the lowest BIC of the admissible refits of a family neither the choice's nor that one's (the
        runner-up: the first step chose by a BIC that the effects still missing distorted).
 
-    Empty when there is neither."""
+    Either only within reach of where the first search ended (:func:`_within_reach`; ``band`` None: without
+    that condition). Empty when there is neither."""
     if not path.steps or path.steps[0].number != 1:
         return []
     s1 = path.steps[0]
     accs, contenders = s1.acceptances, s1.screen.contenders
     n = min(len(accs), len(contenders))
     taken = s1.chosen.refit.bic[1] if s1.chosen is not None and s1.chosen.refit.success else math.inf
+    near = _within_reach(path.current.chi2_per_dof, band) if band is not None else (lambda c: True)
     pool = [j for j in range(n)
             if accs[j].refit.success and accs[j].check("significant").passed and not accs[j].check("size").passed
-            and not accs[j].refit.at_bound and contenders[j].effect.scan is None and accs[j].refit.bic[1] < taken]
+            and not accs[j].refit.at_bound and contenders[j].effect.scan is None and accs[j].refit.bic[1] < taken
+            and near(accs[j].refit.chi2_per_dof)]
     out = [min(pool, key=lambda j: accs[j].refit.bic[1])] if pool else []
     used = {_family(s1.chosen.refit.name)} if s1.chosen is not None else set()
     used |= {_family(accs[j].refit.name) for j in out}
     choosable = set(_choosable([(contenders[j].effect, accs[j]) for j in range(n)]))
-    other = [j for j in sorted(choosable) if accs[j].admissible and _family(accs[j].refit.name) not in used]
+    other = [j for j in sorted(choosable) if accs[j].admissible and _family(accs[j].refit.name) not in used
+             and near(accs[j].refit.chi2_per_dof)]
     return out + ([min(other, key=lambda j: accs[j].refit.bic[1])] if other else [])
+
+
+def _within_reach(ended: float, band: NoiseBand):
+    """Whether a first-step refit at chi2/dof ``c`` is within reach of a search that ended at ``ended``: its
+    excess over the noise band's upper edge at most :data:`SECOND_PATH_REACH` times the ended search's (that
+    excess taken at least the band's own width above 1, for a search that ended inside the band with residuals
+    not white). A second path has the same steps left as the first had and must end at the noise; a start
+    whose misfit is tens of times the first search's end is left (module note 8)."""
+    scale = max(ended - band.upper, band.upper - 1.0)
+    return lambda c: bool(np.isfinite(c)) and c - band.upper <= SECOND_PATH_REACH * scale
 
 
 def _second_path(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Effect], max_effects: int,
                  path: _Path, notes: list) -> _Path:
     """When the search ended above the noise: forward searches whose first step is taken from another of the
     first step's refits (:func:`_provisional`: the lowest BIC beyond a plausible size, then the best admissible
-    refit of another family), tried in turn. One missing effect can make the right family's refit oversized --
+    refit of another family, each within reach of where the first search ended: :func:`_within_reach`), tried
+    in turn; a start left out of reach is named in a note. One missing effect can make the right family's refit oversized --
     its shape absorbs what the other effect would explain -- and the size check then keeps the greedy search
     from it; or a flexible shape of a wrong family can win the first step by BIC. A second path replaces the
     first only when it ends explained: at the noise, with every effect of its final model at a plausible size
@@ -964,11 +989,18 @@ def _second_path(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Eff
     ended.
 
     Measured: Stage-30 with a 45 m/s jet at 10.5 km, a +1.5 % thrust error and a 5 m altitude bias. At step 1
-    the wind's 10-knot profile reached chi2/dof 12.4 with knot values beyond 5 realistic sizes (it carried
+    the wind's 10-knot profile reached chi2/dof 12.4 with knot values up to 24 realistic sizes (it carried
     the thrust error too), so the search took a misalignment (1158) and ended with a misalignment, a start
     angle and a thrust profile at 16.3, "partly explained"; from the oversized wind it ends explained."""
     s1 = path.steps[0] if path.steps else None
-    for j in _provisional(path):
+    starts = _provisional(path, ctx.band)
+    for j in _provisional(path, None):
+        if j not in starts:
+            r = s1.acceptances[j].refit
+            notes.append(f"second path: not started from {r.name} (chi2/dof {r.chi2_per_dof:.4g} at the first step): "
+                         f"its excess over the noise band is more than {SECOND_PATH_REACH:g} times that of the first "
+                         f"search's end ({path.current.chi2_per_dof:.4g}), out of a search's reach")
+    for j in starts:
         mine: list = []
         alt = _forward(ctx, fit, candidates, max_effects, mine, first=(s1.screen, s1.acceptances, j))
         name = s1.acceptances[j].refit.name
