@@ -308,16 +308,15 @@ def test_the_exchange_swaps_an_effect_chosen_while_another_was_missing(monkeypat
 
     monkeypatch.setattr(S, "_task", fake_task)
     monkeypatch.setattr(S, "refit_all", fake_refits)
-    effects, acc, why = S._exchange(steps, [wind, bias], last, None, None, None, BAND, level=0.05, options=None,
-                                    timeout=60.0, workers=1)
+    ctx = S._Search(None, BAND, None, 0.05, None, 60.0, 1, True, None)
+    effects, acc, why = S._exchange(steps, [wind, bias], last, None, ctx)
     assert [e.name for e in effects] == ["misalignment", "bias_h"]
     assert tried == [("misalignment", "bias_h"), ("time_offset", "bias_h")]     # the same family is not tried
     assert "misalignment in place of wind" in why and acc.accepted
     # when no swap passes every check (here: residuals not white), the found set stays
     monkeypatch.setattr(S, "refit_all", lambda tasks, workers=None: tuple(
         refit(t[0], 0.95, white={"x": 0.0, "h": 0.0, "v": 0.0}) for t in tasks))
-    assert S._exchange(steps, [wind, bias], last, None, None, None, BAND, level=0.05, options=None, timeout=60.0,
-                       workers=1) is None
+    assert S._exchange(steps, [wind, bias], last, None, ctx) is None
 
 
 def test_a_refined_shape_is_put_back_in_its_family_shape_when_that_explains(monkeypatch):

@@ -633,7 +633,7 @@ def _starts(effect: Effect, fit: EstimationResult | None, vehicle: Vehicle | Non
 
 
 def _exchange(steps: Sequence[Step], chosen: Sequence[Effect], last: Acceptance | None, base: EstimationResult,
-              base_spec, vehicle: Vehicle, band: NoiseBand, *, level, options, timeout, workers):
+              ctx: "_Search"):
     """The exchange of module note 7: ``(effects, acceptance, why)`` of a better set, or None.
 
     Every set tried is refitted from the base fit with all its effects' parameters judged (sizes and
@@ -664,8 +664,7 @@ def _exchange(steps: Sequence[Step], chosen: Sequence[Effect], last: Acceptance 
             tries.append((who, eff, effects))
             if sum(1 for t in tries if t[0] == who) >= EXCHANGE_ALTERNATIVES:
                 break
-    best = _best_set(tries, base, base_spec, vehicle, band, best_bic, level=level, options=options, timeout=timeout,
-                     workers=workers)
+    best = _best_set(tries, base, ctx, best_bic)
     if best is None:
         return None
     bic, who, eff, effects, acc = best
@@ -673,19 +672,17 @@ def _exchange(steps: Sequence[Step], chosen: Sequence[Effect], last: Acceptance 
                           f"{bic:.6g}; {who} was chosen while another effect was still missing)")
 
 
-def _best_set(tries: Sequence[tuple], base: EstimationResult, base_spec, vehicle: Vehicle, band: NoiseBand,
-              best_bic: float, *, level, options, timeout, workers) -> tuple | None:
+def _best_set(tries: Sequence[tuple], base: EstimationResult, ctx: "_Search", best_bic: float) -> tuple | None:
     """Refit each ``(who, effect, effects)`` of ``tries`` (the set ``effects``, ``effect`` in place of ``who``) from
     the base fit with all its effects' parameters judged, in parallel; ``(bic, who, effect, effects, acceptance)``
     of the lowest BIC below ``best_bic`` among those that pass every check of an explanation, or None."""
     if not tries:
         return None
-    tasks = [_task(base_spec, base, effects, tuple(e.name for e in effects), {}, vehicle, base=base, options=options,
-                   timeout=timeout, level=level, band_upper=band.upper) for _, _, effects in tries]
-    results = refit_all(tasks, workers=workers)
+    tasks = [ctx.task(base, effects, tuple(e.name for e in effects)) for _, _, effects in tries]
+    results = refit_all(tasks, workers=ctx.workers)
     good = []
     for (who, eff, effects), r in zip(tries, results):
-        acc = accept(r, band, level=level, n_tests=len(tries))
+        acc = accept(r, ctx.band, level=ctx.level, n_tests=len(tries))
         if acc.accepted and r.bic[1] < best_bic:
             good.append((r.bic[1], who, eff, effects, acc))
     return min(good, key=lambda g: g[0]) if good else None
@@ -713,8 +710,7 @@ def _simpler(chosen: Sequence[Effect], last: Acceptance | None, base: Estimation
         if parent is not None:
             tries.append((e.name, parent, list(chosen[:k]) + [parent] + list(chosen[k + 1:])))
     best_bic = float(last.refit.bic[1])
-    best = _best_set(tries, base, ctx.base_spec, ctx.vehicle, ctx.band, best_bic, level=ctx.level,
-                     options=ctx.options, timeout=ctx.timeout, workers=ctx.workers)
+    best = _best_set(tries, base, ctx, best_bic)
     if best is None:
         return None
     bic, who, eff, effects, acc = best
@@ -1175,8 +1171,7 @@ def _apply_exchange(ctx: _Search, base: EstimationResult, steps: list, chosen: l
                     notes: list) -> tuple | None:
     """The exchange (module note 7) applied: ``(effects, fit, acceptance)`` of the better set, its step appended
     to ``steps`` and its note to ``notes``; None when no swap is better."""
-    swap = _exchange(steps, chosen, last, base, ctx.base_spec, ctx.vehicle, ctx.band, level=ctx.level,
-                     options=ctx.options, timeout=ctx.timeout, workers=ctx.workers)
+    swap = _exchange(steps, chosen, last, base, ctx)
     return _apply_set(ctx, base, steps, swap, notes, "exchange")
 
 
