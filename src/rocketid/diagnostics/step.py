@@ -963,7 +963,7 @@ def _provisional(path: _Path, band: NoiseBand | None) -> list[int]:
 
 
 def _within_reach(ended: float, band: NoiseBand):
-    """Whether a first-step refit at chi2/dof ``c`` is within reach of a search that ended at ``ended``: its
+    """The predicate on a first-step refit's chi2/dof ``c``: within reach of a search that ended at ``ended``, its
     excess over the noise band's upper edge at most :data:`SECOND_PATH_REACH` times the ended search's (that
     excess taken at least the band's own width above 1, for a search that ended inside the band with residuals
     not white). A second path has the same steps left as the first had and must end at the noise; a start
@@ -977,12 +977,12 @@ def _second_path(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Eff
     """When the search ended above the noise: forward searches whose first step is taken from another of the
     first step's refits (:func:`_provisional`: the lowest BIC beyond a plausible size, then the best admissible
     refit of another family, each within reach of where the first search ended: :func:`_within_reach`), tried
-    in turn; a start left out of reach is named in a note. One missing effect can make the right family's refit oversized --
-    its shape absorbs what the other effect would explain -- and the size check then keeps the greedy search
-    from it; or a flexible shape of a wrong family can win the first step by BIC. A second path replaces the
-    first only when it ends explained: at the noise, with every effect of its final model at a plausible size
-    and every other check passed; otherwise the first path stands and a note says where each second path
-    ended.
+    in turn; a start left out of reach is named in a note. One missing effect can make the right family's refit
+    oversized -- its shape absorbs what the other effect would explain -- and the size check then keeps the
+    greedy search from it; or a flexible shape of a wrong family can win the first step by BIC. A second path
+    replaces the first only when it ends explained: at the noise, with every effect of its final model at a
+    plausible size and every other check passed; otherwise the first path stands and a note says where each
+    second path ended.
 
     Measured: Stage-30 with a 45 m/s jet at 10.5 km, a +1.5 % thrust error and a 5 m altitude bias. At step 1
     the wind's 10-knot profile reached chi2/dof 12.4 with knot values up to 24 realistic sizes (it carried
