@@ -34,7 +34,8 @@ Forward selection with a backward check, capped at ``max_effects``:
    right family's refit carry it, oversized), then from the best admissible refit of another family
    (the runner-up; :func:`_second_path`), each only within reach of where the first search ended (its
    excess over the noise band at most :data:`SECOND_PATH_REACH` times the first's); a second path's model
-   replaces the first search's only when it ends explained, every size plausible;
+   replaces the first search's when it ends explained, every size plausible -- or, when no search explains
+   the data, when it ends with a lower BIC with every size and coefficient plausible (partly explained);
 9. simpler shape: a search that ends explained with a refined shape (module note 4) is refitted with that
    shape put back in its family's catalogue shape (a thrust profile as a constant thrust error), the other
    effects kept; the simpler set replaces it when it passes every check of an explanation with a lower BIC
@@ -980,16 +981,17 @@ def _second_path(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Eff
     in turn; a start left out of reach is named in a note. One missing effect can make the right family's refit
     oversized -- its shape absorbs what the other effect would explain -- and the size check then keeps the
     greedy search from it; or a flexible shape of a wrong family can win the first step by BIC. A second path
-    replaces the first only when it ends explained: at the noise, with every effect of its final model at a
-    plausible size and every other check passed; otherwise the first path stands and a note says where each
-    second path ended.
+    replaces the first when it ends explained: at the noise, with every effect of its final model at a
+    plausible size and every other check passed. When none does, the one that ends with the lowest BIC below the
+    first search's, every size and coefficient of its model plausible, is reported instead, partly explained
+    (:func:`_partial_better`); otherwise the first path stands. A note says where each second path ended.
 
     Measured: Stage-30 with a 45 m/s jet at 10.5 km, a +1.5 % thrust error and a 5 m altitude bias. At step 1
     the wind's 10-knot profile reached chi2/dof 12.4 with knot values up to 24 realistic sizes (it carried
     the thrust error too), so the search took a misalignment (1158) and ended with a misalignment, a start
     angle and a thrust profile at 16.3, "partly explained"; from the oversized wind it ends explained."""
     s1 = path.steps[0] if path.steps else None
-    starts = _provisional(path, ctx.band)
+    starts, better = _provisional(path, ctx.band), None
     for j in _provisional(path, None):
         if j not in starts:
             r = s1.acceptances[j].refit
@@ -1009,10 +1011,42 @@ def _second_path(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Eff
                          f"the search ends with {', '.join(e.name for e in alt.chosen)} at "
                          f"{alt.current.chi2_per_dof:.4g}, every size plausible: that model replaces it")
             return alt
+        lower = _partial_better(alt, path) and (better is None or _path_bic(alt) < _path_bic(better[0]))
         notes.append(f"second path: started from {name} ({how}), the search ends with "
                      f"{', '.join(e.name for e in alt.chosen) or 'nothing added'} at chi2/dof "
-                     f"{alt.current.chi2_per_dof:.4g}, not an explanation: the first search's model stands")
-    return path
+                     f"{alt.current.chi2_per_dof:.4g}, not an explanation" + (
+                         f", with a lower BIC than the first search's ({_path_bic(path):.6g} -> {_path_bic(alt):.6g}) "
+                         "and every size and coefficient plausible" if lower else ""))
+        if lower:
+            better = (alt, name, mine)
+    if better is None:
+        if starts:
+            notes.append("second path: none explains the data or ends lower at plausible values: the first search's "
+                         "model stands")
+        return path
+    alt, name, mine = better
+    notes += mine
+    notes.append(f"second path: no search explains the data; the one started from {name} ends with the lowest BIC at "
+                 "plausible values: its model is reported, partly explained")
+    return alt
+
+
+def _path_bic(path: _Path) -> float:
+    """The BIC of the model a search ended with (inf when it added nothing or its last refit has no BIC)."""
+    last = path.last
+    return float(last.refit.bic[1]) if last is not None and last.refit.success else math.inf
+
+
+def _partial_better(alt: _Path, path: _Path) -> bool:
+    """Whether a second path ``alt`` that ended without explaining the data describes them better than the first
+    search ``path``, which did not either: a lower BIC, with every effect of its final model at a plausible size and
+    the base coefficients plausible -- the best model found with values an engineer can believe. (On Wren-H's pad
+    hold, 1.5 kg of N2O vented on the pad, the first search ended ``burn_rate`` + ``wind_pl_5`` + ``base_drag_mach_3``
+    at chi2/dof 1.919 with a drag knot at 3, five times its true value, and the second path from ``start_mass`` -- the
+    right family -- with two drag shapes at 1.707.)"""
+    last = alt.last
+    return (path.last is not None and last is not None and last.refit.success and not alt.ambiguous
+            and last.check("size").passed and last.check("coefficients").passed and _path_bic(alt) < _path_bic(path))
 
 
 def _finding(ctx: "_Search", base: EstimationResult, steps: list, notes: list) -> tuple | None:
