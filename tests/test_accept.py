@@ -571,25 +571,24 @@ def test_a_second_path_starts_from_an_oversized_first_step_and_stands_only_when_
 
 
 def test_when_no_search_explains_the_lowest_bic_at_plausible_values_is_reported(monkeypatch):
-    """Wren-H's pad hold (1.5 kg of N2O vented on the pad): the first search ended burn_rate + wind_pl_5 +
-    base_drag_mach_3 at chi2/dof 1.919, a drag knot at 3; the second path from start_mass -- the right family --
-    ended at 1.707. Neither explains the data; the model reported is the lower BIC among those whose every size and
-    coefficient is plausible, and the first search's when no second path is better. (A thrust error stands in for
-    the burn rate here.)"""
+    """Wren-H's burn-through: the first search ended base_drag_mach_5 + drag_mach_7 at chi2/dof 1.71 with a drag
+    knot at 1.47 for 0.6; the second path from burn_rate ended burn_rate + back_pressure_vacuum + base_drag_mach_2 at
+    1.255, every value plausible. Neither explains the data; the model reported is the lower BIC among those whose
+    every size and coefficient is plausible, and the first search's when no second path is better."""
     from rocketid.diagnostics import step as S
     from rocketid.diagnostics.effects import CATALOGUE
     from rocketid.diagnostics.screen import Contender, Screen
 
-    base = 74.0
+    base = 6.33
     names = ("thrust_level", "start_mass", "wind")
-    accs = [accept(refit("thrust_level", 7.0, base_chi2=base), BAND),
-            accept(refit("start_mass", 9.0, base_chi2=base), BAND),
-            accept(refit("wind", 12.0, base_chi2=base), BAND)]
+    accs = [accept(refit("thrust_level", 2.2, base_chi2=base), BAND),
+            accept(refit("start_mass", 4.3, base_chi2=base), BAND),
+            accept(refit("wind", 5.0, base_chi2=base), BAND)]
     assert all(a.admissible and not a.accepted for a in accs)
     scr = Screen(None, tuple(Contender(CATALOGUE[n], "") for n in names), ())
     step1 = S.Step(1, scr, tuple(accs), accs[0], "", (), ("thrust_level",), None)
-    first_last = accept(refit("base_drag", 1.919, base_chi2=base, plausible=False), BAND)
-    first = S._Path((step1,), [CATALOGUE["thrust_level"]], SimpleNamespace(chi2_per_dof=1.919), first_last, False, "")
+    first_last = accept(refit("base_drag", 1.71, base_chi2=base, plausible=False), BAND)
+    first = S._Path((step1,), [CATALOGUE["thrust_level"]], SimpleNamespace(chi2_per_dof=1.71), first_last, False, "")
     assert S._provisional(first, BAND) == [1]           # the runner-up start_mass, within reach
 
     def ends_at(last, ambiguous=""):
@@ -599,23 +598,22 @@ def test_when_no_search_explains_the_lowest_bic_at_plausible_values_is_reported(
         return alt
 
     ctx = SimpleNamespace(band=BAND)
-    lower = ends_at(accept(refit("transonic_drag", 1.707, base_chi2=base), BAND))
+    lower = ends_at(accept(refit("transonic_drag", 1.255, base_chi2=base), BAND))
     assert not lower.last.accepted and S._path_bic(lower) < S._path_bic(first)
     notes = []
     assert S._second_path(ctx, None, [], 3, first, notes) is lower
     assert "lower BIC than the first search's" in notes[-2] and "its model is reported, partly explained" in notes[-1]
     # beyond a plausible size, with implausible coefficients, in a tie, or with a higher BIC: the first stands
-    for last, amb in ((accept(refit("transonic_drag", 1.707, value=1.0, base_chi2=base), BAND), ""),
-                      (accept(refit("transonic_drag", 1.707, base_chi2=base, plausible=False), BAND), ""),
-                      (accept(refit("transonic_drag", 1.707, base_chi2=base), BAND), "a tie"),
-                      (accept(refit("transonic_drag", 2.5, base_chi2=base), BAND), "")):
+    for last, amb in ((accept(refit("transonic_drag", 1.255, value=1.0, base_chi2=base), BAND), ""),
+                      (accept(refit("transonic_drag", 1.255, base_chi2=base, plausible=False), BAND), ""),
+                      (accept(refit("transonic_drag", 1.255, base_chi2=base), BAND), "a tie"),
+                      (accept(refit("transonic_drag", 1.8, base_chi2=base), BAND), "")):
         ends_at(last, amb)
         notes = []
         assert S._second_path(ctx, None, [], 3, first, notes) is first, last.refit.chi2_per_dof
         assert "the first search's model stands" in notes[-1]
     # nor when the first search added nothing: a second path's model is no partial answer to compare
-    ends_at(accept(refit("transonic_drag", 1.707, base_chi2=base), BAND))
-    assert not S._partial_better(lower, S._Path((step1,), [], SimpleNamespace(chi2_per_dof=30.0), None, False, ""))
+    assert not S._partial_better(lower, S._Path((step1,), [], SimpleNamespace(chi2_per_dof=6.33), None, False, ""))
 
 
 def test_a_shape_with_several_starts_is_represented_by_its_best_refit(monkeypatch):

@@ -1040,10 +1040,11 @@ def _path_bic(path: _Path) -> float:
 def _partial_better(alt: _Path, path: _Path) -> bool:
     """Whether a second path ``alt`` that ended without explaining the data describes them better than the first
     search ``path``, which did not either: a lower BIC, with every effect of its final model at a plausible size and
-    the base coefficients plausible -- the best model found with values an engineer can believe. (On Wren-H's pad
-    hold, 1.5 kg of N2O vented on the pad, the first search ended ``burn_rate`` + ``wind_pl_5`` + ``base_drag_mach_3``
-    at chi2/dof 1.919 with a drag knot at 3, five times its true value, and the second path from ``start_mass`` -- the
-    right family -- with two drag shapes at 1.707.)"""
+    the base coefficients plausible -- the best model found with values an engineer can believe. (Measured on
+    Wren-H's burn-through, a hybrid whose fuel web ends 16 mm short: the first search ended ``base_drag_mach_5`` +
+    ``drag_mach_7`` at chi2/dof 1.71, BIC 2227.5, a drag knot at 1.47 for a true 0.6; the second path from
+    ``burn_rate`` ends ``burn_rate`` + ``back_pressure_vacuum`` + ``base_drag_mach_2`` at 1.255, BIC 1625.7, every value
+    plausible -- a motor effect where the first answer redrew the drag. Neither reaches the band of 1.25.)"""
     last = alt.last
     return (path.last is not None and last is not None and last.refit.success and not alt.ambiguous
             and last.check("size").passed and last.check("coefficients").passed and _path_bic(alt) < _path_bic(path))
