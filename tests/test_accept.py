@@ -599,7 +599,7 @@ def test_when_no_search_explains_the_lowest_bic_at_plausible_values_is_reported(
 
     ctx = SimpleNamespace(band=BAND)
     lower = ends_at(accept(refit("transonic_drag", 1.255, base_chi2=base), BAND))
-    assert not lower.last.accepted and S._path_bic(lower) < S._path_bic(first)
+    assert not lower.last.accepted and S._bic(lower.last) < S._bic(first.last)
     notes = []
     assert S._second_path(ctx, None, [], 3, first, notes) is lower
     assert "lower BIC than the first search's" in notes[-2] and "its model is reported, partly explained" in notes[-1]

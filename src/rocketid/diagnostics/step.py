@@ -948,7 +948,7 @@ def _provisional(path: _Path, band: NoiseBand | None) -> list[int]:
     s1 = path.steps[0]
     accs, contenders = s1.acceptances, s1.screen.contenders
     n = min(len(accs), len(contenders))
-    taken = s1.chosen.refit.bic[1] if s1.chosen is not None and s1.chosen.refit.success else math.inf
+    taken = _bic(s1.chosen)
     near = _within_reach(path.current.chi2_per_dof, band) if band is not None else (lambda c: True)
     pool = [j for j in range(n)
             if accs[j].refit.success and accs[j].check("significant").passed and not accs[j].check("size").passed
@@ -1011,11 +1011,11 @@ def _second_path(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Eff
                          f"the search ends with {', '.join(e.name for e in alt.chosen)} at "
                          f"{alt.current.chi2_per_dof:.4g}, every size plausible: that model replaces it")
             return alt
-        lower = _partial_better(alt, path) and (better is None or _path_bic(alt) < _path_bic(better[0]))
+        lower = _partial_better(alt, path) and (better is None or _bic(alt.last) < _bic(better[0].last))
         notes.append(f"second path: started from {name} ({how}), the search ends with "
                      f"{', '.join(e.name for e in alt.chosen) or 'nothing added'} at chi2/dof "
                      f"{alt.current.chi2_per_dof:.4g}, not an explanation" + (
-                         f", with a lower BIC than the first search's ({_path_bic(path):.6g} -> {_path_bic(alt):.6g}) "
+                         f", with a lower BIC than the first search's ({_bic(path.last):.6g} -> {_bic(alt.last):.6g}) "
                          "and every size and coefficient plausible" if lower else ""))
         if lower:
             better = (alt, name, mine)
@@ -1031,10 +1031,9 @@ def _second_path(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Eff
     return alt
 
 
-def _path_bic(path: _Path) -> float:
-    """The BIC of the model a search ended with (inf when it added nothing or its last refit has no BIC)."""
-    last = path.last
-    return float(last.refit.bic[1]) if last is not None and last.refit.success else math.inf
+def _bic(acceptance: Acceptance | None) -> float:
+    """The BIC of the model an acceptance tested (inf when there is none, or its refit did not converge)."""
+    return float(acceptance.refit.bic[1]) if acceptance is not None and acceptance.refit.success else math.inf
 
 
 def _partial_better(alt: _Path, path: _Path) -> bool:
@@ -1047,7 +1046,7 @@ def _partial_better(alt: _Path, path: _Path) -> bool:
     plausible -- a motor effect where the first answer redrew the drag. Neither reaches the band of 1.25.)"""
     last = alt.last
     return (path.last is not None and last is not None and last.refit.success and not alt.ambiguous
-            and last.check("size").passed and last.check("coefficients").passed and _path_bic(alt) < _path_bic(path))
+            and last.check("size").passed and last.check("coefficients").passed and _bic(alt.last) < _bic(path.last))
 
 
 def _finding(ctx: "_Search", base: EstimationResult, steps: list, notes: list) -> tuple | None:
