@@ -679,8 +679,7 @@ def _best_set(tries: Sequence[tuple], base: EstimationResult, ctx: "_Search", be
     of the lowest BIC below ``best_bic`` among those that pass every check of an explanation, or None."""
     if not tries:
         return None
-    tasks = [ctx.task(base, effects, tuple(e.name for e in effects)) for _, _, effects in tries]
-    results = refit_all(tasks, workers=ctx.workers)
+    results = ctx.refit([ctx.task(base, effects, tuple(e.name for e in effects)) for _, _, effects in tries])
     good = []
     for (who, eff, effects), r in zip(tries, results):
         acc = accept(r, ctx.band, level=ctx.level, n_tests=len(tries))
@@ -1044,9 +1043,8 @@ def _partial_better(alt: _Path, path: _Path) -> bool:
     ``drag_mach_7`` at chi2/dof 1.71, BIC 2227.5, a drag knot at 1.47 for a true 0.6; the second path from
     ``burn_rate`` ends ``burn_rate`` + ``back_pressure_vacuum`` + ``base_drag_mach_2`` at 1.255, BIC 1625.7, every value
     plausible -- a motor effect where the first answer redrew the drag. Neither reaches the band of 1.25.)"""
-    last = alt.last
-    return (path.last is not None and last is not None and last.refit.success and not alt.ambiguous
-            and last.check("size").passed and last.check("coefficients").passed and _bic(alt.last) < _bic(path.last))
+    return (path.last is not None and _bic(alt.last) < _bic(path.last) and not alt.ambiguous
+            and alt.last.check("size").passed and alt.last.check("coefficients").passed)
 
 
 def _finding(ctx: "_Search", base: EstimationResult, steps: list, notes: list) -> tuple | None:
