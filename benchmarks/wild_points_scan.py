@@ -1,5 +1,6 @@
 """How often the wild-point test flags a point where there is none: on Gaussian noise, and on every case of
-the vehicle studies (``docs/telemetry.md``, "Wild points").
+the vehicle studies (``docs/telemetry.md``, "Wild points"); and on the same base fits, whether the errors are
+found correlated in time (``rocketid.diagnostics.correlated``; none of the studies' noise is).
 
 ::
 
@@ -71,11 +72,17 @@ def cost(repeats: int = 5) -> None:
     print(f"{meas.n_samples} samples: the test {min(tests):.3f} s, the base fit {min(fits):.3f} s (best of {repeats})")
 
 
+CORRELATED: list = []
+"""The data sets whose errors the base fit found correlated in time (``rocketid.diagnostics.correlated``)."""
+
+
 def _line(label: str, name: str, spec, meas, sigma, guess=None) -> bool:
     t0 = time.perf_counter()
-    fit, _, _, wild = base_fit(spec, meas, sigma, guess=guess)
+    fit, _, _, wild, corr = base_fit(spec, meas, sigma, guess=guess)
     print(f"{label} {name}: {len(wild)} wild, base chi2/dof {fit.chi2_per_dof:.4g}, {time.perf_counter() - t0:.1f} s"
-          + (f" -- {wild.note()}" if wild else ""), flush=True)
+          + (f" -- {wild.note()}" if wild else "") + (f" -- {corr.note()}" if corr else ""), flush=True)
+    if corr:
+        CORRELATED.append(f"{label} {name}")
     return bool(wild)
 
 
@@ -158,7 +165,8 @@ def main(argv: list[str]) -> None:
             raise SystemExit(f"unknown: {key!r} (gaussian, cost, {', '.join(STUDIES)}, blind, discovery, falcon9)")
         flagged, total = flagged + f, total + n
     if total:
-        print(f"{flagged} of {total} data sets with a point flagged")
+        print(f"{flagged} of {total} data sets with a point flagged; {len(CORRELATED)} with errors correlated in time"
+              + (f" ({', '.join(CORRELATED)})" if CORRELATED else ""))
 
 
 if __name__ == "__main__":

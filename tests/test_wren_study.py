@@ -244,7 +244,7 @@ def _refits_from_the_base_fit(spec, hidden: Hidden, case: str):
     from rocketid.diagnostics.screen import vehicle_of
     from rocketid.diagnostics.step import _Search
     data = truth.measurements(hidden, seed=BY_NAME[case].seed)
-    fit, _, counts, _ = base_fit(spec, data, "estimate")
+    fit, _, counts, _, _ = base_fit(spec, data, "estimate")
     band = noise_band(fit)
     ctx = _Search(spec, band, vehicle_of(fit), 0.05, None, 300.0, 1, False, None)
 
@@ -298,7 +298,7 @@ def test_an_earlier_step_s_effect_is_judged_by_its_size_at_the_next(spec):
     from rocketid.diagnostics.refit import run_refit
     from rocketid.diagnostics.screen import vehicle_of
     from rocketid.diagnostics.step import _Search, _fit_of
-    fit, _, _, _ = base_fit(spec, truth.measurements(Hidden(dm_payload=BALLAST), seed=BY_NAME["nose-ballast"].seed),
+    fit, _, _, _, _ = base_fit(spec, truth.measurements(Hidden(dm_payload=BALLAST), seed=BY_NAME["nose-ballast"].seed),
                             "estimate")
     band = noise_band(fit)
     ctx = _Search(spec, band, vehicle_of(fit), 0.05, None, 300.0, 1, False, None)
@@ -320,7 +320,7 @@ def test_a_confounded_mate_s_fuller_shape_replaces_a_snug_choice(spec):
     from rocketid.diagnostics.accept import noise_band
     from rocketid.diagnostics.api import base_fit
     from rocketid.diagnostics.step import NEAR_RIVAL
-    fit, _, _, _ = base_fit(spec, truth.measurements(Hidden(dm_payload=BALLAST), seed=BY_NAME["nose-ballast"].seed),
+    fit, _, _, _, _ = base_fit(spec, truth.measurements(Hidden(dm_payload=BALLAST), seed=BY_NAME["nose-ballast"].seed),
                             "estimate")
     band = noise_band(fit)
     found = discover(fit, [CATALOGUE["thrust_level"], CATALOGUE["start_mass"]], workers=1)

@@ -317,6 +317,16 @@ them (a launch vehicle's downrange sampled at 1 Hz has a fourth derivative of or
 centimetres), white noise ``sigma sqrt(C(2k, k))`` (``sqrt(70) sigma`` for k = 4)."""
 
 
+def steady_runs(times: Sequence[float], gap: float = 1.5) -> list:
+    """Index arrays of the runs of steady sampling of ``times``: a run ends where the interval grows beyond
+    ``gap`` times the median interval (a drop-out, a change of rate)."""
+    t = np.asarray(times, float)
+    dt = np.diff(t)
+    if dt.size == 0:
+        return [np.arange(t.size)]
+    return np.split(np.arange(t.size), np.flatnonzero(dt > gap * float(np.median(dt))) + 1)
+
+
 def difference_noise(channel: "Channel", order: int = DIFFERENCE_ORDER, *, gap: float = 1.5) -> tuple[float, int]:
     """A channel's noise level from the data alone: the scatter of its ``order``-th differences.
 
@@ -346,12 +356,9 @@ def difference_noise(channel: "Channel", order: int = DIFFERENCE_ORDER, *, gap: 
     if t.size < k + 11:
         raise DataError(f"channel {channel.name!r}: {t.size} samples cannot give its noise from the data alone "
                         f"(at least {k + 11} in steady runs are needed); give its sigma")
-    dt = np.diff(t)
-    step = float(np.median(dt))
-    breaks = np.flatnonzero(dt > gap * step) + 1
     coef = np.array([(-1) ** j * math.comb(k, j) for j in range(k + 1)], float)
     total, n = 0.0, 0
-    for run in np.split(np.arange(t.size), breaks):
+    for run in steady_runs(t, gap):
         if run.size > k:
             d = np.convolve(y[run], coef, mode="valid")
             total += float(np.dot(d, d))

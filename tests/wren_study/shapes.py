@@ -86,7 +86,7 @@ def main(argv: list[str]) -> None:
     case, sets = BY_NAME[argv[0]], [s.split("+") for s in argv[1:]]
     spec, _ = resolve_model(str(STUDY.model_file))
     meas, _ = _read_data(str(STUDY.make_data(case)), spec)
-    fit, _, counts, _ = base_fit(spec, meas, "estimate")
+    fit, _, counts, _, _ = base_fit(spec, meas, "estimate")
     band = noise_band(fit, estimated=counts)
     print(f"{case.name}: base chi2/dof {fit.chi2_per_dof:.4g}, noise band <= {band.upper:.4g}")
     ctx = _Search(fit.spec, band, vehicle_of(fit), 0.05, None, 600.0, 2, True, None)

@@ -76,6 +76,12 @@ __all__ = ["command"]
               help="Isolated samples no model can follow (a GPS multipath jump, a radar wild point), found on the "
                    "base fit's residuals: 'drop' removes them before the diagnosis, 'keep' only lists them. The "
                    "report names every one.")
+@click.option("--correlated-noise", "correlated_noise", type=click.Choice(["thin", "keep"]), default="thin",
+              show_default=True,
+              help="Errors correlated from sample to sample (a navigation filter, a smoothed readout), measured on "
+                   "the base fit's residuals: 'thin' keeps the samples of such a channel far enough apart for "
+                   "their errors to be independent before the diagnosis, 'keep' only reports the correlation. "
+                   "On every sample the whiteness test would take correlated errors for a missing effect.")
 @click.option("--size", "size_opts", multiple=True, type=NameValue(float), metavar="NAME=VALUE",
               help="Realistic size of an effect parameter (repeatable; a name or a pattern such as 'eps_P*'), in "
                    "place of the catalogue's: an effect beyond 5 times it is implausible. A model file's "
@@ -85,7 +91,8 @@ __all__ = ["command"]
 @unmeasured_option_decl()
 @verbose_option
 def command(data_files, out, model, level, confirm_top, holdout, max_effects, workers, refit_timeout, locate_window,
-            window_text, columns, time_column, wild_points, size_opts, sigmas, sigma_columns, unmeasured):
+            window_text, columns, time_column, wild_points, correlated_noise, size_opts, sigmas, sigma_columns,
+            unmeasured):
     """Fit a model to DATA.csv and diagnose what it misses; write DIR/report.html.
 
     The report compares each channel with the model, locates where the
@@ -130,7 +137,8 @@ def command(data_files, out, model, level, confirm_top, holdout, max_effects, wo
                  sigma_columns=sigma_columns, unmeasured=unmeasured,
                  settings=dict(level=level, confirm_top=confirm_top, window=window, holdout=holdout,
                                max_effects=max_effects, workers=workers, refit_timeout=refit_timeout,
-                               candidates=candidates, wild_points=wild_points, sizes=sizes))
+                               candidates=candidates, wild_points=wild_points, sizes=sizes,
+                               correlated_noise=correlated_noise))
         return
     data_file = data_files[0]
     data = read_data(data_file, spec, time_column=time_column, columns=assignments(columns, "--column"),
@@ -142,7 +150,8 @@ def command(data_files, out, model, level, confirm_top, holdout, max_effects, wo
         t0 = time.perf_counter()
         report = diagnose(data, spec, level=level, confirm_top=confirm_top, window=window, holdout=holdout,
                           max_effects=max_effects, workers=workers, refit_timeout=refit_timeout, sigma=sigma,
-                          flight_window=flight, candidates=candidates, wild_points=wild_points, sizes=sizes)
+                          flight_window=flight, candidates=candidates, wild_points=wild_points, sizes=sizes,
+                          correlated_noise=correlated_noise)
         report = _relabel(report, label, str(data_file))
         path = report.write(out)
     for line in report.verdict():

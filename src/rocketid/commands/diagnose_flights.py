@@ -275,7 +275,8 @@ def diagnose_flights(datas: Sequence, labels: Sequence[str], spec, *, files: Seq
     **settings
         Passed to :func:`rocketid.diagnostics.diagnose` for each flight (``level``,
         ``confirm_top``, ``holdout``, ``max_effects``, ``workers``, ``refit_timeout``, ``window``,
-        ``wild_points``). The joint fit leaves out the wild points each flight's diagnosis dropped.
+        ``wild_points``, ``correlated_noise``). The joint fit sees each flight's data as its diagnosis
+        did: without the wild points it dropped, thinned where its errors were correlated.
     """
     from ..cli import windowed_inputs
     from ..diagnostics import diagnose
@@ -302,9 +303,9 @@ def diagnose_flights(datas: Sequence, labels: Sequence[str], spec, *, files: Seq
         reports.append(rep)
     t1 = time.perf_counter()
     joint, failed = None, ""
-    # the joint fit sees each flight's data as its diagnosis did: without the wild points it dropped
-    flights = [replace(fl, data=rep.wild_points.without(fl.data))
-               if rep.wild_points and rep.wild_points.action == "drop" else fl for fl, rep in zip(flights, reports)]
+    # the joint fit sees each flight's data as its diagnosis did: without the wild points it dropped,
+    # thinned where its errors were correlated
+    flights = [replace(fl, data=_as_diagnosed(fl.data, rep)) for fl, rep in zip(flights, reports)]
     flights, joint_sigma, noise = _noise_of_the_flights(flights, reports, sigma)
     try:
         joint = joint_estimate(flights, sigma=joint_sigma)
@@ -317,6 +318,17 @@ def diagnose_flights(datas: Sequence, labels: Sequence[str], spec, *, files: Seq
     if out is not None:
         result.write_joint(out)
     return result
+
+
+def _as_diagnosed(data, report):
+    """A flight's data as its diagnosis saw them: without the wild points it dropped, each channel whose errors
+    it found correlated thinned to the same stride."""
+    if report.wild_points and report.wild_points.action == "drop":
+        data = report.wild_points.without(data)
+    corr = report.correlated_noise
+    if corr and corr.action == "thin":
+        data = corr.thin(data)
+    return data
 
 
 def _noise_of_the_flights(flights: list, reports: Sequence, sigma) -> tuple[list, Any, dict]:

@@ -1,9 +1,12 @@
 """Diagnostics: compare the model with the measurements, find where it fails, learn which
 physical effect is missing, add it and watch the error fall (``docs/effects.md``).
 
-Before anything is judged, the data's wild points (isolated samples no model can follow):
+Before anything is judged, the data's wild points (isolated samples no model can follow) and their
+errors' correlation in time:
 
-``wild``     :func:`find_wild_points` -> :class:`WildPoints` (on the base fit's residuals; dropped by default)
+``wild``       :func:`find_wild_points` -> :class:`WildPoints` (on the base fit's residuals; dropped by default)
+``correlated`` :func:`find_correlated_noise` -> :class:`CorrelatedNoise` (on the base fit's residuals; a
+               correlated channel thinned to its independent samples by default)
 
 Part A -- candidate effects, their ranking by the score test, confirmation by refit, model history:
 
@@ -59,8 +62,9 @@ from .accept import Acceptance, NoiseBand, accept, noise_band
 from .step import Discovery, Step, discover
 from .variant import mach_variant
 from .wild import WildPoint, WildPoints, find_wild_points
+from .correlated import CorrelatedNoise, find_correlated_noise
 
 __all__ += ["compare", "Comparison", "locate", "Location", "check_plausibility", "Plausibility",
             "diagnose", "DiagnosisReport", "FinalModel", "screen", "Screen", "vehicle_of", "refit_all", "Refit",
             "accept", "Acceptance", "NoiseBand", "noise_band", "discover", "Discovery", "Step", "mach_variant",
-            "find_wild_points", "WildPoints", "WildPoint"]
+            "find_wild_points", "WildPoints", "WildPoint", "find_correlated_noise", "CorrelatedNoise"]

@@ -127,6 +127,10 @@ class DiagnosisReport:
         The isolated samples no model can follow, found on the first base fit
         (:mod:`rocketid.diagnostics.wild`); dropped before the diagnosis unless
         ``wild_points="keep"``. None when the test was not made.
+    correlated_noise : CorrelatedNoise or None
+        The errors' correlation in time, channel by channel, found on the base fit
+        (:mod:`rocketid.diagnostics.correlated`); a correlated channel is thinned to the samples whose
+        errors are independent unless ``correlated_noise="keep"``. None when the test was not made.
     """
 
     model: str
@@ -150,6 +154,7 @@ class DiagnosisReport:
     ranking_failed: str = ""
     noise_from_data: dict = field(default_factory=dict)
     wild_points: Any = None
+    correlated_noise: Any = None
 
     # ---- verdicts
     @property
@@ -187,6 +192,9 @@ class DiagnosisReport:
         base_ok = self._base_fits()
         if self.wild_points:
             out.append(self.wild_points.note()[0].upper() + self.wild_points.note()[1:] + ".")
+        if self.correlated_noise:
+            text = self.correlated_noise.note()
+            out.append(text[0].upper() + text[1:] + ".")
         if base_ok:
             out.append(f"The residuals of {self.fit.spec.name} are white noise at the stated sigma "
                        f"(chi2/dof {c.chi2_per_dof:.3f}).")
@@ -252,6 +260,8 @@ class DiagnosisReport:
         sections = [Section("Verdict", tuple(self.verdict()))]
         if self.wild_points:
             sections.append(Section("", (self.wild_points.summary(),)))
+        if self.correlated_noise:
+            sections.append(Section("", (self.correlated_noise.summary(),)))
         sections += [Section("", (self.comparison.summary(),)),
                     Section("", (self.location.summary() if self.location is not None
                                  else "Location: not available (see notes)",)),
@@ -315,6 +325,7 @@ class DiagnosisReport:
                "noise_from_data": {c: {"sigma": float(v), "differences": int(n)}
                                    for c, (v, n) in self.noise_from_data.items()},
                "wild_points": None if self.wild_points is None else self.wild_points.to_dict(),
+               "correlated_noise": None if self.correlated_noise is None else self.correlated_noise.to_dict(),
                "timings": dict(self.timings), "notes": list(self.notes)}
         return out
 
@@ -399,10 +410,12 @@ def _noise_from_data(sigma, meas, notes: list, from_data: dict) -> tuple:
 
 
 def base_fit(spec, meas, sigma=None, *, guess=None, mesh=None, options=None, notes: list | None = None,
-             from_data: dict | None = None, wild_points: str = "drop") -> tuple:
+             from_data: dict | None = None, wild_points: str = "drop", correlated_noise: str = "thin") -> tuple:
     """The diagnosis's base fit: the noise (from the data alone where it is to be estimated), the fit, the
     wild points on its residuals (:func:`~rocketid.diagnostics.wild.find_wild_points`) and, when they are
-    dropped, the noise and the fit again without them.
+    dropped, the noise and the fit again without them; then the errors' correlation in time
+    (:func:`~rocketid.diagnostics.correlated.find_correlated_noise`) and, where it is found and the channels
+    are thinned, the noise and the fit again on the samples whose errors are independent.
 
     Returns
     -------
@@ -412,10 +425,13 @@ def base_fit(spec, meas, sigma=None, *, guess=None, mesh=None, options=None, not
     counts : dict
         ``{channel: number of differences}`` of the channels whose noise was estimated.
     wild : WildPoints
+    correlated : CorrelatedNoise
     """
+    from .correlated import check_action as check_correlated, find_correlated_noise
     from .wild import check_action, find_wild_points
 
     check_action(wild_points)          # before the first fit
+    check_correlated(correlated_noise)
     notes = notes if notes is not None else []
     from_data = from_data if from_data is not None else {}
     first: list = []
@@ -423,13 +439,20 @@ def base_fit(spec, meas, sigma=None, *, guess=None, mesh=None, options=None, not
     fit = _fit_base(spec, meas, guess, mesh, options, first, values)
     wild = find_wild_points(fit, action=wild_points)
     if wild and wild_points == "drop":
-        first, kept = [], wild.without(meas)
-        values, counts = _noise_from_data(sigma, kept, first, from_data)
-        fit = _fit_base(spec, kept, fit.p, fit.prepared.transcription.mesh, options, first, values)
+        first, meas = [], wild.without(meas)
+        values, counts = _noise_from_data(sigma, meas, first, from_data)
+        fit = _fit_base(spec, meas, fit.p, fit.prepared.transcription.mesh, options, first, values)
+    corr = find_correlated_noise(fit, action=correlated_noise)
+    if corr and correlated_noise == "thin":
+        first, meas = [], corr.thin(meas)
+        values, counts = _noise_from_data(sigma, meas, first, from_data)
+        fit = _fit_base(spec, meas, fit.p, fit.prepared.transcription.mesh, options, first, values)
     notes.extend(first)
     if wild:
         notes.append(wild.note())
-    return fit, values, counts, wild
+    if corr:
+        notes.append(corr.note())
+    return fit, values, counts, wild, corr
 
 
 def _fit_base(spec, meas, guess, mesh, options, notes: list, sigma=None) -> EstimationResult:
@@ -703,7 +726,7 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
              refine: bool = True, variant: bool | str = "auto",
              sigma: str | Mapping[str, float | str] | None = None,
              flight_window: Sequence[float] | None = None, wild_points: str = "drop",
-             sizes: Mapping[str, float] | None = None) -> DiagnosisReport:
+             sizes: Mapping[str, float] | None = None, correlated_noise: str = "thin") -> DiagnosisReport:
     """Fit ``model`` to ``data`` and find what it misses::
 
         fit -> compare -> locate -> plausibility
@@ -767,6 +790,13 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
         removes them, takes the noise from the data again when it is estimated, and fits the base
         model again before anything is judged; ``"keep"`` only lists them. Either way the report
         names every one.
+    correlated_noise : {"thin", "keep"}
+        Errors correlated from sample to sample (a navigation filter, a smoothed readout;
+        :mod:`rocketid.diagnostics.correlated`) are measured on the base fit's residuals, channel by
+        channel. ``"thin"`` keeps, in each such channel, the samples far enough apart for their errors
+        to be independent, takes the noise from the data again when it is estimated, and fits the base
+        model again before anything is judged -- on every sample the whiteness test takes correlated
+        errors for a missing effect; ``"keep"`` only reports the correlation.
     sizes : mapping of str to float, optional
         Realistic sizes the user states for effect parameters, by name or ``fnmatch`` pattern
         (``{"eps_thrust": 0.10, "eps_P*": 0.10}``), in place of the catalogue's
@@ -810,9 +840,10 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
 
     from_data: dict = {}
     asked = sigma
-    fit, sigma, counts, wild = timed("fit_s", base_fit, spec, meas, asked, guess=guess, mesh=mesh, options=options,
-                                     notes=notes, from_data=from_data, wild_points=wild_points)
-    meas = fit.prepared.measurements  # with the sigmas of the fit (and without the wild points dropped)
+    fit, sigma, counts, wild, corr = timed("fit_s", base_fit, spec, meas, asked, guess=guess, mesh=mesh,
+                                           options=options, notes=notes, from_data=from_data,
+                                           wild_points=wild_points, correlated_noise=correlated_noise)
+    meas = fit.prepared.measurements  # with the sigmas of the fit (without the wild points dropped, thinned)
     comp, loc, plaus = timed("describe_s", _describe, fit, level, window, notes)
     effects = _stated(_candidate_effects(candidates), sizes, fit, notes)
     disc, ranking, failed = None, None, ""
@@ -850,7 +881,8 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
                              plausibility=plaus, ranking=ranking, confirmations=confs, confirmed=names,
                              refit_plausibility=pls, after=after, history=history, level=float(level),
                              timings=timings, notes=tuple(notes), discovery=disc, final=final, variant=var,
-                             ranking_failed=failed, noise_from_data=from_data, wild_points=wild)
+                             ranking_failed=failed, noise_from_data=from_data, wild_points=wild,
+                             correlated_noise=corr)
     if out is not None:
         report.write(out)
     return report
