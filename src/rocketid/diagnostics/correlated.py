@@ -69,6 +69,19 @@ RESIDUAL = 0.03
 """Correlation of the errors of neighbouring samples kept: the stride is where the fitted first-order
 correlation ``rho ** stride`` falls to this."""
 
+FLAT = 3.0
+"""Sampling errors of slack on the fastest rise first-order errors allow (``v`` in proportion to the stride):
+the strides beyond a faster rise are left out of the fit -- there a misfit's own curvature enters, growing up to
+the stride's eighth power."""
+
+PARTS = 3
+"""Consecutive parts of a channel's samples in each of which the scatter must rise too: a sensor's errors are
+correlated throughout the flight, a model's misfit of a few seconds' scale (a motor's thrust ripple) only
+where it acts."""
+
+PART_DETECT = 2.0
+"""Sampling errors (of the part's ``v(1)``) by which the scatter must rise in every part."""
+
 MAX_SECONDS = 2.0
 """Longest spacing, s, a channel is thinned to: errors correlated longer than this act on the time scales of the
 flight's own events and cannot be told from a missing effect."""
@@ -140,6 +153,9 @@ class ChannelCorrelation:
         Samples thinning to ``stride`` keeps.
     rho : float
         The fitted correlation of neighbouring samples' errors (0 when they are not correlated).
+    parts : tuple of float
+        ``v(stride) / v(1)`` in each of :data:`PARTS` consecutive parts of the flight, when the whole channel's
+        rose (empty otherwise): a sensor's errors are correlated throughout.
     """
 
     channel: str
@@ -153,6 +169,7 @@ class ChannelCorrelation:
     n_samples: int
     kept: int
     rho: float
+    parts: tuple = ()
 
     def text(self) -> str:
         return (f"{self.channel} over {self.seconds:.3g} s ({self.stride} samples; the one-sample differences see "
@@ -161,7 +178,7 @@ class ChannelCorrelation:
     def to_dict(self) -> dict:
         return {"channel": self.channel, "correlated": self.correlated, "stride": self.stride,
                 "seconds": self.seconds, "ratio": self.ratio, "error": self.error, "settled": self.settled,
-                "n_samples": self.n_samples, "kept": self.kept, "rho": self.rho, "scatter": [list(p) for p in self.scatter]}
+                "n_samples": self.n_samples, "kept": self.kept, "rho": self.rho, "parts": list(self.parts), "scatter": [list(p) for p in self.scatter]}
 
 
 def noise_correlation(name: str, t: np.ndarray, e: np.ndarray, *, max_seconds: float = MAX_SECONDS,
@@ -174,27 +191,46 @@ def noise_correlation(name: str, t: np.ndarray, e: np.ndarray, *, max_seconds: f
     v1, n1 = stride_scatter(t, e, 1)
     if not (n1 >= 10 and v1 > 0):
         return ChannelCorrelation(name, 1, dt, 1.0, math.inf, False, True, ((1, 1.0),), int(t.size), int(t.size),
-                                  0.0)
+                                  0.0, ())
     err = math.sqrt(8.0 / n1)
     tried = strides(t, max_seconds=max_seconds, min_kept=min_kept)
     v = {1: v1}
     for s in tried[1:]:
         v[s] = stride_scatter(t, e, s)[0]
     tried = [s for s in tried if math.isfinite(v[s])]
-    ss = np.array(tried, float)
-    vv = np.array([v[s] for s in tried]) / v1
+    used = [1]
+    for s in tried[1:]:      # no faster than first-order errors can rise: v(s) grows at most like s
+        if v[s] > v[used[-1]] * (s / used[-1]) * (1.0 + FLAT * err):
+            break
+        used.append(s)
+    ss = np.array(used, float)
+    vv = np.array([v[s] for s in used]) / v1
     rho, level = _fit_first_order(ss, vv)
     ratio = float(level)
     correlated = bool(ratio > 1.0 + DETECT * err and rho > 0.0)
+    parts: tuple = ()
     if correlated:
         want = math.log(RESIDUAL) / math.log(rho)
         chosen = int(min(math.ceil(want), tried[-1]))
         settled = want <= tried[-1]
-    else:
+        parts = _parts(t, e, min(chosen, used[-1]))
+        correlated = all(r > 1.0 + PART_DETECT * x for r, x in parts)
+    if not correlated:
         chosen, settled, rho = 1, True, 0.0
-    seen = tuple((int(a), float(b)) for a, b in zip(ss, vv))
+    seen = tuple((int(a), float(v[a] / v1)) for a in tried)
     return ChannelCorrelation(name, int(chosen), float(chosen * dt), float(ratio), float(err), correlated,
-                              bool(settled), seen, int(t.size), int(_thin_index(t, chosen).size), float(rho))
+                              bool(settled), seen, int(t.size), int(_thin_index(t, chosen).size), float(rho),
+                              tuple(float(r) for r, _ in parts))
+
+
+def _parts(t: np.ndarray, e: np.ndarray, stride: int) -> list:
+    """``[(v(stride) / v(1), sampling error)]`` in each of :data:`PARTS` consecutive parts of the samples."""
+    out = []
+    for k in np.array_split(np.arange(t.size), PARTS):
+        v1, n1 = stride_scatter(t[k], e[k], 1)
+        vs, ns = stride_scatter(t[k], e[k], stride)
+        out.append((vs / v1, math.sqrt(8.0 / n1)) if ns and v1 > 0 else (math.nan, math.inf))
+    return out
 
 
 def _first_order(s: np.ndarray, rho: float) -> np.ndarray:
