@@ -8,6 +8,7 @@ found correlated in time (``rocketid.diagnostics.correlated``; none of the studi
     python benchmarks/wild_points_scan.py cost                      # its time beside the base fit's
     python benchmarks/wild_points_scan.py wren sounding air unseen telemetry blind discovery
     python benchmarks/wild_points_scan.py falcon9                   # the two real flights
+    python benchmarks/wild_points_scan.py correlated                # the correlated-errors rule on series
 
 A study's data come from its directory (the study's own environment variable, as its ``run.py``; made from
 its truth when missing). Each case gets the diagnosis's base fit (``rocketid.diagnostics.api.base_fit``:
@@ -49,6 +50,38 @@ def gaussian(reps_small: int = 4000, reps_large: int = 300) -> None:
                    for _ in range(reps))
         print(f"3 x {n} samples: {hits} of {reps} data sets flagged ({100 * hits / reps:.2f} %; level "
               f"{100 * LEVEL:g} %)", flush=True)
+
+
+def correlated(white: int = 2000, reps: int = 50) -> None:
+    """The correlated-errors rule (``rocketid.diagnostics.correlated.noise_correlation``) on series: how often
+    white noise is called correlated, alone and under a smooth 5-sigma misfit; for first-order errors of each
+    ``rho``, how often they are found, the stride and the fitted ``rho``; a 10-sample moving average."""
+    import math
+    from scipy.signal import lfilter
+    from rocketid.diagnostics.correlated import noise_correlation
+    rng = np.random.default_rng(5)
+
+    def first_order(n, rho):
+        return lfilter([math.sqrt(1 - rho ** 2)], [1, -rho], rng.standard_normal(n))
+
+    for n, dt in ((6600, 0.01), (800, 0.1), (377, 0.1), (1131, 0.2)):
+        t = dt * np.arange(n)
+        alone = sum(noise_correlation("x", t, rng.standard_normal(n)).correlated for _ in range(white))
+        misfit = 5.0 * np.sin(2 * np.pi * t / (t[-1] / 3))
+        under = sum(noise_correlation("x", t, misfit + rng.standard_normal(n)).correlated for _ in range(white // 10))
+        print(f"{n} samples every {dt} s: white noise called correlated {alone} of {white}; under a smooth 5-sigma "
+              f"misfit {under} of {white // 10}", flush=True)
+        for rho in (0.1, 0.2, 0.3, 0.6, 0.9, 0.97):
+            found = [noise_correlation("x", t, first_order(n, rho)) for _ in range(reps)]
+            hit = [c for c in found if c.correlated]
+            print(f"  first-order rho {rho}: found {len(hit)} of {reps}"
+                  + (f", stride median {np.median([c.stride for c in hit]):g}, rho fitted median "
+                     f"{np.median([c.rho for c in hit]):.3f}, settled {sum(c.settled for c in hit)}" if hit else ""),
+                  flush=True)
+        ma = [noise_correlation("x", t, np.convolve(rng.standard_normal(n + 9), np.ones(10) / math.sqrt(10), "valid"))
+              for _ in range(reps)]
+        print(f"  10-sample moving average: found {sum(c.correlated for c in ma)} of {reps}, stride median "
+              f"{np.median([c.stride for c in ma if c.correlated] or [1]):g}", flush=True)
 
 
 def cost(repeats: int = 5) -> None:
@@ -153,6 +186,9 @@ def main(argv: list[str]) -> None:
         if key == "cost":
             cost()
             continue
+        if key == "correlated":
+            correlated()
+            continue
         if key in STUDIES:
             f, n = study(key)
         elif key == "blind":
@@ -162,7 +198,8 @@ def main(argv: list[str]) -> None:
         elif key == "falcon9":
             f, n = falcon9()
         else:
-            raise SystemExit(f"unknown: {key!r} (gaussian, cost, {', '.join(STUDIES)}, blind, discovery, falcon9)")
+            raise SystemExit(f"unknown: {key!r} (gaussian, cost, correlated, {', '.join(STUDIES)}, blind, discovery, "
+                             "falcon9)")
         flagged, total = flagged + f, total + n
     if total:
         print(f"{flagged} of {total} data sets with a point flagged; {len(CORRELATED)} with errors correlated in time"

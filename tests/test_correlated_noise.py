@@ -203,3 +203,19 @@ def test_detect_is_well_above_the_white_noise_scatter():
     levels = [noise_correlation("x", t, rng.standard_normal(t.size)).ratio for _ in range(100)]
     err = math.sqrt(8 / 6596)
     assert max(levels) < 1 + DETECT * err
+
+
+def test_the_fit_command_warns_that_white_noise_standard_errors_are_too_small(clean_filtered, tmp_path):
+    from click.testing import CliRunner
+    from rocketid.cli import main
+    csv = tmp_path / "flight.csv"
+    np.savetxt(csv, np.column_stack([TIMES] + [clean_filtered[c].values for c in ("x", "h", "v")]), delimiter=",",
+               header="t,x,h,v", comments="")
+    white = CliRunner().invoke(main, ["estimate", str(csv), "--model", MODEL, "--out", str(tmp_path / "w.json")])
+    assert white.exit_code == 0, white.output
+    assert "the errors look correlated in time" in white.output and "--errors coloured" in white.output
+    saved = json.loads((tmp_path / "w.json").read_text())["correlated_noise"]
+    assert [c["channel"] for c in saved["channels"] if c["correlated"]] == ["x", "h", "v"]
+    coloured = CliRunner().invoke(main, ["estimate", str(csv), "--model", MODEL, "--errors", "coloured"])
+    assert coloured.exit_code == 0, coloured.output
+    assert "the errors look correlated in time" not in coloured.output

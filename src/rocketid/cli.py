@@ -974,6 +974,8 @@ def estimate_command(data_files, model, columns, time_column, sigmas, sigma_colu
         if result.success:
             payload["wild_points"] = {fl.label: _print_wild_points(fit, fl.label)
                                       for fl, fit in zip(flights, result.flights)}
+            payload["correlated_noise"] = {fl.label: _print_correlated(fit, errors, fl.label)
+                                           for fl, fit in zip(flights, result.flights)}
         payload["std_err_residuals"] = errors
         if out is not None:
             write_json(out, payload)
@@ -1000,6 +1002,7 @@ def estimate_command(data_files, model, columns, time_column, sigmas, sigma_colu
         payload["std_err"] = _print_standard_errors(result, coloured=errors == "coloured")
         payload["std_err_residuals"] = errors
         payload["wild_points"] = _print_wild_points(result)
+        payload["correlated_noise"] = _print_correlated(result, errors)
     if out is not None:
         path = write_json(out, payload)
         status(f"wrote {path}")
@@ -1019,6 +1022,20 @@ def _print_wild_points(result, flight: str = "") -> list:
                    f"{wild.listed()}. The fit keeps them; `rocketid diagnose` drops them, or remove those rows to "
                    "fit without them.")
     return [p.to_dict() for p in wild.points]
+
+
+def _print_correlated(result, errors: str, flight: str = "") -> dict:
+    """Warn of channels whose errors look correlated in time (:mod:`rocketid.diagnostics.correlated`) when the
+    standard errors printed assume they are not. Returns the measurement for FIT.json."""
+    from .diagnostics.correlated import find_correlated_noise
+
+    corr = find_correlated_noise(result, action="keep")
+    if corr and errors != "coloured":
+        listed = "; ".join(c.text() for c in corr.correlated)
+        click.echo(f"\nWarning: {f'flight {flight}: ' if flight else ''}the errors look correlated in time: {listed}. "
+                   "The standard errors above assume independent errors and are too small; --errors coloured "
+                   "corrects them ([Residuals correlated in time] in the telemetry guide).")
+    return corr.to_dict()
 
 
 def _print_joint_coloured(result) -> dict:
