@@ -196,7 +196,12 @@ class DiagnosisReport:
             text = self.correlated_noise.note()
             out.append(text[0].upper() + text[1:] + ".")
         if base_ok:
-            out.append(f"The residuals of {self.fit.spec.name} are white noise at the stated sigma "
+            measured = self.fit.prepared.measurements.names
+            taken = [n for n in measured if n in self.noise_from_data]
+            level = ("the noise taken from the data" if len(taken) == len(measured) else
+                     f"the stated sigma, {', '.join(taken)} from the data" if taken else
+                     "the stated sigma")
+            out.append(f"The residuals of {self.fit.spec.name} are white noise at {level} "
                        f"(chi2/dof {c.chi2_per_dof:.3f}).")
         else:
             out.append(f"{self.fit.spec.name} does not fit to the noise: chi2/dof = {c.chi2_per_dof:.3g}"
