@@ -210,7 +210,7 @@ def test_the_bucket_and_the_nozzle_are_the_stated_ones():
 def test_the_cases_are_consistent():
     """Names and seeds unique, every needed family a right one, pairs with one set per effect, five clean
     seeds, the out-of-catalogue cases with nothing right, ``visible`` from the measured 2J."""
-    assert len(BY_NAME) == len(ALL) == 20 and len({c.seed for c in ALL}) == len(ALL)
+    assert len(BY_NAME) == len(ALL) == 22 and len({c.seed for c in ALL}) == len(ALL)
     for case in ALL:
         assert case.needed <= case.right, case.name
         assert all(group <= case.right for group in case.needed_each), case.name

@@ -61,7 +61,11 @@ at 0.72 over 46-62 s, 1098 m/s and 28.9 km at T+100 s; telemetry from T+12 s):
   vibration after the bucket). One sigma per channel cannot describe it; the right answer is that no
   physical effect is missing: nothing found (the regime's second hard case);
 - three pairs: deep bucket + speed bias, jet stream + altitude scale, hot engine + hot day; five clean
-  seeds (nothing to find).
+  seeds (nothing to find);
+- filtered noise (added 2026-11-27 with ``rocketid.diagnostics.correlated``, so not blind to it): the
+  model is right, but every channel's errors come through a navigation filter of 0.5 s (a first-order
+  Gauss-Markov error of the stated sigma; correlated 0.82 from one speed sample to the next). Right:
+  nothing found; and the hot engine under the same filtered errors. Right: as the hot engine.
 
 Every case has the regime's telemetry: speed 10 Hz, altitude 2 Hz, downrange 1 Hz with the radar's
 hand-over gap 40-48 s, a 2 s loss of signal at 57 s, 3 % random drop-outs, quantized words, from
@@ -87,6 +91,7 @@ K_H = 0.004
 TAU = 0.10
 DM0 = -500.0
 VIBRATION = 4.0
+FILTER_S = 0.5
 RADAR_OFFSET = 1500.0
 
 CASES = (
@@ -130,6 +135,12 @@ CASES = (
     Case("vibration-noise", Hidden(v_noise_late=VIBRATION), 811,
          "model right; speed noise 4x larger after 60 s (engine vibration): nothing is missing",
          visible=False),
+    Case("filtered-noise", Hidden(filter_s=FILTER_S), 816,
+         "model right; every channel's errors through a 0.5 s navigation filter (correlated in time): nothing is "
+         "missing", visible=False),
+    Case("hot-engine+filtered", Hidden(eps_thrust=EPS_THRUST, filter_s=FILTER_S), 817,
+         "thrust 2.5 % high at the stated mass flow; errors through a 0.5 s navigation filter",
+         right=THRUST, needed=THRUST, sizes=(("eps_thrust", EPS_THRUST),), visible=True),
     Case("deep-bucket+v-bias", Hidden(bucket_level=BUCKET_LEVEL, bias_v=BIAS_V), 812,
          "bucket delivered at 0.67 (commanded 0.72) + INS speed 1.0 m/s high",
          right=BUCKET | {"bias_v"}, needed=frozenset({"thrust_profile", "bias_v"}),
@@ -150,7 +161,8 @@ CASES = (
 #: sigmas (measured when the cases were written, before any diagnosis; ``visible`` is 2J >= 25).
 MEASURED_2J = {"hot-engine": 8425.0, "deep-bucket": 1265.0, "back-pressure": 9.133e5, "jet-stream": 5865.0,
                "hot-day": 1.263, "v-bias": 486.7, "h-scale": 604.0, "frame-delay": 100.9, "light-load": 79.66,
-               "site-gravity": 2.398, "vibration-noise": 0.0, "radar-geometry": 4.428e4,
+               "site-gravity": 2.398, "vibration-noise": 0.0, "radar-geometry": 4.428e4, "filtered-noise": 0.0,
+               "hot-engine+filtered": 8491.0,
                "deep-bucket+v-bias": 1727.0, "jet-stream+h-scale": 7202.0, "hot-engine+hot-day": 7251.0}
 VISIBLE_2J = 25.0
 

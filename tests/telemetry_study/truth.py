@@ -70,6 +70,8 @@ class Hidden:
     v_noise_late: float = 1.0           # the speed's noise times this after T_VIBRATION
     radar_offset: float = 0.0           # the downrange channel is the ground range from a radar this far (m)
                                         # to the side of the ground track, abeam the pad
+    filter_s: float = 0.0               # every channel's errors through a first-order filter of this time
+                                        # constant (s; a navigation filter), their standard deviation the same
 
 
 class Air:
@@ -226,6 +228,18 @@ def telemetry_times(seed: int) -> dict:
     return kept
 
 
+def filtered(t: np.ndarray, white: np.ndarray, tau: float) -> np.ndarray:
+    """Unit white noise ``white`` at the times ``t`` through a first-order filter of time constant ``tau``
+    (a Gauss-Markov error, stationary with unit variance): each error keeps ``exp(-dt / tau)`` of the one
+    before, ``dt`` the interval between them (longer across a gap)."""
+    out = np.empty(t.size)
+    out[0] = white[0]
+    for i in range(1, t.size):
+        keep = math.exp(-(t[i] - t[i - 1]) / tau)
+        out[i] = keep * out[i - 1] + math.sqrt(1.0 - keep * keep) * white[i]
+    return out
+
+
 def measurements(hidden: Hidden, seed: int):
     """The case's telemetry (``rocketid.Measurements`` without sigmas): noise, quantization, gaps."""
     import rocketid as ri
@@ -238,7 +252,8 @@ def measurements(hidden: Hidden, seed: int):
         sigma = np.full(t.size, V.SIGMA[name])
         if name == "v":
             sigma[t > T_VIBRATION] *= hidden.v_noise_late
-        noisy = exact[name] + sigma * rng.standard_normal(t.size)
+        white = rng.standard_normal(t.size)
+        noisy = exact[name] + sigma * (filtered(t, white, hidden.filter_s) if hidden.filter_s else white)
         q = V.QUANTUM[name]
         channels.append(ri.Channel(name, t, np.round(np.round(noisy / q) * q, 6)))
     return ri.Measurements(tuple(channels))
