@@ -138,7 +138,7 @@ CASES = (
     Case("filtered-noise", Hidden(filter_s=FILTER_S), 816,
          "model right; every channel's errors through a 0.5 s navigation filter (correlated in time): nothing is "
          "missing", visible=False),
-    Case("hot-engine+filtered", Hidden(eps_thrust=EPS_THRUST, filter_s=FILTER_S), 817,
+    Case("filtered-hot-engine", Hidden(eps_thrust=EPS_THRUST, filter_s=FILTER_S), 817,
          "thrust 2.5 % high at the stated mass flow; errors through a 0.5 s navigation filter",
          right=THRUST, needed=THRUST, sizes=(("eps_thrust", EPS_THRUST),), visible=True),
     Case("deep-bucket+v-bias", Hidden(bucket_level=BUCKET_LEVEL, bias_v=BIAS_V), 812,
@@ -162,7 +162,7 @@ CASES = (
 MEASURED_2J = {"hot-engine": 8425.0, "deep-bucket": 1265.0, "back-pressure": 9.133e5, "jet-stream": 5865.0,
                "hot-day": 1.263, "v-bias": 486.7, "h-scale": 604.0, "frame-delay": 100.9, "light-load": 79.66,
                "site-gravity": 2.398, "vibration-noise": 0.0, "radar-geometry": 4.428e4, "filtered-noise": 0.0,
-               "hot-engine+filtered": 8491.0,
+               "filtered-hot-engine": 8491.0,
                "deep-bucket+v-bias": 1727.0, "jet-stream+h-scale": 7202.0, "hot-engine+hot-day": 7251.0}
 VISIBLE_2J = 25.0
 
