@@ -414,6 +414,29 @@ def _noise_from_data(sigma, meas, notes: list, from_data: dict) -> tuple:
     return values, counts
 
 
+def _noise_of_thinned(values, counts: dict, corr, fit, notes: list, from_data: dict) -> tuple:
+    """The noise of each channel estimated from the data and thinned for correlated errors, at the errors' full
+    size: the sigma of ``fit`` (which measured the correlation) times ``sqrt(variance)``, the level the scatter
+    of its normalized residuals' fourth differences settled at (:class:`~rocketid.diagnostics.correlated.
+    ChannelCorrelation`). The thinned data's own differences are not used: samples a second or more apart
+    carry the flight's curvature into them (on Corvid-L's speed, 1.4 s apart, 2.6 m/s for 0.25). Returns
+    ``values, counts`` with those channels replaced, ``counts`` their thinned differences."""
+    thinned = {c.channel: c for c in corr.correlated}
+    mine = [n for n in counts if n in thinned]
+    if not mine:
+        return values, counts
+    values, counts = dict(values), dict(counts)
+    for n in mine:
+        c = thinned[n]
+        values[n] = fit.sigma[n] * math.sqrt(c.variance)
+        counts[n] = max(1, c.kept - 4)
+        from_data[n] = (values[n], counts[n])
+    notes.append("noise of " + ", ".join(f"{n} {values[n]:.4g} (from {thinned[n].n_samples} samples' residual "
+                                         f"differences {thinned[n].stride} apart)" for n in mine)
+                 + ": the errors' full size, where the one-sample differences see only part of correlated errors")
+    return values, counts
+
+
 def base_fit(spec, meas, sigma=None, *, guess=None, mesh=None, options=None, notes: list | None = None,
              from_data: dict | None = None, wild_points: str = "drop", correlated_noise: str = "thin") -> tuple:
     """The diagnosis's base fit: the noise (from the data alone where it is to be estimated), the fit, the
@@ -451,6 +474,7 @@ def base_fit(spec, meas, sigma=None, *, guess=None, mesh=None, options=None, not
     if corr and correlated_noise == "thin":
         first, meas = [], corr.thin(meas)
         values, counts = _noise_from_data(sigma, meas, first, from_data)
+        values, counts = _noise_of_thinned(values, counts, corr, fit, first, from_data)
         fit = _fit_base(spec, meas, fit.p, fit.prepared.transcription.mesh, options, first, values)
     notes.extend(first)
     if wild:
