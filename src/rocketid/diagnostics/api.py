@@ -389,12 +389,14 @@ def _check_settings(level, confirm_top, max_effects, refit_timeout) -> None:
         raise SettingsError(f"refit_timeout must be a positive number of seconds, got {refit_timeout!r}")
 
 
-def _noise_from_data(sigma, meas, notes: list, from_data: dict) -> tuple:
+def _noise_from_data(sigma, meas, notes: list, from_data: dict, known: Mapping | None = None) -> tuple:
     """The diagnosis's noise levels when some are to be estimated: from the data alone (the scatter of
     each channel's fourth differences, :func:`rocketid.data.difference_noise`), not from the base model's
     residuals -- those hold the misfit the diagnosis looks for, and a model judged against its own
-    residuals always "reaches the noise". Returns the ``sigma`` request with numbers in place of
-    ``"estimate"`` and ``{channel: number of differences}`` of the channels estimated so."""
+    residuals always "reaches the noise". ``known`` gives ``{channel: (sigma, differences, how)}`` of
+    channels whose level was measured otherwise (:func:`_noise_of_thinned`). Returns the ``sigma`` request
+    with numbers in place of ``"estimate"`` and ``{channel: number of differences}`` of the channels
+    estimated so."""
     from ..data import DIFFERENCE_ORDER, difference_noise, resolve_quantized, sigma_request
 
     if sigma is None:
@@ -403,38 +405,33 @@ def _noise_from_data(sigma, meas, notes: list, from_data: dict) -> tuple:
     given, wanted = sigma_request(sigma, meas.names)
     if not wanted:
         return sigma, {}
-    values, counts = dict(given), {}
+    known = known or {}
+    values, counts, how = dict(given), {}, {}
     for name in wanted:
-        values[name], counts[name] = difference_noise(meas[name])
+        if name in known:
+            values[name], counts[name], how[name] = known[name]
+        else:
+            values[name], counts[name] = difference_noise(meas[name])
+            how[name] = f"{counts[name]} differences"
     from_data.update({n: (values[n], counts[n]) for n in wanted})
     notes.append(f"noise estimated from the data alone (the scatter of each channel's {DIFFERENCE_ORDER}th differences, "
-                 "not the model's residuals): " + ", ".join(f"{n} {values[n]:.4g} ({counts[n]} differences)"
-                                                            for n in wanted)
+                 "not the size of the model's residuals): " + ", ".join(f"{n} {values[n]:.4g} ({how[n]})"
+                                                                       for n in wanted)
                  + "; the models are judged against it, and the noise band is widened for its uncertainty")
     return values, counts
 
 
-def _noise_of_thinned(values, counts: dict, corr, fit, notes: list, from_data: dict) -> tuple:
-    """The noise of each channel estimated from the data and thinned for correlated errors, at the errors' full
-    size: the sigma of ``fit`` (which measured the correlation) times ``sqrt(variance)``, the level the scatter
-    of its normalized residuals' fourth differences settled at (:class:`~rocketid.diagnostics.correlated.
-    ChannelCorrelation`). The thinned data's own differences are not used: samples a second or more apart
-    carry the flight's curvature into them (on Corvid-L's speed, 1.4 s apart, 2.6 m/s for 0.25). Returns
-    ``values, counts`` with those channels replaced, ``counts`` their thinned differences."""
-    thinned = {c.channel: c for c in corr.correlated}
-    mine = [n for n in counts if n in thinned]
-    if not mine:
-        return values, counts
-    values, counts = dict(values), dict(counts)
-    for n in mine:
-        c = thinned[n]
-        values[n] = fit.sigma[n] * math.sqrt(c.variance)
-        counts[n] = max(1, c.kept - 4)
-        from_data[n] = (values[n], counts[n])
-    notes.append("noise of " + ", ".join(f"{n} {values[n]:.4g} (from {thinned[n].n_samples} samples' residual "
-                                         f"differences {thinned[n].stride} apart)" for n in mine)
-                 + ": the errors' full size, where the one-sample differences see only part of correlated errors")
-    return values, counts
+def _noise_of_thinned(corr, fit) -> dict:
+    """``{channel: (sigma, differences, how)}`` of the channels thinned for correlated errors, at the errors'
+    full size: the sigma of ``fit`` (which measured the correlation) times ``sqrt(variance)``, the level the
+    scatter of its normalized residuals' fourth differences settled at (:class:`~rocketid.diagnostics.correlated.
+    ChannelCorrelation`), resting on the thinned channel's differences. The thinned data's own differences are
+    not used: samples a second or more apart carry the flight's curvature into them (on Corvid-L's speed, 1.4 s
+    apart, 2.6 m/s for 0.25)."""
+    return {c.channel: (fit.sigma[c.channel] * math.sqrt(c.variance), max(1, c.kept - 4),
+                        f"the errors' full size, from the base fit's residuals' differences up to {c.stride} samples "
+                        "apart: one sample apart they see only part of correlated errors")
+            for c in corr.correlated}
 
 
 def base_fit(spec, meas, sigma=None, *, guess=None, mesh=None, options=None, notes: list | None = None,
@@ -473,8 +470,7 @@ def base_fit(spec, meas, sigma=None, *, guess=None, mesh=None, options=None, not
     corr = find_correlated_noise(fit, action=correlated_noise)
     if corr and correlated_noise == "thin":
         first, meas = [], corr.thin(meas)
-        values, counts = _noise_from_data(sigma, meas, first, from_data)
-        values, counts = _noise_of_thinned(values, counts, corr, fit, first, from_data)
+        values, counts = _noise_from_data(sigma, meas, first, from_data, _noise_of_thinned(corr, fit))
         fit = _fit_base(spec, meas, fit.p, fit.prepared.transcription.mesh, options, first, values)
     notes.extend(first)
     if wild:
