@@ -219,3 +219,21 @@ def test_the_fit_command_warns_that_white_noise_standard_errors_are_too_small(cl
     coloured = CliRunner().invoke(main, ["estimate", str(csv), "--model", MODEL, "--errors", "coloured"])
     assert coloured.exit_code == 0, coloured.output
     assert "the errors look correlated in time" not in coloured.output
+
+
+def test_several_flights_each_thinned_as_its_diagnosis_thinned_it(clean_filtered):
+    """Two flights, one with filtered errors and one with white: each diagnosis measures its own, and the joint
+    fit uses each flight's data as its diagnosis did (the filtered flight thinned channel by channel)."""
+    from rocketid.commands.diagnose_flights import diagnose_flights
+    out = truth.simulate(TIMES, {})
+    rng = np.random.default_rng(21)
+    white = ri.Measurements(tuple(ri.Channel(c, TIMES, out[c] + V.SIGMA[c] * rng.standard_normal(TIMES.size),
+                                             V.SIGMA[c]) for c in ("x", "h", "v")))
+    res = diagnose_flights([clean_filtered, white], ["filtered", "white"], resolve_model(MODEL)[0], confirm_top=0,
+                           workers=1)
+    first, second = res.reports
+    assert first.correlated_noise and not second.correlated_noise
+    assert res.joint is not None and res.joint.success
+    used = [{c.name: c.times.size for c in f.prepared.measurements.channels} for f in res.joint.flights]
+    assert used[0] == {c.channel: c.kept for c in first.correlated_noise.correlated}
+    assert used[1] == {"x": 800, "h": 800, "v": 800}
