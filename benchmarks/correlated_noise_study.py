@@ -8,7 +8,8 @@ channels thinned (the default) and with every sample kept (``correlated_noise="k
 Each case: a truth flown by a simulator, its sensors' errors white noise through a first-order filter
 (``scipy.signal.lfilter``, correlation ``rho`` from one sample to the next, marginal standard deviation the
 sensor's sigma), the sigma stated or estimated from the data. RA-66M uses rocketid's own truth (100 Hz);
-Halcyon-8 the blind study's simulator (``tests/blind_study/truth.py``, 10 Hz). One line per case and mode:
+Halcyon-8 the blind study's simulator (``tests/blind_study/truth.py``, 10 Hz); its ``second-order`` cases put the
+errors through two such filters (a navigation filter's position). One line per case and mode:
 final effects, verdict, chi2/dof, the effect's estimate, the noise from the data, the time.
 """
 
@@ -34,8 +35,12 @@ from rocketid.diagnostics import diagnose, with_effects  # noqa: E402
 HALCYON = str(ROOT / "tests" / "vehicles" / "halcyon.py")
 
 
-def _filtered(n, rho, rng):
-    return lfilter([math.sqrt(1 - rho ** 2)], [1, -rho], rng.standard_normal(n))
+def _filtered(n, rho, rng, order=1):
+    """Unit-variance errors: white noise through ``order`` (1 or 2) first-order filters of pole ``rho``."""
+    if order == 1:
+        return lfilter([math.sqrt(1 - rho ** 2)], [1, -rho], rng.standard_normal(n))
+    e = lfilter([1.0], [1.0, -rho], lfilter([1.0], [1.0, -rho], rng.standard_normal(n)))
+    return e / math.sqrt((1 + rho ** 2) / (1 - rho ** 2) ** 3)   # the stationary variance of the cascade
 
 
 def ra66m(eps: float, rho: float, seed: int, stated: bool):
@@ -49,13 +54,13 @@ def ra66m(eps: float, rho: float, seed: int, stated: bool):
                                             1.0 if stated else None) for c in clean.channels)), "ra66m"
 
 
-def halcyon(eps: float, rho: float, seed: int, stated: bool):
+def halcyon(eps: float, rho: float, seed: int, stated: bool, order: int = 1):
     import halcyon as V
     from blind_study import truth
     times = 0.1 * np.arange(1, 801)
     out = truth.simulate(times, {"thrust_eps": eps} if eps else {})
     rng = np.random.default_rng(seed)
-    return ri.Measurements(tuple(ri.Channel(c, times, out[c] + V.SIGMA[c] * _filtered(times.size, rho, rng),
+    return ri.Measurements(tuple(ri.Channel(c, times, out[c] + V.SIGMA[c] * _filtered(times.size, rho, rng, order),
                                             V.SIGMA[c] if stated else None) for c in ("x", "h", "v"))), HALCYON
 
 
@@ -67,6 +72,8 @@ CASES = {  # name: (maker, thrust error, rho, seed, sigma stated)
     "halcyon-clean-estimated": (halcyon, 0.0, 0.6, 3, False),
     "halcyon-shortfall-stated": (halcyon, -0.025, 0.6, 2, True),
     "halcyon-shortfall-estimated": (halcyon, -0.025, 0.6, 2, False),
+    "halcyon-clean-second-order": (lambda *a: halcyon(*a, order=2), 0.0, 0.8, 1, True),
+    "halcyon-shortfall-second-order": (lambda *a: halcyon(*a, order=2), -0.025, 0.8, 2, True),
 }
 
 

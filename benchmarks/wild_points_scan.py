@@ -55,7 +55,8 @@ def gaussian(reps_small: int = 4000, reps_large: int = 300) -> None:
 def correlated(white: int = 2000, reps: int = 50) -> None:
     """The correlated-errors rule (``rocketid.diagnostics.correlated.noise_correlation``) on series: how often
     white noise is called correlated, alone and under a smooth 5-sigma misfit; for first-order errors of each
-    ``rho``, how often they are found, the stride and the fitted ``rho``; a 10-sample moving average."""
+    ``rho``, how often they are found, the stride and the fitted ``rho``; second-order errors; a misfit of a
+    short period over part of the flight (a motor's ripple); a 10-sample moving average."""
     import math
     from scipy.signal import lfilter
     from rocketid.diagnostics.correlated import noise_correlation
@@ -78,6 +79,18 @@ def correlated(white: int = 2000, reps: int = 50) -> None:
                   + (f", stride median {np.median([c.stride for c in hit]):g}, rho fitted median "
                      f"{np.median([c.rho for c in hit]):.3f}, settled {sum(c.settled for c in hit)}" if hit else ""),
                   flush=True)
+        for rho in (0.6, 0.8):
+            found = []
+            for _ in range(reps):
+                e = lfilter([1.0], [1.0, -rho], lfilter([1.0], [1.0, -rho], rng.standard_normal(n)))
+                found.append(noise_correlation("x", t, e / e.std()))
+            print(f"  second-order rho {rho}: found {sum(c.correlated for c in found)} of {reps}", flush=True)
+        for amp in (1.0, 3.0):
+            burn = (t > 0.06 * t[-1]) & (t < 0.31 * t[-1])
+            ripple = amp * np.sin(2 * np.pi * t / (12 * dt)) * burn
+            hits = sum(noise_correlation("x", t, ripple + rng.standard_normal(n)).correlated for _ in range(reps))
+            print(f"  a misfit of 12 samples' period over a quarter of the flight, {amp:g} sigma: called correlated "
+                  f"{hits} of {reps}", flush=True)
         ma = [noise_correlation("x", t, np.convolve(rng.standard_normal(n + 9), np.ones(10) / math.sqrt(10), "valid"))
               for _ in range(reps)]
         print(f"  10-sample moving average: found {sum(c.correlated for c in ma)} of {reps}, stride median "

@@ -85,6 +85,26 @@ def test_first_order_errors_are_found_and_thinned_to_independent_samples(rho):
     assert c.kept == len(kept)
 
 
+@pytest.mark.parametrize("rho", [0.6, 0.8])
+def test_second_order_errors_are_found(rho):
+    """A navigation filter's position: white noise through two first-order filters, whose scatter rises like the
+    stride's cube at first."""
+    rng = np.random.default_rng(int(10 * rho))
+    t = 0.1 * np.arange(800)
+    e = lfilter([1.0], [1.0, -rho], lfilter([1.0], [1.0, -rho], rng.standard_normal(t.size)))
+    c = noise_correlation("h", t, e / e.std())
+    assert c.correlated and c.stride >= 7
+
+
+def test_a_motor_ripple_is_not_taken_for_filtered_errors():
+    """A misfit of a second's period while the motor burns (a quarter of the flight), one sigma: its scatter rises
+    only at longer strides and only where it acts."""
+    rng = np.random.default_rng(4)
+    t = 0.1 * np.arange(800)
+    ripple = np.sin(2 * np.pi * t / 1.2) * ((t > 5) & (t < 25))
+    assert not any(noise_correlation("v", t, ripple + rng.standard_normal(t.size)).correlated for _ in range(30))
+
+
 def test_a_moving_average_is_thinned_past_its_length():
     rng = np.random.default_rng(5)
     n = 6600

@@ -29,15 +29,18 @@ variance, on differences that also cancel a curved trajectory. :func:`noise_corr
 up by half each time (1, 2, 3, 4, 6, 9, ...; :func:`strides`) and fits the curve of errors correlated
 ``rho ** k`` at ``k`` samples (a first-order filter, the commonest sensor smoothing) to the measured
 ``v(s) / v(1)`` -- all strides at once, which is steadier than comparing any two -- leaving out the
-strides where ``v`` rises faster than first-order errors can (in proportion to the stride, with
-:data:`FLAT` sampling errors of slack): there a misfit's own curvature enters. The channel's errors are
+strides from the first where ``log v`` rises against ``log s`` faster than filtered errors can
+(:data:`GROWTH`: a second-order filter's cube) or faster than at the stride before (filtered errors
+rise ever more slowly), with :data:`FLAT` sampling errors of slack: there a misfit's own curvature
+enters. When the stride wanted lies beyond the strides tried, the level is the highest seen, not the
+fit's extrapolation. The channel's errors are
 **correlated** when the fitted variance exceeds ``v(1)`` by more than :data:`DETECT` sampling errors
 (``sqrt(8 / n)`` relative, measured on white noise) and it rises at two samples' spacing in each
 third of the flight (:data:`PARTS`: a misfit of a second's scale, a hybrid motor's thrust ripple, rises
 only where it acts and only at longer spacings); samples ``s = log(RESIDUAL) / log(rho)`` apart then have errors
-correlated :data:`RESIDUAL` at most. Errors of another shape (a moving average) are matched
-by a longer first-order correlation, so they are thinned more than they need: it costs samples, not
-correctness.
+correlated :data:`RESIDUAL` at most. Errors of another shape (a moving average, a second-order filter,
+a reading held over several frames) are matched by a longer first-order correlation, so they are
+thinned more than they need: it costs samples, not correctness.
 
 What is done (``diagnose(..., correlated_noise=...)``, ``--correlated-noise``): ``"thin"`` (the
 default) keeps every ``s``-th sample of each such channel -- the samples whose errors are
@@ -75,9 +78,14 @@ RESIDUAL = 0.03
 correlation ``rho ** stride`` falls to this."""
 
 FLAT = 3.0
-"""Sampling errors of slack on the fastest rise first-order errors allow (``v`` in proportion to the stride):
-the strides beyond a faster rise are left out of the fit -- there a misfit's own curvature enters, growing up to
-the stride's eighth power."""
+"""Sampling errors of slack on the rise of ``log v`` against ``log s`` from one stride to the next (:data:`GROWTH`)."""
+
+GROWTH = 3.0
+"""The steepest rise of ``log v`` against ``log s`` that filtered errors make: 1 for a first-order filter, 3 for a
+second-order one (a navigation filter's position), at the shortest strides, and ever less as the stride passes
+their correlation. The strides from the first one that rises faster than that, or faster than the stride
+before it, are left out of the fit: there a misfit's own curvature enters (up to the eighth power of the
+stride; Wren-H's speed under its hybrid motor's thrust: a rise of 0.4 from 3 to 4 samples, then 3.4)."""
 
 PARTS = 3
 """Consecutive parts of a channel's samples in each of which the scatter must rise at the second stride: a
@@ -212,11 +220,14 @@ def noise_correlation(name: str, t: np.ndarray, e: np.ndarray, *, max_seconds: f
     for s in tried[1:]:
         v[s] = stride_scatter(t, e, s)[0]
     tried = [s for s in tried if math.isfinite(v[s])]
-    used = [1]
-    for s in tried[1:]:      # no faster than first-order errors can rise: v(s) grows at most like s
-        if v[s] > v[used[-1]] * (s / used[-1]) * (1.0 + FLAT * err):
+    used, slope = [1], GROWTH
+    for s in tried[1:]:      # filtered errors rise ever more slowly; a misfit's curvature faster and faster
+        step = math.log(s / used[-1])
+        rise = math.log(v[s] / v[used[-1]]) / step
+        if rise > min(GROWTH, slope) + FLAT * err * math.sqrt(2.0) / step:
             break
         used.append(s)
+        slope = max(rise, 0.0)
     ss = np.array(used, float)
     vv = np.array([v[s] for s in used]) / v1
     rho, level = _fit_first_order(ss, vv)
@@ -227,6 +238,8 @@ def noise_correlation(name: str, t: np.ndarray, e: np.ndarray, *, max_seconds: f
         want = math.log(RESIDUAL) / math.log(rho)
         chosen = int(min(math.ceil(want), tried[-1]))
         settled = want <= tried[-1]
+        if not settled:       # the fitted level is an extrapolation: the variance seen is a lower bound
+            ratio = float(max(vv))
         parts = _parts(t, e, tried[1])
         correlated = all(r > 1.0 for r, _ in parts)
     if not correlated:
