@@ -819,9 +819,10 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
         Errors correlated from sample to sample (a navigation filter, a smoothed readout;
         :mod:`rocketid.diagnostics.correlated`) are measured on the base fit's residuals, channel by
         channel. ``"thin"`` keeps, in each such channel, the samples far enough apart for their errors
-        to be independent, takes the noise from the data again when it is estimated, and fits the base
-        model again before anything is judged -- on every sample the whiteness test takes correlated
-        errors for a missing effect; ``"keep"`` only reports the correlation.
+        to be independent, takes an estimated noise at the errors' full size (the one-sample differences
+        see only part of correlated errors), and fits the base model again before anything is judged --
+        on every sample the whiteness test takes correlated errors for a missing effect; ``"keep"`` only
+        reports the correlation.
     sizes : mapping of str to float, optional
         Realistic sizes the user states for effect parameters, by name or ``fnmatch`` pattern
         (``{"eps_thrust": 0.10, "eps_P*": 0.10}``), in place of the catalogue's
