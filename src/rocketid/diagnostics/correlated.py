@@ -157,7 +157,8 @@ class ChannelCorrelation:
     error : float
         The relative sampling error of ``v(1)``, ``sqrt(8 / n)``.
     correlated : bool
-        ``ratio`` beyond :data:`DETECT` sampling errors above 1.
+        ``ratio`` beyond :data:`DETECT` sampling errors above 1, and the scatter rising at the second stride in
+        each of the :data:`PARTS` (``parts`` all above 1).
     settled : bool
         The stride is within the strides tried (False: correlated beyond :data:`MAX_SECONDS` or beyond what
         :data:`MIN_KEPT` samples allow; thinned at the largest).
@@ -202,7 +203,8 @@ class ChannelCorrelation:
     def to_dict(self) -> dict:
         return {"channel": self.channel, "correlated": self.correlated, "stride": self.stride,
                 "seconds": self.seconds, "ratio": self.ratio, "error": self.error, "settled": self.settled,
-                "n_samples": self.n_samples, "kept": self.kept, "rho": self.rho, "parts": list(self.parts), "v1": self.v1, "scatter": [list(p) for p in self.scatter]}
+                "n_samples": self.n_samples, "kept": self.kept, "rho": self.rho, "parts": list(self.parts),
+                "v1": self.v1, "scatter": [list(p) for p in self.scatter]}
 
 
 def noise_correlation(name: str, t: np.ndarray, e: np.ndarray, *, max_seconds: float = MAX_SECONDS,
@@ -243,23 +245,24 @@ def noise_correlation(name: str, t: np.ndarray, e: np.ndarray, *, max_seconds: f
         if not settled:       # the fitted level is an extrapolation: the variance seen is a lower bound
             ratio = float(max(vv))
         parts = _parts(t, e, tried[1])
-        correlated = all(r > 1.0 for r, _ in parts)
+        correlated = all(r > 1.0 for r in parts)
     if not correlated:
         chosen, settled, rho = 1, True, 0.0
     seen = tuple((int(a), float(v[a] / v1)) for a in tried)
     return ChannelCorrelation(name, int(chosen), float(chosen * dt), float(ratio), float(err), correlated,
                               bool(settled), seen, int(t.size), int(_thin_index(t, chosen).size), float(rho),
-                              tuple(float(r) for r, _ in parts), float(v1))
+                              parts, float(v1))
 
 
-def _parts(t: np.ndarray, e: np.ndarray, stride: int) -> list:
-    """``[(v(stride) / v(1), sampling error)]`` in each of :data:`PARTS` consecutive parts of the samples."""
+def _parts(t: np.ndarray, e: np.ndarray, stride: int) -> tuple:
+    """``v(stride) / v(1)`` in each of :data:`PARTS` consecutive parts of the samples (NaN where a part has no
+    difference at that stride)."""
     out = []
     for k in np.array_split(np.arange(t.size), PARTS):
-        v1, n1 = stride_scatter(t[k], e[k], 1)
+        v1 = stride_scatter(t[k], e[k], 1)[0]
         vs, ns = stride_scatter(t[k], e[k], stride)
-        out.append((vs / v1, math.sqrt(8.0 / n1)) if ns and v1 > 0 else (math.nan, math.inf))
-    return out
+        out.append(float(vs / v1) if ns and v1 > 0 else math.nan)
+    return tuple(out)
 
 
 def _first_order(s: np.ndarray, rho: float) -> np.ndarray:
@@ -271,8 +274,8 @@ def _first_order(s: np.ndarray, rho: float) -> np.ndarray:
 
 def _fit_first_order(s: np.ndarray, ratios: np.ndarray) -> tuple[float, float]:
     """``(rho, level)``: the first-order correlation and the variance (relative to ``v(1)``) whose
-    :func:`_first_order` curve is nearest the measured ``v(s) / v(1)`` in relative least squares (``rho`` on a
-    grid of correlation times from 0 to 500 samples)."""
+    :func:`_first_order` curve is nearest the measured ``v(s) / v(1)`` in least squares (``rho`` on a grid of
+    correlation times from 0 to 500 samples, the level in closed form at each)."""
     grid = np.concatenate([[0.0], np.exp(-1.0 / np.geomspace(0.05, 500.0, 400))])
     best = (math.inf, 0.0, 1.0)
     for rho in grid:
