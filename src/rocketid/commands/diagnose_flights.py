@@ -10,7 +10,11 @@ diagnosed on its own (:func:`rocketid.diagnostics.diagnose`, its report written 
 estimate), then the base model is fitted to all flights jointly
 (:func:`rocketid.joint.joint_estimate`) and each flight is refitted alone
 (:meth:`rocketid.joint.JointResult.consistency`). The effects each flight's diagnosis
-ends with are compared: found in every flight, in some, or in one flight only.
+ends with are compared: found in every flight, in some, or in one flight only. Last, all
+flights are fitted at once with the effects each found (:mod:`rocketid.diagnostics.flights`):
+a vehicle effect (motor, mass flow, aerodynamics) found in several flights is shared when a
+likelihood-ratio test says the flights agree on it, a flight's own effects (sensors, air,
+start, loading, events) stay its own.
 
 Written: ``DIR/<label>/`` (each flight's report.html, diagnosis.json, ...),
 ``DIR/diagnosis.json`` (``flights``, ``joint``, ``common``), ``DIR/summary.txt`` and
@@ -98,6 +102,10 @@ class FlightsDiagnosis:
         ``{label: {channel: sigma}}``: the noise levels the joint fit held for the channels whose
         sigma was to be estimated -- each flight's from its data alone, as its diagnosis took them
         (:attr:`~rocketid.diagnostics.DiagnosisReport.noise_from_data`); empty when none was.
+    final : JointFinal or None
+        All flights fitted at once with the effects each flight's diagnosis found, vehicle effects found
+        in several flights shared when the flights agree (:func:`rocketid.diagnostics.flights.joint_final`);
+        None when no flight added an effect, a flight was not searched or the base joint fit failed.
     """
 
     model: str
@@ -108,6 +116,7 @@ class FlightsDiagnosis:
     joint_failed: str = ""
     timings: Any = None
     joint_noise: dict = field(default_factory=dict)
+    final: Any = None
 
     # ---- per flight
     def effects(self) -> dict[str, tuple | None]:
@@ -175,6 +184,8 @@ class FlightsDiagnosis:
                        + ", ".join(f"{l} {r.chi2_per_dof:.4g}" for l, r in zip(self.joint.labels, self.joint.flights))
                        + ").")
         out += [n[0].upper() + n[1:] + ("" if n.endswith(".") else ".") for n in self._joint_notes()]
+        if self.final is not None:
+            out += self.final.sentences()
         return out
 
     def summary(self) -> Summary:
@@ -196,9 +207,13 @@ class FlightsDiagnosis:
                                   for l, d in rows.items()], (None, ".4g", ".4g", ".4g")))
         else:
             joint_items = (("status", f"not made ({self.joint_failed})"),)
+        sections = [Section("Flights", (flights,)), effects, Section("Joint fit", joint_items)]
+        notes = self._joint_notes()
+        if self.final is not None:
+            sections.append(self.final.section())
+            notes += [t.sentence() for t in self.final.tests] + list(self.final.notes)
         return Summary(f"rocketid diagnosis of {len(self.labels)} flights: {self.reports[0].fit.spec.name}",
-                       (Section("Flights", (flights,)), effects, Section("Joint fit", joint_items)),
-                       self._joint_notes())
+                       tuple(sections), notes)
 
     def to_dict(self) -> dict:
         """The content of ``DIR/diagnosis.json``."""
@@ -211,7 +226,8 @@ class FlightsDiagnosis:
                      "consistency": self._consistency_rows(), "notes": self._joint_notes(),
                      "noise_from_data": {l: dict(d) for l, d in self.joint_noise.items()}}
         return {"model": self.model, "flights": {l: self._flight_row(l, r) for l, r in zip(self.labels, self.reports)},
-                "joint": joint, "common": self.common(), "verdict": self.verdict(),
+                "joint": joint, "joint_final": None if self.final is None else self.final.to_dict(),
+                "common": self.common(), "verdict": self.verdict(),
                 "timings": dict(self.timings or {})}
 
     def index_html(self) -> str:
@@ -280,6 +296,7 @@ def diagnose_flights(datas: Sequence, labels: Sequence[str], spec, *, files: Seq
     """
     from ..cli import windowed_inputs
     from ..diagnostics import diagnose
+    from ..diagnostics.flights import joint_final
     from ..joint import Flight, joint_estimate
     from ..solve import check_determined
 
@@ -312,9 +329,14 @@ def diagnose_flights(datas: Sequence, labels: Sequence[str], spec, *, files: Seq
         joint.consistency()  # each flight refitted alone (cached)
     except RocketidError as exc:
         joint, failed = None, str(exc)
+    t2 = time.perf_counter()
+    final = None
+    if joint is not None:
+        final = joint_final(flights, reports, joint.chi2_per_dof, level=settings.get("level", 0.05),
+                            sigma=joint_sigma, options=settings.get("options"))
+    timings = {"diagnose_s": t1 - t0, "joint_s": t2 - t1, "joint_final_s": time.perf_counter() - t2}
     result = FlightsDiagnosis(model=model_label or spec.name, labels=labels, files=files, reports=tuple(reports),
-                              joint=joint, joint_failed=failed,
-                              timings={"diagnose_s": t1 - t0, "joint_s": time.perf_counter() - t1}, joint_noise=noise)
+                              joint=joint, joint_failed=failed, timings=timings, joint_noise=noise, final=final)
     if out is not None:
         result.write_joint(out)
     return result

@@ -1,0 +1,421 @@
+"""Several flights: the joint model with the effects each flight's diagnosis found.
+
+Each flight's diagnosis (:func:`rocketid.diagnostics.diagnose`) ends with its own model: the base
+model and the effects it added. This step fits all flights at once with those models and says,
+for an effect found in several flights, whether it is one property of the vehicle (one value for
+every flight) or differs between them.
+
+Which effects may be shared is a matter of physics, decided by the effect's kind:
+
+- **the flight's own** (always one value per flight): sensors (``sensor``: biases, scale factors,
+  time tags), the day's air (``environment``: wind, density, temperature), the start and the site
+  (``kinematics``), the loading (``start_mass`` and its rail-exit form), and events at a time of
+  that flight (an effect with an onset time: a jettison, a throttle step or window, a late
+  misalignment) or a flight's throttle programme (``throttle`` effects);
+- **the vehicle's** (shared when the flights agree): the motor (``propulsion``: thrust level and
+  profile, back-pressure, burn rate, misalignment), the mass flow, the aerodynamics (``aero``),
+  and user effects (``custom``).
+
+A vehicle effect found in two or more flights is first fitted with a value per flight (every
+effect its own: the fit "each flight its own effects"), then with one value shared by the flights
+that found it; the likelihood-ratio statistic ``2 (J_shared - J_own)`` is a chi-square with
+``k (F_e - 1)`` degrees of freedom (``k`` parameters, ``F_e`` flights) when the flights agree. The
+effect is shared when its p-value is at least the diagnosis's level; otherwise it is kept per flight
+and said to differ. The final joint fit shares every effect that passed; each flight's chi2/dof in
+it is judged against that flight's own noise band (:class:`~rocketid.diagnostics.accept.NoiseBand`).
+
+The flights' data are those their diagnoses fitted (wild points dropped, correlated channels
+thinned, noise levels taken from the data held fixed), so the joint fits' objectives are
+comparable with each other.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+from scipy import stats
+
+from ..errors import RocketidError, SensitivityError
+from ..output import finite_or_none
+from ..summary import Section, Table
+
+__all__ = ["FLIGHT_KINDS", "SharingTest", "JointFinal", "effect_nature", "sharing_plan", "joint_final"]
+
+#: Effect kinds that are a property of one flight, never shared.
+FLIGHT_KINDS = ("sensor", "environment", "kinematics")
+
+
+def effect_nature(effect) -> str:
+    """``"flight"`` for an effect that belongs to one flight (its sensors, its air, its start, its
+    loading, an event at a time of its own, its throttle programme), ``"vehicle"`` for one that may be
+    a property of the vehicle (motor, mass flow, aerodynamics, user effects)."""
+    name = str(effect.name)
+    if effect.kind in FLIGHT_KINDS or name.startswith("start_mass") or name.startswith("throttle"):
+        return "flight"
+    if effect.event_time is not None:
+        return "flight"
+    return "vehicle"
+
+
+@dataclass(frozen=True)
+class SharingTest:
+    """Whether one vehicle effect found in several flights has one value for all of them.
+
+    Attributes
+    ----------
+    effect : str
+    flights : tuple of str
+        The flights whose diagnosis found it.
+    parameters : tuple of str
+    own : dict
+        ``{flight: {parameter: (value, std)}}`` in the fit where each flight has its own value.
+    statistic : float
+        ``2 (J_shared - J_own)`` (NaN when a fit failed).
+    dof : int
+        ``len(parameters) * (len(flights) - 1)``.
+    p_value : float
+    shared : bool
+        The flights agree (``p_value >= level``): the effect is shared in the final joint fit.
+    note : str
+        Why the test could not be made (empty when it was).
+    """
+
+    effect: str
+    flights: tuple
+    parameters: tuple
+    own: dict
+    statistic: float
+    dof: int
+    p_value: float
+    shared: bool
+    note: str = ""
+
+    def sentence(self) -> str:
+        values = "; ".join(f"{l}: " + ", ".join(f"{n} {v:.4g} +- {s:.2g}" for n, (v, s) in d.items())
+                           for l, d in self.own.items())
+        if self.note:
+            return f"{self.effect}: kept per flight ({self.note}" + (f"; {values})" if values else ")")
+        cost = f"sharing costs 2 dJ = {self.statistic:.4g} for {self.dof} degree(s) of freedom, p = {self.p_value:.2g}"
+        if self.shared:
+            return f"{self.effect}: one value for flights {', '.join(self.flights)} ({cost}; alone {values})"
+        return (f"{self.effect}: differs between flights {', '.join(self.flights)} ({values}; {cost}): not one "
+                "property of the vehicle, kept per flight")
+
+    def to_dict(self) -> dict:
+        return {"effect": self.effect, "flights": list(self.flights), "parameters": list(self.parameters),
+                "own": {l: {n: {"value": finite_or_none(v), "std": finite_or_none(s)} for n, (v, s) in d.items()}
+                        for l, d in self.own.items()},
+                "statistic": finite_or_none(self.statistic), "dof": int(self.dof),
+                "p_value": finite_or_none(self.p_value), "shared": bool(self.shared), "note": self.note}
+
+
+@dataclass(frozen=True)
+class JointFinal:
+    """All flights fitted at once with the effects their diagnoses found.
+
+    Attributes
+    ----------
+    effects : dict
+        ``{flight: (effect, ...)}``: each flight's final effects, in the order its diagnosis added them.
+    nature : dict
+        ``{effect: "vehicle" or "flight"}`` (:func:`effect_nature`).
+    shared : tuple of str
+        The effects fitted with one value for the flights that found them.
+    tests : tuple of SharingTest
+        One per vehicle effect found in two or more flights.
+    result : JointResult or None
+        The final joint fit (None when it failed: :attr:`failed`).
+    base_chi2_per_dof : float
+        The joint fit of the base model (every flight), for the fall.
+    bands : dict
+        ``{flight: chi2/dof a correct model reaches}`` (each flight's noise band's upper edge).
+    failed : str
+    notes : tuple of str
+    parameters_of : dict
+        ``{(flight, effect): parameter names}``: what each flight's effect adds to the base model.
+    """
+
+    effects: dict
+    nature: dict
+    shared: tuple
+    tests: tuple
+    result: Any
+    base_chi2_per_dof: float
+    bands: dict
+    failed: str = ""
+    notes: tuple = ()
+    parameters_of: dict = field(default_factory=dict, repr=False, compare=False)
+
+    @property
+    def chi2_per_dof(self) -> float:
+        return math.nan if self.result is None else float(self.result.chi2_per_dof)
+
+    def per_flight(self) -> dict:
+        """``{flight: (chi2/dof in the final joint fit, its band, reaches the noise)}``."""
+        if self.result is None:
+            return {}
+        out = {}
+        for label, r in zip(self.result.labels, self.result.flights):
+            band = self.bands.get(label, math.nan)
+            out[label] = (float(r.chi2_per_dof), band, bool(math.isfinite(band) and r.chi2_per_dof <= band))
+        return out
+
+    @property
+    def fits_to_noise(self) -> bool:
+        """Every flight's chi2/dof in the final joint fit is inside its noise band."""
+        rows = self.per_flight()
+        return bool(rows) and bool(self.result.success) and all(ok for _, _, ok in rows.values())
+
+    def _values(self) -> list:
+        """``(joint name, value, std)`` of every effect parameter of the final joint fit."""
+        res = self.result
+        try:
+            se = res.standard_errors
+        except SensitivityError:
+            se = np.full(len(res.names), np.nan)
+        names = set()
+        for label, spec_effects in self.effects.items():
+            for e in spec_effects:
+                names.update(self.parameters_of.get((label, e), ()))
+        out = []
+        for i, n in enumerate(res.names):
+            base = n.split("[")[0]
+            if base in names:
+                out.append((n, float(res.theta[i]), float(se[i])))
+        return out
+
+    def sentences(self) -> list[str]:
+        """What the joint model says, in a few sentences."""
+        if self.result is None:
+            return [f"The joint fit with each flight's effects could not be made: {self.failed}"]
+        out = [f"Joint fit with each flight's effects: chi2/dof {_chi2(self.base_chi2_per_dof)} (base model) -> "
+               f"{_chi2(self.chi2_per_dof)}" + ("" if self.result.success else " (did not converge)") + "."]
+        out += [t.sentence() + "." for t in self.tests]     # effect names keep their case
+        rows = self.per_flight()
+        over = [f"{l} {c:.4g} (band {b:.4g})" for l, (c, b, ok) in rows.items() if not ok]
+        if self.fits_to_noise:
+            out.append("Every flight reaches its noise in the joint model.")
+        elif over:
+            out.append("Above the noise in the joint model: " + ", ".join(over) + ".")
+        return out
+
+    def section(self) -> Section:
+        """The summary's section "Joint model with the effects found"."""
+        if self.result is None:
+            return Section("Joint model with the effects found", (("status", f"not made ({self.failed})"),))
+        rows = [(l, ", ".join(self.effects.get(l, ())) or "-", c, b, "yes" if ok else "no")
+                for l, (c, b, ok) in self.per_flight().items()]
+        items: list = [("chi2 / dof", f"{_chi2(self.base_chi2_per_dof)} (base model) -> {_chi2(self.chi2_per_dof)}"),
+                       ("status", "converged" if self.result.success else f"FAILED ({self.result.message})"),
+                       ("shared", ", ".join(self.shared) or "none"),
+                       Table(("flight", "effects", "chi2/dof joint", "band", "at the noise"), rows,
+                             (None, None, ".4g", ".4g", None))]
+        values = self._values()
+        if values:
+            items.append(Table(("parameter", "estimate", "std error"), values, (None, ".6g", ".3g")))
+        return Section("Joint model with the effects found", tuple(items))
+
+    def to_dict(self) -> dict:
+        d: dict = {"effects": {l: list(e) for l, e in self.effects.items()}, "nature": dict(self.nature),
+                   "shared": list(self.shared), "tests": [t.to_dict() for t in self.tests],
+                   "base_chi2_per_dof": finite_or_none(self.base_chi2_per_dof), "failed": self.failed,
+                   "notes": list(self.notes)}
+        if self.result is not None:
+            d.update({"success": bool(self.result.success), "chi2_per_dof": finite_or_none(self.chi2_per_dof),
+                      "fits_to_noise": self.fits_to_noise,
+                      "per_flight": {l: {"chi2_per_dof": finite_or_none(c), "band": finite_or_none(b),
+                                         "fits_to_noise": ok} for l, (c, b, ok) in self.per_flight().items()},
+                      "parameters": {n: {"value": finite_or_none(v), "std": finite_or_none(s)}
+                                     for n, v, s in self._values()}})
+        return d
+
+
+def sharing_plan(declared: Mapping[str, Sequence[tuple]]) -> tuple[dict, set]:
+    """Which effect parameters may be shared between flights, and which stay each flight's own.
+
+    Parameters
+    ----------
+    declared : mapping
+        ``{flight: [(effect, nature, parameter names), ...]}``: each flight's final effects, their
+        :func:`effect_nature` and the parameters each adds.
+
+    Returns
+    -------
+    (dict, set)
+        ``{effect: (flights, parameters)}`` of the vehicle effects found in two or more flights whose
+        parameters may take one value (a parameter is shareable only when no other effect, in any flight,
+        declares a parameter of the same name: two drag tables on other knots both name ``dCD_M0``), and
+        the set of effect parameters that are always per flight.
+    """
+    owner: dict = {}
+    found: dict = {}
+    for flight, items in declared.items():
+        for effect, nature, ps in items:
+            for n in ps:
+                owner.setdefault(n, set()).add(effect)
+            if nature == "vehicle":
+                found.setdefault(effect, [])
+                if flight not in found[effect]:
+                    found[effect].append(flight)
+    shareable = {}
+    for effect, flights in found.items():
+        ps = tuple(dict.fromkeys(n for f in flights for e, _, pp in declared[f] if e == effect for n in pp
+                                 if owner[n] == {effect}))
+        if len(flights) > 1 and ps:
+            shareable[effect] = (tuple(flights), ps)
+    sharing = {n for _, ps in shareable.values() for n in ps}
+    return shareable, set(owner) - sharing
+
+
+def _effect_parameters(base_spec, effect) -> tuple:
+    """The names of the parameters ``effect`` adds to ``base_spec``."""
+    from .effects import with_effects
+    try:
+        added = with_effects(base_spec, [effect]).parameter_names
+    except RocketidError:
+        return tuple(effect.parameter_names)
+    known = set(base_spec.parameter_names)
+    return tuple(n for n in added if n not in known)
+
+
+def _guess(layout, flights: Sequence, values: Sequence[dict]) -> dict:
+    """Joint guesses from each flight's own fit: a flight's own parameter its value, a shared one the mean of
+    the flights that have it."""
+    guess = {}
+    for name, owner in zip(layout.names, layout.owner):
+        if owner is None:
+            vals = [v[name] for v in values if name in v]
+            if vals:
+                guess[name] = float(np.mean(vals))
+        else:
+            base = name[:name.rindex("[")]
+            if base in values[owner]:
+                guess[name] = float(values[owner][base])
+    return guess
+
+
+def joint_final(flights: Sequence, reports: Sequence, base_chi2_per_dof: float, *, level: float = 0.05,
+                sigma=None, options=None) -> JointFinal | None:
+    """Fit all flights at once with the effects their diagnoses found; test which vehicle effects are shared.
+
+    Parameters
+    ----------
+    flights : sequence of Flight
+        Each flight's base model and its data as its diagnosis fitted them (:class:`rocketid.joint.Flight`).
+    reports : sequence of DiagnosisReport
+        Each flight's diagnosis, in the same order.
+    base_chi2_per_dof : float
+        chi2/dof of the joint fit of the base model.
+    level : float
+        A vehicle effect is shared when the likelihood-ratio test of one value against one per flight
+        has a p-value at least this.
+    sigma : optional
+        The noise request of the base model's joint fit (:func:`rocketid.joint.joint_estimate`), the same
+        for every fit here.
+    options : mapping, optional
+        IPOPT options.
+
+    Returns
+    -------
+    JointFinal or None
+        None when some flight's diagnosis did not search for effects (``confirm_top=0``) or none added one.
+    """
+    from ..joint import joint_estimate, joint_prepare
+
+    finals = [r.discovery for r in reports]
+    if any(d is None for d in finals):
+        return None
+    labels = [fl.label for fl in flights]
+    effects = {l: tuple(e.name for e in d.effects) for l, d in zip(labels, finals)}
+    nature: dict = {}
+    params: dict = {}              # (flight, effect) -> parameter names
+    declared: dict = {l: [] for l in labels}
+    for l, d in zip(labels, finals):
+        for e in d.effects:
+            nature[e.name] = effect_nature(e)
+            params[(l, e.name)] = _effect_parameters(d.base_fit.spec, e)
+            declared[l].append((e.name, nature[e.name], params[(l, e.name)]))
+    bands = {l: float(d.band.upper) for l, d in zip(labels, finals)}
+    if not any(effects.values()):
+        return None
+    shareable, always_own = sharing_plan(declared)
+    fl_final = [replace(fl, spec=d.fit.spec) for fl, d in zip(flights, finals)]
+    values = [dict(zip(d.fit.spec.parameter_names, map(float, d.fit.p))) for d in finals]
+    notes: list = []
+
+    def fit(per_flight: set):
+        prepared = joint_prepare(fl_final, per_flight=sorted(per_flight & _names(fl_final)))
+        return joint_estimate(fl_final, prepared=prepared, guess=_guess(prepared.layout, fl_final, values),
+                              sigma=sigma, options=options)
+
+    tests = []
+    shared: list = []
+    if shareable:
+        own_all = always_own | {n for _, ps in shareable.values() for n in ps}
+        try:
+            own = fit(own_all)
+        except RocketidError as exc:
+            own = None
+            notes.append(f"the joint fit with every effect per flight failed: {exc}")
+        for e, (fs, ps) in shareable.items():
+            own_vals = _own_values(own, fs, ps)
+            if own is None or not own.success:
+                tests.append(SharingTest(e, tuple(fs), ps, own_vals, math.nan, 0, math.nan, False,
+                                         "the fit with one value per flight did not converge"))
+                continue
+            try:
+                one = fit(own_all - set(ps))
+            except RocketidError as exc:
+                tests.append(SharingTest(e, tuple(fs), ps, own_vals, math.nan, 0, math.nan, False,
+                                         f"the fit with one value failed: {exc}"))
+                continue
+            if not one.success:
+                tests.append(SharingTest(e, tuple(fs), ps, own_vals, math.nan, 0, math.nan, False,
+                                         "the fit with one value did not converge"))
+                continue
+            stat = max(0.0, 2.0 * (one.objective - own.objective))
+            dof = len(ps) * (len(fs) - 1)
+            p = float(stats.chi2.sf(stat, dof))
+            tests.append(SharingTest(e, tuple(fs), ps, own_vals, stat, dof, p, p >= level))
+            if p >= level:
+                shared.append(e)
+    per_flight = always_own | {n for t in tests if not t.shared for n in t.parameters}
+    try:
+        result = fit(per_flight)
+        failed = ""
+    except RocketidError as exc:
+        result, failed = None, str(exc)
+    return JointFinal(effects, nature, tuple(shared), tuple(tests), result, float(base_chi2_per_dof), bands,
+                      failed, tuple(notes), parameters_of=params)
+
+
+def _chi2(value: float) -> str:
+    """chi2/dof as the summaries print it: four decimals near the noise, four digits far from it."""
+    return f"{value:.4f}" if abs(value) < 100 else f"{value:.4g}"
+
+
+def _names(flights) -> set:
+    return {n for fl in flights for n in fl.spec.parameter_names}
+
+
+def _own_values(res, flights: Sequence[str], parameters: Sequence[str]) -> dict:
+    """``{flight: {parameter: (value, std)}}`` of a fit where each flight has its own values."""
+    if res is None:
+        return {}
+    try:
+        se = res.standard_errors
+    except SensitivityError:
+        se = np.full(len(res.names), np.nan)
+    out = {}
+    for l in flights:
+        d = {}
+        for n in parameters:
+            key = f"{n}[{l}]"
+            if key in res.names:
+                i = res.names.index(key)
+                d[n] = (float(res.theta[i]), float(se[i]))
+        out[l] = d
+    return out

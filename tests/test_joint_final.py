@@ -1,0 +1,121 @@
+"""Several flights: the joint model with the effects each flight's diagnosis found.
+
+Truth: the hidden-effect study's own truth model of RA-66 (``tests/discovery_study/truth.py``:
+a vector force balance, the thrust scaled by ``1 + eps`` in its own expression, the altimeter's
+bias added to the simulated readings), not the catalogue's expressions. Three flights:
+
+- A: thrust 2 % above the stated one;
+- B: the same engine (thrust +2 %) and an altimeter reading 5 m high;
+- C: another engine, thrust 3.5 % above the stated one.
+
+A and B share the thrust error (one value: 0.02), B's bias is its own; A and C differ (0.02 and
+0.035), so the thrust error is not one property of the vehicle and stays per flight. About 45 s:
+at most two effects per flight, no hold-out check.
+"""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from click.testing import CliRunner
+
+from discovery_study.truth import measure, ra66_vehicle
+from rocketid.cli import main
+from rocketid.diagnostics import CATALOGUE
+from rocketid.diagnostics.effects import Vehicle, throttle_effect
+from rocketid.diagnostics.flights import effect_nature, sharing_plan
+
+FAST = ["--model", "ra66", "--max-effects", "2", "--holdout", "none"]
+TRUTH = {"A": {"thrust_level": {"eps_thrust": 0.02}},
+         "B": {"thrust_level": {"eps_thrust": 0.02}, "bias_h": {"b_h": 5.0}},
+         "C": {"thrust_level": {"eps_thrust": 0.035}}}
+
+
+@pytest.fixture(scope="module")
+def flight_files(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("flights")
+    vehicle = ra66_vehicle()
+    return {label: measure(vehicle, effects, seed=400 + i).to_csv(folder / f"{label}.csv")
+            for i, (label, effects) in enumerate(TRUTH.items())}
+
+
+def _diagnose(files, labels, out):
+    res = CliRunner().invoke(main, ["diagnose", *[str(files[l]) for l in labels], *FAST, "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    return res, json.loads((out / "diagnosis.json").read_text())
+
+
+def test_an_effect_the_flights_agree_on_is_fitted_once_and_a_flights_own_stays_its_own(flight_files, tmp_path):
+    res, d = _diagnose(flight_files, ["A", "B"], tmp_path / "diag")
+    final = d["joint_final"]
+    assert final["effects"] == {"A": ["thrust_level"], "B": ["thrust_level", "bias_h"]}
+    assert final["nature"] == {"thrust_level": "vehicle", "bias_h": "flight"}
+    (test,) = final["tests"]
+    assert test["effect"] == "thrust_level" and test["flights"] == ["A", "B"] and test["dof"] == 1
+    assert test["shared"] and test["p_value"] >= 0.05
+    assert final["shared"] == ["thrust_level"]
+    params = final["parameters"]
+    assert set(params) == {"eps_thrust", "b_h[B]"}                      # one thrust error, B's bias its own
+    eps, b_h = params["eps_thrust"], params["b_h[B]"]
+    assert abs(eps["value"] - 0.02) < 4 * eps["std"] and eps["std"] < 1e-4
+    assert abs(b_h["value"] - 5.0) < 4 * b_h["std"]
+    # the error falls to the noise in the joint model, flight by flight
+    assert final["success"] and final["fits_to_noise"]
+    assert final["chi2_per_dof"] < 1.05 < 10 < final["base_chi2_per_dof"]
+    assert all(row["fits_to_noise"] for row in final["per_flight"].values())
+    assert "Joint model with the effects found" in res.output
+    assert "thrust_level: one value for flights A, B" in res.output
+    assert any(v.startswith("Every flight reaches its noise in the joint model") for v in d["verdict"])
+
+
+def test_an_effect_that_differs_between_flights_is_kept_per_flight(flight_files, tmp_path):
+    res, d = _diagnose(flight_files, ["A", "C"], tmp_path / "diag")
+    final = d["joint_final"]
+    (test,) = final["tests"]
+    assert test["effect"] == "thrust_level" and not test["shared"] and test["p_value"] < 1e-6
+    own = test["own"]
+    assert abs(own["A"]["eps_thrust"]["value"] - 0.02) < 1e-3 and abs(own["C"]["eps_thrust"]["value"] - 0.035) < 1e-3
+    assert final["shared"] == []
+    assert set(final["parameters"]) == {"eps_thrust[A]", "eps_thrust[C]"}
+    assert final["fits_to_noise"]
+    assert "thrust_level: differs between flights A, C" in res.output
+    assert "not one property of the vehicle" in res.output
+
+
+def test_the_nature_of_an_effect_follows_its_physics():
+    for name in ("thrust_level", "back_pressure", "mass_flow", "transonic_drag", "base_drag", "misalignment"):
+        assert effect_nature(CATALOGUE[name]) == "vehicle", name
+    for name in ("bias_h", "scale_v", "time_offset", "wind", "density", "earth_rotation", "start_speed",
+                 "start_mass"):
+        assert effect_nature(CATALOGUE[name]) == "flight", name
+    # the refined and located shapes: a throttle window, a jettison at a time, a user's throttle are the flight's;
+    # a drag table in Mach and a thrust profile are the vehicle's
+    vehicle = Vehicle(thrust=1e5, mass=1e4, mass_flow=100.0, speed=1000.0, start_speed=0.0, duration=60.0,
+                      altitude=(0.0, 20e3), mach=(0.0, 3.0), sigma={"h": 1.0}, sample_interval=0.01,
+                      knot_times=tuple(float(t) for t in range(0, 61, 6)), mach_knots=(0.0, 0.8, 1.2, 2.0, 3.0),
+                      powered=(0.0, 60.0))
+    shapes = {e.name: e for fam in ("thrust_level", "start_mass", "transonic_drag")
+              for e in CATALOGUE[fam].refinements(vehicle)}
+    assert effect_nature(shapes["throttle_window"]) == "flight"
+    assert effect_nature(shapes["mass_jettison"]) == "flight"
+    assert effect_nature(throttle_effect([10.0, 20.0, 30.0])) == "flight"
+    assert any(n.startswith("thrust_profile") for n in shapes)
+    for n, e in shapes.items():
+        if n.startswith(("thrust_profile", "drag_mach")):
+            assert effect_nature(e) == "vehicle", n
+
+
+def test_a_parameter_two_effects_declare_is_never_shared():
+    declared = {
+        "A": [("thrust_level", "vehicle", ("eps_thrust",)), ("drag_mach_6", "vehicle", ("dCD_M0", "dCD_M1")),
+              ("bias_h", "flight", ("b_h",))],
+        "B": [("thrust_level", "vehicle", ("eps_thrust",)), ("drag_mach_8", "vehicle", ("dCD_M0", "dCD_M1")),
+              ("bias_h", "flight", ("b_h",))],
+        "C": [("mass_flow", "vehicle", ("eps_mdot",))],
+    }
+    shareable, own = sharing_plan(declared)
+    assert shareable == {"thrust_level": (("A", "B"), ("eps_thrust",))}
+    # two drag tables on other knots name the same parameters: each flight keeps its own; a sensor's bias found
+    # in two flights is each flight's; a vehicle effect of one flight has nothing to share with
+    assert own == {"dCD_M0", "dCD_M1", "b_h", "eps_mdot"}
