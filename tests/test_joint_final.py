@@ -40,8 +40,8 @@ def flight_files(tmp_path_factory):
             for i, (label, effects) in enumerate(TRUTH.items())}
 
 
-def _diagnose(files, labels, out):
-    res = CliRunner().invoke(main, ["diagnose", *[str(files[l]) for l in labels], *FAST, "--out", str(out)])
+def _diagnose(files, labels, out, *options):
+    res = CliRunner().invoke(main, ["diagnose", *[str(files[l]) for l in labels], *FAST, *options, "--out", str(out)])
     assert res.exit_code == 0, res.output
     return res, json.loads((out / "diagnosis.json").read_text())
 
@@ -70,7 +70,8 @@ def test_an_effect_the_flights_agree_on_is_fitted_once_and_a_flights_own_stays_i
 
 
 def test_an_effect_that_differs_between_flights_is_kept_per_flight(flight_files, tmp_path):
-    res, d = _diagnose(flight_files, ["A", "C"], tmp_path / "diag")
+    # the lift coefficient each flight's own (--per-flight, as an attitude program would be): the joint fits keep it
+    res, d = _diagnose(flight_files, ["A", "C"], tmp_path / "diag", "--per-flight", "C*L")
     final = d["joint_final"]
     (test,) = final["tests"]
     assert test["effect"] == "thrust_level" and not test["shared"] and test["p_value"] < 1e-6
@@ -79,6 +80,7 @@ def test_an_effect_that_differs_between_flights_is_kept_per_flight(flight_files,
     assert final["shared"] == []
     assert set(final["parameters"]) == {"eps_thrust[A]", "eps_thrust[C]"}
     assert final["fits_to_noise"]
+    assert {"CL[A]", "CL[C]"} <= set(d["joint"]["parameters"]) and "CL" not in d["joint"]["parameters"]
     assert "thrust_level: differs between flights A, C" in res.output
     assert "not one property of the vehicle" in res.output
 
@@ -119,3 +121,13 @@ def test_a_parameter_two_effects_declare_is_never_shared():
     # two drag tables on other knots name the same parameters: each flight keeps its own; a sensor's bias found
     # in two flights is each flight's; a vehicle effect of one flight has nothing to share with
     assert own == {"dCD_M0", "dCD_M1", "b_h", "eps_mdot"}
+
+
+def test_per_flight_parameters_are_checked_before_any_work(flight_files, tmp_path):
+    one = CliRunner().invoke(main, ["diagnose", str(flight_files["A"]), *FAST, "--per-flight", "CL",
+                                    "--out", str(tmp_path / "one")])
+    assert one.exit_code == 2 and "--per-flight needs several data files" in one.output
+    bad = CliRunner().invoke(main, ["diagnose", str(flight_files["A"]), str(flight_files["B"]), *FAST,
+                                    "--per-flight", "alpha*", "--out", str(tmp_path / "bad")])
+    assert bad.exit_code == 2 and "--per-flight alpha*: no parameter of RA-66 matches" in bad.output
+    assert "CD0" in bad.output and not (tmp_path / "bad" / "A").exists()

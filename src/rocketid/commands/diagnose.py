@@ -86,13 +86,17 @@ __all__ = ["command"]
               help="Realistic size of an effect parameter (repeatable; a name or a pattern such as 'eps_P*'), in "
                    "place of the catalogue's: an effect beyond 5 times it is implausible. A model file's "
                    "realistic_sizes() states them too; the option wins.")
+@click.option("--per-flight", "per_flight", multiple=True, metavar="NAME",
+              help="With several data files: a model parameter (or a pattern such as 'alpha*') that each flight "
+                   "estimates for itself in the joint fits (repeatable; the others are shared, free initial states "
+                   "are per flight always): a flight's attitude program, its lift-off mass.")
 @sigma_option_decl()
 @sigma_column_option_decl()
 @unmeasured_option_decl()
 @verbose_option
 def command(data_files, out, model, level, confirm_top, holdout, max_effects, workers, refit_timeout, locate_window,
-            window_text, columns, time_column, wild_points, correlated_noise, size_opts, sigmas, sigma_columns,
-            unmeasured):
+            window_text, columns, time_column, wild_points, correlated_noise, size_opts, per_flight, sigmas,
+            sigma_columns, unmeasured):
     """Fit a model to DATA.csv and diagnose what it misses; write DIR/report.html.
 
     The report compares each channel with the model, locates where the
@@ -132,9 +136,12 @@ def command(data_files, out, model, level, confirm_top, holdout, max_effects, wo
     candidates = _file_candidates(model)
     sizes = {**_file_sizes(model), **assignments(size_opts, "--size")}
     sigma = sigma_argument(sigmas, spec)
+    if per_flight and len(data_files) < 2:
+        raise SettingsError("--per-flight needs several data files (one per flight)")
+    own = _per_flight_names(per_flight, spec)
     if len(data_files) > 1:
         _several(data_files, out, spec, label, sigma, flight, columns=columns, time_column=time_column,
-                 sigma_columns=sigma_columns, unmeasured=unmeasured,
+                 sigma_columns=sigma_columns, unmeasured=unmeasured, per_flight=own,
                  settings=dict(level=level, confirm_top=confirm_top, window=window, holdout=holdout,
                                max_effects=max_effects, workers=workers, refit_timeout=refit_timeout,
                                candidates=candidates, wild_points=wild_points, sizes=sizes,
@@ -161,8 +168,24 @@ def command(data_files, out, model, level, confirm_top, holdout, max_effects, wo
         click.get_current_context().exit(EXIT_NOT_CONVERGED)
 
 
+def _per_flight_names(patterns, spec) -> tuple:
+    """The model's parameters named by ``--per-flight`` (names or shell-style patterns, ``alpha*``); a
+    SettingsError naming the parameters when one matches none."""
+    from fnmatch import fnmatchcase
+
+    names = tuple(spec.parameter_names)
+    out: list = []
+    for pat in patterns:
+        hit = [n for n in names if fnmatchcase(n, pat)]
+        if not hit:
+            raise SettingsError(f"--per-flight {pat}: no parameter of {spec.name} matches; its parameters are "
+                                f"{', '.join(names)}")
+        out += [n for n in hit if n not in out]
+    return tuple(out)
+
+
 def _several(data_files, out, spec, model_label, sigma, flight, *, columns, time_column, sigma_columns, unmeasured,
-             settings):
+             per_flight=(), settings):
     """Several flights: each diagnosed alone, then jointly (:mod:`rocketid.commands.diagnose_flights`)."""
     from ..cli import flight_labels
     from .diagnose_flights import diagnose_flights
@@ -182,7 +205,8 @@ def _several(data_files, out, spec, model_label, sigma, flight, *, columns, time
 
         status(f"diagnosing {len(labels)} flights ({', '.join(labels)}) with {spec.name}, one at a time, then jointly")
         result = diagnose_flights(datas, labels, spec, files=[str(f) for f in data_files], model_label=model_label,
-                                  flight_window=flight, sigma=sigma, out=out, on_flight=done, **settings)
+                                  flight_window=flight, sigma=sigma, out=out, on_flight=done, per_flight=per_flight,
+                                  **settings)
     click.echo(result.summary().text())
     click.echo(f"wrote {Path(out) / 'index.html'}, {Path(out) / 'diagnosis.json'} and each flight's report in "
                f"{Path(out)}/<flight>/ ({time.perf_counter() - t0:.1f} s)")

@@ -267,7 +267,7 @@ class FlightsDiagnosis:
 
 def diagnose_flights(datas: Sequence, labels: Sequence[str], spec, *, files: Sequence[str] | None = None,
                      model_label: str | None = None, flight_window=None, sigma=None, out: str | Path | None = None,
-                     on_flight=None, **settings) -> FlightsDiagnosis:
+                     on_flight=None, per_flight: Sequence[str] = (), **settings) -> FlightsDiagnosis:
     """Diagnose each flight alone, then fit the base model to all flights jointly.
 
     Parameters
@@ -288,6 +288,9 @@ def diagnose_flights(datas: Sequence, labels: Sequence[str], spec, *, files: Seq
         Write each flight's report to ``out/<label>/`` as soon as it is made, then the joint files.
     on_flight : callable, optional
         ``on_flight(label, report)`` after each flight's diagnosis (progress).
+    per_flight : sequence of str
+        Model parameters each flight estimates for itself in the joint fits (its attitude program, its
+        lift-off mass); the others are shared (:func:`rocketid.joint.joint_estimate`).
     **settings
         Passed to :func:`rocketid.diagnostics.diagnose` for each flight (``level``,
         ``confirm_top``, ``holdout``, ``max_effects``, ``workers``, ``refit_timeout``, ``window``,
@@ -325,7 +328,7 @@ def diagnose_flights(datas: Sequence, labels: Sequence[str], spec, *, files: Seq
     flights = [replace(fl, data=_as_diagnosed(fl.data, rep)) for fl, rep in zip(flights, reports)]
     flights, joint_sigma, noise = _noise_of_the_flights(flights, reports, sigma)
     try:
-        joint = joint_estimate(flights, sigma=joint_sigma)
+        joint = joint_estimate(flights, per_flight=per_flight, sigma=joint_sigma)
         joint.consistency()  # each flight refitted alone (cached)
     except RocketidError as exc:
         joint, failed = None, str(exc)
@@ -333,7 +336,7 @@ def diagnose_flights(datas: Sequence, labels: Sequence[str], spec, *, files: Seq
     final = None
     if joint is not None:
         final = joint_final(flights, reports, joint.chi2_per_dof, level=settings.get("level", 0.05),
-                            sigma=joint_sigma, options=settings.get("options"))
+                            sigma=joint_sigma, options=settings.get("options"), per_flight=per_flight)
     timings = {"diagnose_s": t1 - t0, "joint_s": t2 - t1, "joint_final_s": time.perf_counter() - t2}
     result = FlightsDiagnosis(model=model_label or spec.name, labels=labels, files=files, reports=tuple(reports),
                               joint=joint, joint_failed=failed, timings=timings, joint_noise=noise, final=final)

@@ -298,7 +298,7 @@ def _guess(layout, flights: Sequence, values: Sequence[dict]) -> dict:
 
 
 def joint_final(flights: Sequence, reports: Sequence, base_chi2_per_dof: float, *, level: float = 0.05,
-                sigma=None, options=None) -> JointFinal | None:
+                sigma=None, options=None, per_flight: Sequence[str] = ()) -> JointFinal | None:
     """Fit all flights at once with the effects their diagnoses found; test which vehicle effects are shared.
 
     Parameters
@@ -317,6 +317,8 @@ def joint_final(flights: Sequence, reports: Sequence, base_chi2_per_dof: float, 
         for every fit here.
     options : mapping, optional
         IPOPT options.
+    per_flight : sequence of str
+        Base-model parameters each flight keeps for itself in every joint fit (as in the base model's).
 
     Returns
     -------
@@ -346,8 +348,10 @@ def joint_final(flights: Sequence, reports: Sequence, base_chi2_per_dof: float, 
     values = [dict(zip(d.fit.spec.parameter_names, map(float, d.fit.p))) for d in finals]
     notes: list = []
 
-    def fit(per_flight: set):
-        prepared = joint_prepare(fl_final, per_flight=sorted(per_flight & _names(fl_final)))
+    base_own = set(per_flight)
+
+    def fit(own: set):
+        prepared = joint_prepare(fl_final, per_flight=sorted((own | base_own) & _names(fl_final)))
         return joint_estimate(fl_final, prepared=prepared, guess=_guess(prepared.layout, fl_final, values),
                               sigma=sigma, options=options)
 
@@ -382,9 +386,9 @@ def joint_final(flights: Sequence, reports: Sequence, base_chi2_per_dof: float, 
             tests.append(SharingTest(e, tuple(fs), ps, own_vals, stat, dof, p, p >= level))
             if p >= level:
                 shared.append(e)
-    per_flight = always_own | {n for t in tests if not t.shared for n in t.parameters}
+    kept_own = always_own | {n for t in tests if not t.shared for n in t.parameters}
     try:
-        result = fit(per_flight)
+        result = fit(kept_own)
         failed = ""
     except RocketidError as exc:
         result, failed = None, str(exc)
