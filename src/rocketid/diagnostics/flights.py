@@ -281,7 +281,7 @@ def _effect_parameters(base_spec, effect) -> tuple:
     return tuple(n for n in added if n not in known)
 
 
-def _guess(layout, flights: Sequence, values: Sequence[dict]) -> dict:
+def _guess(layout, values: Sequence[dict]) -> dict:
     """Joint guesses from each flight's own fit: a flight's own parameter its value, a shared one the mean of
     the flights that have it."""
     guess = {}
@@ -352,7 +352,7 @@ def joint_final(flights: Sequence, reports: Sequence, base_chi2_per_dof: float, 
 
     def fit(own: set):
         prepared = joint_prepare(fl_final, per_flight=sorted((own | base_own) & _names(fl_final)))
-        return joint_estimate(fl_final, prepared=prepared, guess=_guess(prepared.layout, fl_final, values),
+        return joint_estimate(fl_final, prepared=prepared, guess=_guess(prepared.layout, values),
                               sigma=sigma, options=options)
 
     tests = []
