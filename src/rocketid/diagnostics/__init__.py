@@ -25,6 +25,12 @@ The discovery (issue 8), one module per step, each handing the next an immutable
 ``step``     :func:`discover` -> :class:`Discovery` (forward selection, refinement, backward check, verdict)
 ``variant``  :func:`mach_variant` (the Mach-indexed variant of a time-knot drag model)
 ``api``      :func:`diagnose` -> :class:`DiagnosisReport` with :class:`FinalModel` (the composition)
+
+Several flights, after each flight's diagnosis:
+
+``flights``  :func:`~rocketid.diagnostics.flights.joint_final` -> :class:`~rocketid.diagnostics.flights.JointFinal`
+             (all flights at once with the effects each found; a vehicle effect found in several shared when
+             a likelihood-ratio test says they agree)
 """
 
 from .effects import (CATALOGUE, KINDS, Effect, Vehicle, apply_effect, back_pressure_effect, custom_effect,
