@@ -349,11 +349,17 @@ def joint_final(flights: Sequence, reports: Sequence, base_chi2_per_dof: float, 
     notes: list = []
 
     base_own = set(per_flight)
+    fits: dict = {}
 
     def fit(own: set):
-        prepared = joint_prepare(fl_final, per_flight=sorted((own | base_own) & _names(fl_final)))
-        return joint_estimate(fl_final, prepared=prepared, guess=_guess(prepared.layout, values),
-                              sigma=sigma, options=options)
+        # one fit per choice of per-flight parameters: the final fit is often one of the tests' (every effect
+        # kept per flight, or the one shared effect's)
+        key = frozenset((own | base_own) & _names(fl_final))
+        if key not in fits:
+            prepared = joint_prepare(fl_final, per_flight=sorted(key))
+            fits[key] = joint_estimate(fl_final, prepared=prepared, guess=_guess(prepared.layout, values),
+                                       sigma=sigma, options=options)
+        return fits[key]
 
     tests = []
     shared: list = []
