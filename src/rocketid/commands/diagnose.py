@@ -63,6 +63,10 @@ __all__ = ["command"]
               help="Parallel refit processes (default: up to 2).")
 @click.option("--refit-timeout", type=float, default=180.0, show_default=True, metavar="SECONDS",
               help="Give up a refit or hold-out prediction after this long (it is reported as given up).")
+@click.option("--budget", type=float, default=None, metavar="SECONDS",
+              help="Stop the search for missing effects after this long (each flight's, with several files): the "
+                   "step under way is not completed, the steps before it stand, and the report says where it "
+                   "stopped. Default: no limit. Run again with more: the models built are kept in the code cache.")
 @click.option("--locate-window", "locate_window", type=float, default=None, metavar="SECONDS",
               help="Window length of the located statistics (default: the flight's span / 22).")
 @click.option("--window", "window_text", default=None, metavar="T0:T1",
@@ -94,7 +98,8 @@ __all__ = ["command"]
 @sigma_column_option_decl()
 @unmeasured_option_decl()
 @verbose_option
-def command(data_files, out, model, level, confirm_top, holdout, max_effects, workers, refit_timeout, locate_window,
+def command(data_files, out, model, level, confirm_top, holdout, max_effects, workers, refit_timeout, budget,
+            locate_window,
             window_text, columns, time_column, wild_points, correlated_noise, size_opts, per_flight, sigmas,
             sigma_columns, unmeasured):
     """Fit a model to DATA.csv and diagnose what it misses; write DIR/report.html.
@@ -130,6 +135,8 @@ def command(data_files, out, model, level, confirm_top, holdout, max_effects, wo
                    "window T0:T1", err=True)
     if not refit_timeout > 0:
         raise SettingsError(f"--refit-timeout must be a positive number of seconds, got {refit_timeout:g}")
+    if budget is not None and not (budget > 0 and budget < float("inf")):
+        raise SettingsError(f"--budget must be a positive number of seconds, got {budget:g}")
     holdout = _holdout(holdout)
     check_folder(out, "--out")  # before the work: a bad --out fails at once, not after the fits
     spec, label = resolve_model(model)
@@ -145,7 +152,7 @@ def command(data_files, out, model, level, confirm_top, holdout, max_effects, wo
                  settings=dict(level=level, confirm_top=confirm_top, window=window, holdout=holdout,
                                max_effects=max_effects, workers=workers, refit_timeout=refit_timeout,
                                candidates=candidates, wild_points=wild_points, sizes=sizes,
-                               correlated_noise=correlated_noise))
+                               correlated_noise=correlated_noise, budget=budget))
         return
     data_file = data_files[0]
     data = read_data(data_file, spec, time_column=time_column, columns=assignments(columns, "--column"),
@@ -158,7 +165,7 @@ def command(data_files, out, model, level, confirm_top, holdout, max_effects, wo
         report = diagnose(data, spec, level=level, confirm_top=confirm_top, window=window, holdout=holdout,
                           max_effects=max_effects, workers=workers, refit_timeout=refit_timeout, sigma=sigma,
                           flight_window=flight, candidates=candidates, wild_points=wild_points, sizes=sizes,
-                          correlated_noise=correlated_noise)
+                          correlated_noise=correlated_noise, budget=budget)
         report = _relabel(report, label, str(data_file))
         path = report.write(out)
     for line in report.verdict():

@@ -323,6 +323,8 @@ class DiagnosisReport:
                "final": None if self.final is None else self.final.to_dict(),
                "steps": [s.to_dict() for s in self.steps],
                "noise_band": None if self.discovery is None else self.discovery.band.to_dict(),
+               "search_stopped": None if self.discovery is None or not self.discovery.stopped
+               else self.discovery.stopped,
                "variant": None if self.variant is None else {
                    "model": self.variant.fit.spec.name,
                    "final": None if self.variant.final is None else self.variant.final.to_dict(),
@@ -378,7 +380,7 @@ def _confirmation_dict(c, name: str | None = None) -> dict:
 # ---------------------------------------------------------------------------
 
 
-def _check_settings(level, confirm_top, max_effects, refit_timeout) -> None:
+def _check_settings(level, confirm_top, max_effects, refit_timeout, budget=None) -> None:
     if not 0 < level < 1:
         raise SettingsError(f"level must be in (0, 1), got {level}")
     if isinstance(confirm_top, bool) or not isinstance(confirm_top, (int, np.integer)) or confirm_top < 0:
@@ -387,6 +389,9 @@ def _check_settings(level, confirm_top, max_effects, refit_timeout) -> None:
         raise SettingsError(f"max_effects must be a positive integer, got {max_effects!r}")
     if isinstance(refit_timeout, bool) or not isinstance(refit_timeout, (int, float)) or not refit_timeout > 0:
         raise SettingsError(f"refit_timeout must be a positive number of seconds, got {refit_timeout!r}")
+    if budget is not None and (isinstance(budget, bool) or not isinstance(budget, (int, float, np.floating))
+                               or not budget > 0 or not math.isfinite(budget)):
+        raise SettingsError(f"budget must be a positive number of seconds (or None: no limit), got {budget!r}")
 
 
 def _noise_from_data(sigma, meas, notes: list, from_data: dict, known: Mapping | None = None) -> tuple:
@@ -686,7 +691,11 @@ def _final(disc, ranking, level, window) -> FinalModel | None:
                          "against it.")
         else:
             text = (f"the model with {names} does not reach the noise ({disc.noise_detail}); the residual is "
-                    f"located in: {_where(fit, level, window)}.{amb} Try {_suggest(ranking)}.")
+                    f"located in: {_where(fit, level, window)}.{amb}" + ("" if disc.stopped else f" Try {_suggest(ranking)}."))
+    elif disc.stopped:
+        text = (f"no effect was added before the search was cut short (chi2/dof {fit.chi2_per_dof:.4g}, band <= "
+                f"{band.upper:.4g}); not every candidate was tried, so this does not say the catalogue cannot explain "
+                f"it; the residual sits in: {_where(fit, level, window)}.")
     elif disc.ambiguous:
         text = (f"{disc.ambiguous} (chi2/dof {fit.chi2_per_dof:.4g} without them, band <= {band.upper:.4g}); the "
                 f"residual sits in: {_where(fit, level, window)}. Other data (another channel, a measured thrust or "
@@ -694,6 +703,9 @@ def _final(disc, ranking, level, window) -> FinalModel | None:
     else:
         text = (f"no catalogue effect explains the misfit (chi2/dof {fit.chi2_per_dof:.4g}, band <= {band.upper:.4g}); "
                 f"the residual sits in: {_where(fit, level, window)}. Try {_suggest(ranking)}.")
+    if disc.stopped:
+        text += (f" The search was cut short: {disc.stopped}. A larger budget (--budget, diagnose(budget=)) lets it "
+                 "go on; the models already built are kept in the code cache.")
     return FinalModel(disc.effect_names, params, float(fit.chi2_per_dof), bool(disc.fits_to_noise), disc.verdict,
                       text[0].upper() + text[1:], fit)
 
@@ -751,7 +763,8 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
              refine: bool = True, variant: bool | str = "auto",
              sigma: str | Mapping[str, float | str] | None = None,
              flight_window: Sequence[float] | None = None, wild_points: str = "drop",
-             sizes: Mapping[str, float] | None = None, correlated_noise: str = "thin") -> DiagnosisReport:
+             sizes: Mapping[str, float] | None = None, correlated_noise: str = "thin",
+             budget: float | None = None) -> DiagnosisReport:
     """Fit ``model`` to ``data`` and find what it misses::
 
         fit -> compare -> locate -> plausibility
@@ -829,6 +842,12 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
         (:func:`~rocketid.diagnostics.effects.state_sizes`): an effect is implausible beyond 5 times
         its realistic size, so a vehicle whose numbers are less certain than the catalogue assumes
         says so here. An entry that names no parameter of the candidates is refused.
+    budget : float, optional
+        Seconds the search for missing effects may take, the Mach-indexed variant's search
+        included (None: no limit). When they run out the step under way is not completed and the
+        steps before it stand; the report says where the search stopped
+        (:attr:`~rocketid.diagnostics.step.Discovery.stopped`), and its verdict is that of the
+        model reached. The base fit, the comparison and the report are not counted.
 
     Returns
     -------
@@ -838,7 +857,7 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
     from .refit import holdout_window
     from .step import discover
 
-    _check_settings(level, confirm_top, max_effects, refit_timeout)
+    _check_settings(level, confirm_top, max_effects, refit_timeout, budget)
     from .effects import check_sizes
     sizes = check_sizes(sizes)
     if variant not in (True, False, "auto"):
@@ -873,13 +892,14 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
     comp, loc, plaus = timed("describe_s", _describe, fit, level, window, notes)
     effects = _stated(_candidate_effects(candidates), sizes, fit, notes)
     disc, ranking, failed = None, None, ""
+    t_search = time.perf_counter()
     if confirm_top > 0:
         try:
             from .accept import noise_band
             band = noise_band(fit, estimated=counts) if counts else None
             disc = timed("discover_s", discover, fit, effects, level=level, max_effects=int(max_effects),
                          workers=workers, timeout=float(refit_timeout), options=options, refine=refine,
-                         holdout=holdout, band=band)
+                         holdout=holdout, band=band, budget=budget)
         except RocketidError as exc:
             notes.append(f"the discovery failed: {exc}")
         if disc is not None:
@@ -902,7 +922,11 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
         settings = dict(level=level, confirm_top=confirm_top, window=window, options=options,
                         max_effects=max_effects, workers=workers, refit_timeout=refit_timeout, refine=refine,
                         sigma=asked if counts else None)     # the same data, the same noise (and a widened band)
-        var = timed("variant_s", _variant, fit, meas, effects, settings, notes)
+        left = None if budget is None else budget - (time.perf_counter() - t_search)
+        if left is not None and left <= 0:
+            notes.append("the Mach-indexed variant of the time-knot drag was not searched: the time budget had run out")
+        else:
+            var = timed("variant_s", _variant, fit, meas, effects, dict(settings, budget=left), notes)
     report = DiagnosisReport(model=label, data_label=data_label, fit=fit, comparison=comp, location=loc,
                              plausibility=plaus, ranking=ranking, confirmations=confs, confirmed=names,
                              refit_plausibility=pls, after=after, history=history, level=float(level),

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import math
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from typing import Any, Mapping, NamedTuple, Sequence
 
@@ -1194,6 +1195,39 @@ def _weight(task: RefitTask) -> int:
 
 _TASKS: list = []   # read by forked workers (the tasks are not pickled: effects may be closures)
 
+_DEADLINE: list = []  # the search's time budget: ``time.perf_counter()`` deadlines, innermost last
+
+
+class BudgetSpent(Exception):
+    """The diagnosis's time budget ran out: no refit is started after it, and one running is stopped.
+
+    Not a :class:`~rocketid.errors.RocketidError` (those say a model could not be fitted): the search that
+    set the budget (:func:`time_budget`) catches it and ends with the steps it completed."""
+
+
+@contextmanager
+def time_budget(seconds: float | None):
+    """Within this block :func:`refit_all` starts no refit after ``seconds`` from now, stops those still
+    running at that time, and raises :class:`BudgetSpent`; None sets no budget."""
+    if seconds is None:
+        yield
+        return
+    _DEADLINE.append(time.perf_counter() + float(seconds))
+    try:
+        yield
+    finally:
+        _DEADLINE.pop()
+
+
+def budget_spent() -> bool:
+    """Whether the time budget of the enclosing :func:`time_budget` has run out (False without one)."""
+    return bool(_DEADLINE) and time.perf_counter() >= _DEADLINE[-1]
+
+
+def _check_budget() -> None:
+    if budget_spent():
+        raise BudgetSpent("the diagnosis's time budget ran out")
+
 
 def _child(index: int, conn, parent_pid: int) -> None:   # pragma: no cover - runs in a worker process
     """Run refit ``index`` in a forked worker and send its :class:`Refit`; the worker ends with
@@ -1225,6 +1259,9 @@ def refit_all(tasks: Sequence[RefitTask], *, workers: int | None = None) -> tupl
     its refit reported as given up, with the time. One worker (or no ``fork``) runs them
     here, in turn, with IPOPT's wall-time limit as the guard.
 
+    Within a :func:`time_budget` that has run out, no refit is started and those running are
+    stopped: :class:`BudgetSpent` is raised (a batch is never returned in part).
+
     Returns
     -------
     tuple of Refit
@@ -1236,10 +1273,15 @@ def refit_all(tasks: Sequence[RefitTask], *, workers: int | None = None) -> tupl
     tasks = list(tasks)
     if not tasks:
         return ()
+    _check_budget()
     if workers is None:
         workers = min(2, os.cpu_count() or 1)
     if workers <= 1 or len(tasks) == 1 or "fork" not in mp.get_all_start_methods():
-        return tuple(run_refit(t)[0] for t in tasks)
+        out = []
+        for t in tasks:
+            _check_budget()
+            out.append(run_refit(t)[0])
+        return tuple(out)
     from multiprocessing.connection import wait
 
     global _TASKS
@@ -1252,6 +1294,7 @@ def refit_all(tasks: Sequence[RefitTask], *, workers: int | None = None) -> tupl
     running: dict = {}
     try:
         while pending or running:
+            _check_budget()     # the finally below stops the workers still running
             while pending and len(running) < workers:
                 i = pending.pop(0)
                 recv, send = ctx.Pipe(duplex=False)

@@ -43,7 +43,14 @@ Forward selection with a backward check, capped at ``max_effects``:
 10. finding: a search that ends without reaching the noise is replaced by the first step's
    refit that passes every check but its size (:func:`_finding`: a thrust 12 % off its
    stated value), its verdict "partly explained" with the size named -- the user checks
-   the vehicle's numbers or states the larger uncertainty (``diagnose(..., sizes=)``).
+   the vehicle's numbers or states the larger uncertainty (``diagnose(..., sizes=)``);
+11. budget: a search given a time budget (``discover(..., budget=)``, ``rocketid diagnose --budget``)
+   starts no refit once it has run out and stops those running; the step under way is not completed (a
+   step chosen from part of its contenders would be a choice on part of the evidence), the steps before
+   it stand, the stages after it (exchange, second path, simpler shape, finding) are not tried, and
+   :attr:`Discovery.stopped` says where it stopped. The verdict is that of the model reached: a search cut
+   short is never "nothing missing" nor, without an effect that reaches the noise, "explained". A second
+   run with a larger budget costs less: the models already built are in the code cache.
 
 The model each step keeps is fitted again here from the chosen refit's own solution (primal and dual), and
 is judged again when it lands anywhere else (:func:`_judged_again`): the verdict is the test of the model
@@ -70,7 +77,7 @@ from ..errors import RocketidError, SettingsError
 from ..solve import EstimationResult, estimate
 from .accept import Acceptance, NoiseBand, accept, fits_to_noise
 from .effects import Effect, Vehicle, with_effects
-from .refit import REFIT_TIMEOUT, Refit, RefitTask, refit_all, summarize_task
+from .refit import REFIT_TIMEOUT, BudgetSpent, Refit, RefitTask, budget_spent, refit_all, summarize_task, time_budget
 from .screen import Contender, Screen, screen, vehicle_of
 
 __all__ = ["Step", "Discovery", "discover", "VERDICTS", "MAX_EFFECTS"]
@@ -179,6 +186,9 @@ class Discovery:
         Non-empty when a step chose among rivals within :data:`BIC_TIE` by the hold-out (which, and why).
     not_an_explanation : str
         Why a final model that reaches the noise is not an explanation (the failed checks; empty otherwise).
+    stopped : str
+        Non-empty when the search's time budget ran out: where (the step under way, or the exchange, the
+        second path, the simpler shape), the steps completed before it standing.
     """
 
     base_fit: EstimationResult
@@ -196,6 +206,7 @@ class Discovery:
     ambiguous: str = ""
     rivals: str = ""
     not_an_explanation: str = ""
+    stopped: str = ""
 
     @property
     def ranking_failed(self) -> str:
@@ -737,7 +748,7 @@ def _family(name: str) -> str:
 def discover(fit: EstimationResult, candidates: Sequence[Effect], *, level: float = 0.05,
              max_effects: int = MAX_EFFECTS, workers: int | None = None, timeout: float = REFIT_TIMEOUT,
              options: Mapping[str, Any] | None = None, band: NoiseBand | None = None,
-             refine: bool = True, holdout: Any = "auto") -> Discovery:
+             refine: bool = True, holdout: Any = "auto", budget: float | None = None) -> Discovery:
     """Find the effects ``fit``'s model misses, stepwise (module notes).
 
     Parameters
@@ -761,6 +772,11 @@ def discover(fit: EstimationResult, candidates: Sequence[Effect], *, level: floa
         Try the more flexible shapes of a chosen effect that leaves a residual.
     holdout : "auto", (float, float) or None
         The hold-out window that decides between accepted refits within :data:`BIC_TIE`.
+    budget : float, optional
+        Seconds the search may take (None: no limit). When they have run out no refit is started
+        and those running are stopped: the step under way is not completed, the steps before it stand
+        (and the exchange, the second path and the simpler shape are not tried), and
+        :attr:`Discovery.stopped` says where it stopped (module note 11).
     """
     from .accept import noise_band
 
@@ -769,21 +785,19 @@ def discover(fit: EstimationResult, candidates: Sequence[Effect], *, level: floa
     ctx = _Search(fit.spec, band, vehicle_of(fit), level, options, timeout, workers, refine, holdout)
     notes = [band.note] if band.note else []
     base_ok = fits_to_noise(fit, band)[0]
-    path = _forward(ctx, fit, candidates, max_effects, notes)
-    if len(path.chosen) >= 2 and not path.ambiguous:
-        path = _exchanged(ctx, fit, path, notes)
-    if not path.ok and not base_ok and not path.ambiguous:
-        path = _second_path(ctx, fit, candidates, max_effects, path, notes)
-    if path.ok and not path.ambiguous and ctx.refine:
-        path = _simplified(ctx, fit, candidates, path, notes)
+    with time_budget(budget):
+        path, stopped = _search(ctx, fit, candidates, max_effects, base_ok, notes)
     steps, chosen, current, last, ok, detail = list(path.steps), path.chosen, path.current, path.last, path.ok, \
         path.detail
     ambiguous, rivals = path.ambiguous, path.rivals
-    if not ok and not base_ok and not ambiguous:
+    if not ok and not base_ok and not ambiguous and not stopped:
         found = _finding(ctx, fit, steps, notes)
         if found is not None:
             chosen, current, last = found
             ok, detail = fits_to_noise(current, band)
+    if stopped:
+        stopped = f"the time budget of {budget:g} s ran out during {stopped}"
+        notes.append(f"budget: {stopped}; " + ("the steps completed before it stand" if steps else "no step was completed"))
     if ambiguous:
         notes.append(f"ambiguous: {ambiguous}")
     verdict, why = final_verdict(bool(chosen), bool(ok), base_ok, last, ambiguous)
@@ -791,7 +805,35 @@ def discover(fit: EstimationResult, candidates: Sequence[Effect], *, level: floa
     return Discovery(fit, band, ctx.vehicle, tuple(steps), tuple(chosen), current,
                      last.refit if last is not None else None, bool(ok), detail,
                      verdict, tuple(notes), {"discover_s": time.perf_counter() - t_start}, ambiguous, rivals,
-                     not_an_explanation(last) if verdict == "partly explained" and ok else "")
+                     not_an_explanation(last) if verdict == "partly explained" and ok else "", stopped)
+
+
+def _search(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Effect], max_effects: int, base_ok: bool,
+            notes: list) -> tuple:
+    """The forward search, then the exchange, the second path and the simpler shape where they apply (module
+    notes 7-9). Returns ``(path, stopped)``: ``stopped`` names the stage during which the time budget ran out
+    (empty when it did not); the path is the last one completed."""
+    path = _forward(ctx, fit, candidates, max_effects, notes)
+    if path.stopped:
+        return path, f"step {path.stopped} of the search"
+    stages = (("the exchange", lambda p: len(p.chosen) >= 2 and not p.ambiguous,
+               lambda p: _exchanged(ctx, fit, p, notes)),
+              ("the second path", lambda p: not p.ok and not base_ok and not p.ambiguous,
+               lambda p: _second_path(ctx, fit, candidates, max_effects, p, notes)),
+              ("the simpler shape", lambda p: p.ok and not p.ambiguous and ctx.refine,
+               lambda p: _simplified(ctx, fit, candidates, p, notes)))
+    for label, applies, run in stages:
+        if not applies(path):
+            continue
+        if budget_spent():
+            return path, f"{label} (not tried)"
+        try:
+            path = run(path)
+        except BudgetSpent:
+            return path, f"{label} (not completed)"
+        if path.stopped:        # a second path cut short: the paths completed before it are weighed
+            return replace(path, stopped=0), f"{label} (cut short)"
+    return path, ""
 
 
 @dataclass(frozen=True)
@@ -807,6 +849,7 @@ class _Path:
     detail: str
     ambiguous: str = ""
     rivals: str = ""
+    stopped: int = 0            # the step during which the time budget ran out (0: it did not)
 
 
 def _forward(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Effect], max_effects: int, notes: list,
@@ -824,6 +867,8 @@ def _forward(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Effect]
         # wind_pl_13 had reached the noise -- a wrong effect called explained -- so it is not done.)
         if number > 1 and ok:
             break
+        if budget_spent() and not (number == 1 and first is not None):      # a given first step refits nothing
+            return _Path(tuple(steps), chosen, current, last, bool(ok), detail, ambiguous, rivals, stopped=number)
         keep = tuple(e.name for e in chosen)
         if number == 1 and first is not None:
             scr, accs, i = first
@@ -834,8 +879,11 @@ def _forward(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Effect]
                 (f"taken in place of the first search's choice: the first step's best admissible refit of another "
                  f"family ({pick.refit.name}, chi2/dof {pick.refit.chi2_per_dof:.4g})")
         else:
-            scr, accs, effect, pick, why, amb, riv = _next_choice(ctx, current, chosen, candidates, number, notes,
-                                                                  steps)
+            try:
+                scr, accs, effect, pick, why, amb, riv = _next_choice(ctx, current, chosen, candidates, number, notes,
+                                                                      steps)
+            except BudgetSpent:
+                return _Path(tuple(steps), chosen, current, last, bool(ok), detail, ambiguous, rivals, stopped=number)
             ambiguous, rivals = amb or ambiguous, riv or rivals
             if effect is None:
                 break
@@ -848,11 +896,16 @@ def _forward(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Effect]
                               f"({'; '.join(f'{c.name}: {c.detail}' for c in pick.checks if not c.passed)}): "
                               "nothing is added", (), keep, None))
             break
-        new_effects, dropped = _backward(ctx, current, chosen + [effect], pick)
+        try:
+            new_effects, dropped = _backward(ctx, current, chosen + [effect], pick)
+        except BudgetSpent:
+            return _Path(tuple(steps), chosen, current, last, bool(ok), detail, ambiguous, rivals, stopped=number)
         if dropped:
             notes.append(f"step {number}: the backward check dropped {', '.join(dropped)} (BIC lower without it)")
         try:
             new_fit, pick = _fit_chosen(ctx, current, new_effects, effect, pick, bool(dropped), notes, number)
+        except BudgetSpent:
+            return _Path(tuple(steps), chosen, current, last, bool(ok), detail, ambiguous, rivals, stopped=number)
         except RocketidError as exc:
             notes.append(f"step {number}: the chosen model could not be fitted here ({exc}); the search stops")
             steps.append(Step(number, scr, tuple(accs), None, why, tuple(dropped), keep, None))
@@ -997,12 +1050,19 @@ def _second_path(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Eff
             notes.append(f"second path: not started from {r.name} (chi2/dof {r.chi2_per_dof:.4g} at the first step): "
                          f"its excess over the noise band is more than {SECOND_PATH_REACH:g} times that of the first "
                          f"search's end ({path.current.chi2_per_dof:.4g}), out of a search's reach")
+    cut = 0
     for j in starts:
         mine: list = []
         alt = _forward(ctx, fit, candidates, max_effects, mine, first=(s1.screen, s1.acceptances, j))
         name = s1.acceptances[j].refit.name
         how = "the first step's best admissible refit of another family" if s1.acceptances[j].admissible else \
             "the first step's lowest BIC, beyond a plausible size there"
+        if alt.stopped:
+            cut = alt.stopped
+            notes.append(f"second path: started from {name} ({how}), stopped by the time budget during its step "
+                         f"{alt.stopped}, at chi2/dof {alt.current.chi2_per_dof:.4g} with "
+                         f"{', '.join(e.name for e in alt.chosen) or 'nothing added'}")
+            alt = replace(alt, stopped=0)
         if alt.ok and alt.last is not None and alt.last.accepted and not alt.ambiguous:
             notes += mine
             notes.append(f"second path: the first search ended at chi2/dof {path.current.chi2_per_dof:.4g} with "
@@ -1018,16 +1078,18 @@ def _second_path(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Eff
                          "and every size and coefficient plausible" if lower else ""))
         if lower:
             better = (alt, name, mine)
+        if cut:
+            break
     if better is None:
         if starts:
             notes.append("second path: none explains the data or ends lower at plausible values: the first search's "
                          "model stands")
-        return path
+        return replace(path, stopped=cut) if cut else path
     alt, name, mine = better
     notes += mine
     notes.append(f"second path: no search explains the data; the one started from {name} ends with the lowest BIC at "
                  "plausible values: its model is reported, partly explained")
-    return alt
+    return replace(alt, stopped=cut) if cut else alt
 
 
 def _bic(acceptance: Acceptance | None) -> float:

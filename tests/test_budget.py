@@ -1,0 +1,109 @@
+"""The diagnosis's time budget (``diagnose(budget=)``, ``rocketid diagnose --budget``).
+
+Truth: the hidden-effect study's own truth model of RA-66 (``tests/discovery_study/truth.py``: a
+vector force balance, the thrust scaled in its own expression, the altimeter's bias added to the
+simulated readings), flown with the thrust 2 % above the stated one and the altimeter 5 m high --
+two effects, found in two steps (thrust, then the bias) when the search has its time.
+
+A search cut short must say so, keep the steps it completed, stop its worker processes, and never
+claim more than the model it reached: no "nothing missing", no "not explained by the catalogue" in
+words that say the catalogue was tried.
+"""
+
+from __future__ import annotations
+
+import json
+import multiprocessing as mp
+import time
+
+import pytest
+from click.testing import CliRunner
+
+from discovery_study.truth import measure, ra66_vehicle
+from rocketid import estimate
+from rocketid.cases.ra66 import ra66
+from rocketid.cli import main
+from rocketid.diagnostics import CATALOGUE
+from rocketid.diagnostics.accept import noise_band
+from rocketid.diagnostics.refit import BudgetSpent, budget_spent, refit_all, time_budget
+from rocketid.diagnostics.screen import vehicle_of
+from rocketid.diagnostics import step as S
+
+TRUTH = {"thrust_level": {"eps_thrust": 0.02}, "bias_h": {"b_h": 5.0}}
+
+
+@pytest.fixture(scope="module")
+def data():
+    return measure(ra66_vehicle(), TRUTH, seed=401)
+
+
+@pytest.fixture(scope="module")
+def base(data):
+    fit = estimate(ra66(), data)
+    assert fit.success
+    return fit
+
+
+def _ctx(fit):
+    return S._Search(fit.spec, noise_band(fit), vehicle_of(fit), 0.05, None, 60.0, 2, True, None)
+
+
+def test_a_budget_that_runs_out_stops_the_refits_running_and_starts_none(base):
+    ctx = _ctx(base)
+    tasks = [ctx.task(base, [CATALOGUE[n]], (n,)) for n in ("wind", "density", "thrust_level", "bias_h")]
+    t0 = time.perf_counter()
+    with time_budget(0.3):
+        with pytest.raises(BudgetSpent):
+            refit_all(tasks, workers=2)
+        assert budget_spent()
+    # the wind's and the density's refits take seconds each; the batch was given up at the budget
+    assert time.perf_counter() - t0 < 8.0
+    assert not mp.active_children()                     # the workers running were stopped
+    assert not budget_spent()                           # outside the block there is no budget
+    with time_budget(None):
+        assert not budget_spent()
+
+
+def test_a_search_cut_short_keeps_the_steps_it_completed(base):
+    """Step 1 (thrust) given, the budget spent before step 2: the path ends with step 1 and says it stopped at 2."""
+    ctx = _ctx(base)
+    cands = list(CATALOGUE.values())
+    scr = S.screen(base, cands, level=0.05, vehicle=ctx.vehicle)
+    i = scr.names.index("thrust_level")
+    (refit,) = ctx.refit([ctx.task(base, [scr.contenders[i].effect], ("thrust_level",))])
+    accs = [S.accept(refit, ctx.band)] * len(scr.contenders)
+    with time_budget(1e-9):
+        path = S._forward(ctx, base, cands, 3, [], first=(scr, accs, i))
+    assert path.stopped == 2
+    assert [s.number for s in path.steps] == [1] and path.steps[0].effects == ("thrust_level",)
+    assert [e.name for e in path.chosen] == ["thrust_level"]
+    assert 1.0 < path.current.chi2_per_dof < 3.0 and not path.ok     # the bias is still missing
+
+
+def test_the_report_of_a_search_cut_short_says_where_and_claims_nothing_it_did_not_try(data, tmp_path):
+    csv = data.to_csv(tmp_path / "flight.csv")
+    out = tmp_path / "diag"
+    res = CliRunner().invoke(main, ["diagnose", str(csv), "--model", "ra66", "--max-effects", "2", "--holdout", "none",
+                                    "--budget", "0.001", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    d = json.loads((out / "diagnosis.json").read_text())
+    assert d["search_stopped"] == "the time budget of 0.001 s ran out during step 1 of the search"
+    final = d["final"]
+    assert final["effects"] == [] and not final["fits_to_noise"]
+    assert final["verdict"] != "nothing missing"
+    text = final["explanation"]
+    assert text.startswith("No effect was added before the search was cut short")
+    assert "does not say the catalogue cannot explain it" in text and "--budget" in text
+    assert any("Mach-indexed variant of the time-knot drag was not searched" in n for n in d["notes"])
+    assert d["variant"] is None
+
+
+@pytest.mark.parametrize("value", ["0", "-5", "inf"])
+def test_a_budget_that_is_not_a_positive_number_of_seconds_is_refused(data, tmp_path, value):
+    csv = data.to_csv(tmp_path / "flight.csv")
+    res = CliRunner().invoke(main, ["diagnose", str(csv), "--budget", value, "--out", str(tmp_path / "d")])
+    assert res.exit_code == 2 and "--budget must be a positive number of seconds" in res.output
+    from rocketid.diagnostics.api import diagnose
+    from rocketid.errors import SettingsError
+    with pytest.raises(SettingsError, match="budget must be a positive number of seconds"):
+        diagnose(data, "ra66", budget=float(value))
