@@ -555,7 +555,7 @@ def test_a_second_path_starts_from_an_oversized_first_step_and_stands_only_when_
     assert explained.accepted
     ends["alt"] = S._Path((step1,), [effects[1]], SimpleNamespace(chi2_per_dof=1.0028), explained, True, "")
     notes = []
-    ctx = SimpleNamespace(band=BAND)
+    ctx = SimpleNamespace(band=BAND, say=lambda message: None)
     assert S._second_path(ctx, None, effects, 3, first, notes) is ends["alt"]
     assert "replaces it" in notes[-1]
     # a start out of reach is not searched from, and a note names it
@@ -597,7 +597,7 @@ def test_when_no_search_explains_the_lowest_bic_at_plausible_values_is_reported(
         monkeypatch.setattr(S, "_forward", lambda *a, **k: alt)
         return alt
 
-    ctx = SimpleNamespace(band=BAND)
+    ctx = SimpleNamespace(band=BAND, say=lambda message: None)
     lower = ends_at(accept(refit("transonic_drag", 1.255, base_chi2=base), BAND))
     assert not lower.last.accepted and S._bic(lower.last) < S._bic(first.last)
     notes = []

@@ -107,3 +107,21 @@ def test_a_budget_that_is_not_a_positive_number_of_seconds_is_refused(data, tmp_
     from rocketid.errors import SettingsError
     with pytest.raises(SettingsError, match="budget must be a positive number of seconds"):
         diagnose(data, "ra66", budget=float(value))
+
+
+def test_the_search_reports_its_progress_step_by_step(data):
+    """``diagnose(progress=)`` gets a line at each stage: the contenders refitted, the effect taken and the fall."""
+    from rocketid.diagnostics.api import diagnose
+    lines: list = []
+    rep = diagnose(data, "ra66", max_effects=2, holdout=None, variant=False, progress=lines.append)
+    assert rep.final.effects == ("thrust_level", "bias_h") and rep.final.verdict == "explained"
+    assert all(l.startswith("search ") and " s: " in l for l in lines)
+    said = [l.split(" s: ", 1)[1] for l in lines]
+    assert said[0].startswith("step 1: ranking the candidates at chi2/dof 58.7")
+    assert any(m.startswith("step 1: refitting ") and "thrust_level" in m for m in said)
+    taken = [m for m in said if " -- chi2/dof " in m]
+    assert len(taken) == 2 and taken[0].startswith("step 1: thrust_level -- chi2/dof 58.7")
+    assert taken[1].startswith("step 2: thrust_level, bias_h -- ")
+    # the seconds since the search started never go back
+    secs = [float(l.split(" s: ", 1)[0].split()[1]) for l in lines]
+    assert secs == sorted(secs) and secs[-1] <= rep.discovery.timings["discover_s"] + 1

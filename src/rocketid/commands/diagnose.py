@@ -165,7 +165,7 @@ def command(data_files, out, model, level, confirm_top, holdout, max_effects, wo
         report = diagnose(data, spec, level=level, confirm_top=confirm_top, window=window, holdout=holdout,
                           max_effects=max_effects, workers=workers, refit_timeout=refit_timeout, sigma=sigma,
                           flight_window=flight, candidates=candidates, wild_points=wild_points, sizes=sizes,
-                          correlated_noise=correlated_noise, budget=budget)
+                          correlated_noise=correlated_noise, budget=budget, progress=status)
         report = _relabel(report, label, str(data_file))
         path = report.write(out)
     for line in report.verdict():
@@ -213,7 +213,7 @@ def _several(data_files, out, spec, model_label, sigma, flight, *, columns, time
         status(f"diagnosing {len(labels)} flights ({', '.join(labels)}) with {spec.name}, one at a time, then jointly")
         result = diagnose_flights(datas, labels, spec, files=[str(f) for f in data_files], model_label=model_label,
                                   flight_window=flight, sigma=sigma, out=out, on_flight=done, per_flight=per_flight,
-                                  **settings)
+                                  progress=status, **settings)
     click.echo(result.summary().text())
     click.echo(f"wrote {Path(out) / 'index.html'}, {Path(out) / 'diagnosis.json'} and each flight's report in "
                f"{Path(out)}/<flight>/ ({time.perf_counter() - t0:.1f} s)")

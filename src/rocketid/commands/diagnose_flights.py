@@ -267,7 +267,7 @@ class FlightsDiagnosis:
 
 def diagnose_flights(datas: Sequence, labels: Sequence[str], spec, *, files: Sequence[str] | None = None,
                      model_label: str | None = None, flight_window=None, sigma=None, out: str | Path | None = None,
-                     on_flight=None, per_flight: Sequence[str] = (), **settings) -> FlightsDiagnosis:
+                     on_flight=None, per_flight: Sequence[str] = (), progress=None, **settings) -> FlightsDiagnosis:
     """Diagnose each flight alone, then fit the base model to all flights jointly.
 
     Parameters
@@ -288,13 +288,16 @@ def diagnose_flights(datas: Sequence, labels: Sequence[str], spec, *, files: Seq
         Write each flight's report to ``out/<label>/`` as soon as it is made, then the joint files.
     on_flight : callable, optional
         ``on_flight(label, report)`` after each flight's diagnosis (progress).
+    progress : callable, optional
+        Each flight's search's lines of progress (:func:`rocketid.diagnostics.diagnose`), prefixed with
+        the flight's label.
     per_flight : sequence of str
         Model parameters each flight estimates for itself in the joint fits (its attitude program, its
         lift-off mass); the others are shared (:func:`rocketid.joint.joint_estimate`).
     **settings
         Passed to :func:`rocketid.diagnostics.diagnose` for each flight (``level``,
         ``confirm_top``, ``holdout``, ``max_effects``, ``workers``, ``refit_timeout``, ``window``,
-        ``wild_points``, ``correlated_noise``). The joint fit sees each flight's data as its diagnosis
+        ``wild_points``, ``correlated_noise``, ``budget``: each flight's search its own). The joint fit sees each flight's data as its diagnosis
         did: without the wild points it dropped, thinned where its errors were correlated.
     """
     from ..cli import windowed_inputs
@@ -314,7 +317,8 @@ def diagnose_flights(datas: Sequence, labels: Sequence[str], spec, *, files: Seq
     t0 = time.perf_counter()
     reports = []
     for label, f, data in zip(labels, files, datas):
-        rep = diagnose(data, spec, sigma=sigma, flight_window=flight_window, **settings)
+        said = None if progress is None else (lambda m, label=label: progress(f"flight {label}: {m}"))
+        rep = diagnose(data, spec, sigma=sigma, flight_window=flight_window, progress=said, **settings)
         rep = replace(rep, model=model_label or spec.name, data_label=f)
         if out is not None:
             rep.write(Path(out) / label)

@@ -764,7 +764,7 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
              sigma: str | Mapping[str, float | str] | None = None,
              flight_window: Sequence[float] | None = None, wild_points: str = "drop",
              sizes: Mapping[str, float] | None = None, correlated_noise: str = "thin",
-             budget: float | None = None) -> DiagnosisReport:
+             budget: float | None = None, progress=None) -> DiagnosisReport:
     """Fit ``model`` to ``data`` and find what it misses::
 
         fit -> compare -> locate -> plausibility
@@ -848,6 +848,10 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
         steps before it stand; the report says where the search stopped
         (:attr:`~rocketid.diagnostics.step.Discovery.stopped`), and its verdict is that of the
         model reached. The base fit, the comparison and the report are not counted.
+    progress : callable, optional
+        Called with one line of text at each stage of the search (the contenders refitted at
+        each step, the effect taken, the second path, the variant's search); ``rocketid
+        diagnose`` prints them on a terminal or with ``--verbose``.
 
     Returns
     -------
@@ -899,7 +903,7 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
             band = noise_band(fit, estimated=counts) if counts else None
             disc = timed("discover_s", discover, fit, effects, level=level, max_effects=int(max_effects),
                          workers=workers, timeout=float(refit_timeout), options=options, refine=refine,
-                         holdout=holdout, band=band, budget=budget)
+                         holdout=holdout, band=band, budget=budget, progress=progress)
         except RocketidError as exc:
             notes.append(f"the discovery failed: {exc}")
         if disc is not None:
@@ -926,7 +930,8 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
         if left is not None and left <= 0:
             notes.append("the Mach-indexed variant of the time-knot drag was not searched: the time budget had run out")
         else:
-            var = timed("variant_s", _variant, fit, meas, effects, dict(settings, budget=left), notes)
+            said = None if progress is None else (lambda m: progress(f"Mach-indexed variant: {m}"))
+            var = timed("variant_s", _variant, fit, meas, effects, dict(settings, budget=left, progress=said), notes)
     report = DiagnosisReport(model=label, data_label=data_label, fit=fit, comparison=comp, location=loc,
                              plausibility=plaus, ranking=ranking, confirmations=confs, confirmed=names,
                              refit_plausibility=pls, after=after, history=history, level=float(level),

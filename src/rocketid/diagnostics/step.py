@@ -748,7 +748,8 @@ def _family(name: str) -> str:
 def discover(fit: EstimationResult, candidates: Sequence[Effect], *, level: float = 0.05,
              max_effects: int = MAX_EFFECTS, workers: int | None = None, timeout: float = REFIT_TIMEOUT,
              options: Mapping[str, Any] | None = None, band: NoiseBand | None = None,
-             refine: bool = True, holdout: Any = "auto", budget: float | None = None) -> Discovery:
+             refine: bool = True, holdout: Any = "auto", budget: float | None = None,
+             progress=None) -> Discovery:
     """Find the effects ``fit``'s model misses, stepwise (module notes).
 
     Parameters
@@ -777,12 +778,15 @@ def discover(fit: EstimationResult, candidates: Sequence[Effect], *, level: floa
         and those running are stopped: the step under way is not completed, the steps before it stand
         (and the exchange, the second path and the simpler shape are not tried), and
         :attr:`Discovery.stopped` says where it stopped (module note 11).
+    progress : callable, optional
+        Called with one line of text as the search goes (the contenders of each step, the effect taken,
+        the second path); ``rocketid diagnose`` prints them on a terminal or with ``--verbose``.
     """
     from .accept import noise_band
 
     t_start = time.perf_counter()
     band = band if band is not None else noise_band(fit)
-    ctx = _Search(fit.spec, band, vehicle_of(fit), level, options, timeout, workers, refine, holdout)
+    ctx = _Search(fit.spec, band, vehicle_of(fit), level, options, timeout, workers, refine, holdout, progress)
     notes = [band.note] if band.note else []
     base_ok = fits_to_noise(fit, band)[0]
     with time_budget(budget):
@@ -797,6 +801,7 @@ def discover(fit: EstimationResult, candidates: Sequence[Effect], *, level: floa
             ok, detail = fits_to_noise(current, band)
     if stopped:
         stopped = f"the time budget of {budget:g} s ran out during {stopped}"
+        ctx.say(stopped)
         notes.append(f"budget: {stopped}; " + ("the steps completed before it stand" if steps else "no step was completed"))
     if ambiguous:
         notes.append(f"ambiguous: {ambiguous}")
@@ -910,6 +915,8 @@ def _forward(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Effect]
             notes.append(f"step {number}: the chosen model could not be fitted here ({exc}); the search stops")
             steps.append(Step(number, scr, tuple(accs), None, why, tuple(dropped), keep, None))
             break
+        ctx.say(f"step {number}: {', '.join(e.name for e in new_effects)} -- chi2/dof {current.chi2_per_dof:.4g} -> "
+                f"{new_fit.chi2_per_dof:.4g} (band <= {ctx.band.upper:.4g})")
         chosen, current, last = new_effects, new_fit, pick
         ok, detail = fits_to_noise(current, ctx.band)
         steps.append(Step(number, scr, tuple(accs), pick, why, tuple(dropped), tuple(e.name for e in chosen), current))
@@ -924,7 +931,12 @@ def _next_choice(ctx: "_Search", current: EstimationResult, chosen: list, candid
     holdout, level, options, timeout, band = ctx.holdout, ctx.level, ctx.options, ctx.timeout, ctx.band
     ambiguous, rivals = "", ""
     keep = tuple(e.name for e in chosen)
+    ctx.say(f"step {number}: ranking the candidates at chi2/dof {current.chi2_per_dof:.4g}")
     scr = screen(current, [e for e in candidates if e.name not in keep], level=level, vehicle=ctx.vehicle)
+    if scr.contenders:
+        ctx.say(f"step {number}: refitting {len(scr.contenders)} contender(s): {', '.join(scr.names)}")
+    else:
+        ctx.say(f"step {number}: no contender")
     if not scr.contenders:
         steps.append(Step(number, scr, (), None, "; ".join(scr.notes) or "no contender", (), keep, None))
         return scr, (), None, None, "", ambiguous, rivals
@@ -1053,6 +1065,8 @@ def _second_path(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Eff
     cut = 0
     for j in starts:
         mine: list = []
+        ctx.say(f"second path: the first search ended at chi2/dof {path.current.chi2_per_dof:.4g}; starting again "
+                f"from {s1.acceptances[j].refit.name}")
         alt = _forward(ctx, fit, candidates, max_effects, mine, first=(s1.screen, s1.acceptances, j))
         name = s1.acceptances[j].refit.name
         how = "the first step's best admissible refit of another family" if s1.acceptances[j].admissible else \
@@ -1156,6 +1170,13 @@ class _Search:
     workers: int | None
     refine: bool
     holdout: Any
+    progress: Any = None        # a callable taking one line of progress (None: silent)
+    started: float = field(default_factory=time.perf_counter)
+
+    def say(self, message: str) -> None:
+        """Report one line of progress, with the seconds since the search started."""
+        if self.progress is not None:
+            self.progress(f"search {time.perf_counter() - self.started:5.0f} s: {message}")
 
     def task(self, current: EstimationResult, effects: Sequence[Effect], added: Sequence[str],
              start: Mapping | None = None) -> RefitTask:
@@ -1180,6 +1201,8 @@ def _refit_contenders(ctx: _Search, current: EstimationResult, chosen: list, scr
     if i is None and ctx.refine:
         fam = _families_to_refine(accs, scr, ctx.vehicle, None, ctx.level)
         if fam:
+            ctx.say(f"no contender is admissible: refining the shapes of {len(fam)} famil"
+                    f"{'y' if len(fam) == 1 else 'ies'}")
             found = _refine_families(_ladders([scr.contenders[j].effect.refinements(ctx.vehicle) for j in fam]),
                                      _variant_task(ctx, current, chosen), _judge(ctx, n_tests), ctx.workers,
                                      current, ctx.vehicle, scr.scans, ctx.level / max(1, n_tests))
@@ -1223,6 +1246,8 @@ def _refine_choice(ctx: _Search, current: EstimationResult, chosen: list, scr: S
     families = [f for f in families if f and f[0].name not in {a.refit.name for a in accs}]
     if not families:
         return scr, accs, effect, pick, why
+    ctx.say(f"refining the shapes of {len(families)} famil{'y' if len(families) == 1 else 'ies'} beside "
+            f"{effect.name} (chi2/dof {pick.refit.chi2_per_dof:.4g})")
     found = _refine_families(families, _variant_task(ctx, current, chosen), _judge(ctx, n_tests), ctx.workers,
                              current, ctx.vehicle, scr.scans, ctx.level / max(1, n_tests))
     va = [a for _, a in found]
