@@ -131,3 +131,81 @@ def test_per_flight_parameters_are_checked_before_any_work(flight_files, tmp_pat
                                     "--per-flight", "alpha*", "--out", str(tmp_path / "bad")])
     assert bad.exit_code == 2 and "--per-flight alpha*: no parameter of RA-66 matches" in bad.output
     assert "CD0" in bad.output and not (tmp_path / "bad" / "A").exists()
+
+
+# ---- a vehicle effect found in some flights, carried to the others ----------------------------------------------
+
+def _as_diagnosed(label, data, effects):
+    """A flight as a diagnosis that ended with ``effects`` leaves it: its base fit, the fit of its final model and
+    its noise band (real fits; the search itself is not run: its choice between rivals is what is given)."""
+    from types import SimpleNamespace
+
+    from rocketid import estimate
+    from rocketid.cases.ra66 import ra66
+    from rocketid.diagnostics.accept import noise_band
+    from rocketid.diagnostics.effects import with_effects
+    from rocketid.joint import Flight
+
+    base = estimate(ra66(), data)
+    fit = estimate(with_effects(base.spec, list(effects)), data, mesh=base.prepared.transcription.mesh) \
+        if effects else base
+    assert base.success and fit.success
+    disc = SimpleNamespace(effects=tuple(effects), base_fit=base, fit=fit, band=noise_band(fit))
+    return Flight(label, base.spec, data, base.prepared.transcription.mesh), SimpleNamespace(discovery=disc), base
+
+
+def _joint(cases):
+    from rocketid.diagnostics.flights import joint_final
+    from rocketid.joint import joint_estimate
+
+    flights, reports = zip(*[(f, r) for f, r, _ in cases])
+    base = joint_estimate(list(flights))
+    return joint_final(list(flights), list(reports), base.chi2_per_dof)
+
+
+@pytest.fixture(scope="module")
+def thrust_flights():
+    vehicle = ra66_vehicle()
+    return {label: measure(vehicle, effects, seed=410 + i) for i, (label, effects) in enumerate(
+        {"A": {"thrust_level": {"eps_thrust": 0.02}}, "B": {"thrust_level": {"eps_thrust": 0.02}},
+         "C": {"thrust_level": {"eps_thrust": 0.035}}, "D": {}}.items())}
+
+
+def test_a_vehicle_effect_one_flight_found_is_carried_to_a_flight_whose_search_took_a_rival(thrust_flights):
+    """A and B fly the same engine, 2 % above its stated thrust. A's search found the thrust error; B's took a
+    start-mass error for it (as a search may, where the two fit a flight alike). The thrust error is the
+    vehicle's: tried in B with one value for both, the flights agree, and B's start-mass error no longer lowers
+    the joint BIC and is dropped -- one thrust error, both flights at their noise."""
+    thrust, start_mass = CATALOGUE["thrust_level"], CATALOGUE["start_mass"]
+    final = _joint([_as_diagnosed("A", thrust_flights["A"], [thrust]),
+                    _as_diagnosed("B", thrust_flights["B"], [start_mass])])
+    (c,) = final.carried
+    assert c.effect == "thrust_level" and c.found_in == ("A",) and c.to == ("B",)
+    assert c.carried and c.p_value >= 0.05 and c.dof == 1 and c.fall > 0
+    assert c.dropped == {"B": ("start_mass",)}
+    assert final.effects == {"A": ("thrust_level",), "B": ("thrust_level",)}
+    assert final.shared == ("thrust_level",)
+    values = {n: (v, s) for n, v, s in final._values()}
+    assert set(values) == {"eps_thrust"}
+    eps, std = values["eps_thrust"]
+    assert abs(eps - 0.02) < 4 * std and std < 1e-4
+    assert final.fits_to_noise
+    assert "carried to every flight" in " ".join(final.sentences())
+    assert "B drops start_mass" in " ".join(final.sentences())
+    d = final.to_dict()
+    assert d["carried"][0]["carried"] and d["carried"][0]["dropped"] == {"B": ["start_mass"]}
+
+
+def test_a_vehicle_effect_is_not_carried_to_flights_that_disagree_on_its_value(thrust_flights):
+    """C's engine is 3.5 % above the stated thrust and its search found a start-mass error; D's data are clean
+    and its search found nothing. A's 2 % is no value for C nor for D: neither takes it, each keeps its model."""
+    thrust, start_mass = CATALOGUE["thrust_level"], CATALOGUE["start_mass"]
+    a = _as_diagnosed("A", thrust_flights["A"], [thrust])
+    for other, effects in (("C", [start_mass]), ("D", [])):
+        final = _joint([a, _as_diagnosed(other, thrust_flights[other], effects)])
+        (c,) = final.carried
+        assert c.effect == "thrust_level" and c.to == (other,)
+        assert not c.carried and c.p_value < 1e-6, other
+        assert final.effects == {"A": ("thrust_level",), other: tuple(e.name for e in effects)}
+        assert final.shared == ()
+        assert "do not agree on one value" in " ".join(final.sentences())

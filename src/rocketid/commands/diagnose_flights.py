@@ -211,7 +211,8 @@ class FlightsDiagnosis:
         notes = self._joint_notes()
         if self.final is not None:
             sections.append(self.final.section())
-            notes += [t.sentence() for t in self.final.tests] + list(self.final.notes)
+            notes += ([t.sentence() for t in self.final.tests] + [c.sentence() for c in self.final.carried]
+                      + list(self.final.notes))
         return Summary(f"rocketid diagnosis of {len(self.labels)} flights: {self.reports[0].fit.spec.name}",
                        tuple(sections), notes)
 

@@ -30,7 +30,8 @@ Several flights, after each flight's diagnosis:
 
 ``flights``  :func:`~rocketid.diagnostics.flights.joint_final` -> :class:`~rocketid.diagnostics.flights.JointFinal`
              (all flights at once with the effects each found; a vehicle effect found in several shared when
-             a likelihood-ratio test says they agree)
+             a likelihood-ratio test says they agree; one found in some flights only carried to the others when
+             they agree on its value, :class:`~rocketid.diagnostics.flights.Carried`)
 """
 
 from .effects import (CATALOGUE, KINDS, Effect, Vehicle, apply_effect, back_pressure_effect, custom_effect,

@@ -24,6 +24,16 @@ effect is shared when its p-value is at least the diagnosis's level; otherwise i
 and said to differ. The final joint fit shares every effect that passed; each flight's chi2/dof in
 it is judged against that flight's own noise band (:class:`~rocketid.diagnostics.accept.NoiseBand`).
 
+A vehicle effect found in some flights but not in the others (their searches stopped at the noise
+without it, or took a rival that fits their flight alike) is then **carried** to the others: the
+joint fit with it in every flight and one value for all is tested against the fit with a value per
+flight (``2 (J_one - J_each)`` against chi2 with ``k (F - 1)`` degrees of freedom); when the flights
+agree it is carried, and each flight it was carried to is checked backward: an effect of its own that
+no longer lowers the joint BIC is dropped (two flights that both fly 2 % above the stated thrust,
+one of whose searches took a start-mass error for it, end with one thrust error). A vehicle property
+is one value for every flight of that vehicle; a flight whose data reject the value keeps its own
+model, and the report says so.
+
 The flights' data are those their diagnoses fitted (wild points dropped, correlated channels
 thinned, noise levels taken from the data held fixed), so the joint fits' objectives are
 comparable with each other.
@@ -42,7 +52,7 @@ from ..errors import RocketidError, SensitivityError
 from ..output import finite_or_none
 from ..summary import Section, Table
 
-__all__ = ["FLIGHT_KINDS", "SharingTest", "JointFinal", "effect_nature", "sharing_plan", "joint_final"]
+__all__ = ["FLIGHT_KINDS", "SharingTest", "Carried", "JointFinal", "effect_nature", "sharing_plan", "joint_final"]
 
 #: Effect kinds that are a property of one flight, never shared.
 FLIGHT_KINDS = ("sensor", "environment", "kinematics")
@@ -113,6 +123,63 @@ class SharingTest:
 
 
 @dataclass(frozen=True)
+class Carried:
+    """A vehicle effect found in some flights, tried in the others (module notes).
+
+    Attributes
+    ----------
+    effect : str
+    found_in : tuple of str
+        The flights whose diagnosis found it.
+    to : tuple of str
+        The flights it was tried in.
+    statistic : float
+        ``2 (J_one - J_each)``: one value for every flight against one per flight (NaN when a fit failed).
+    dof : int
+    p_value : float
+    carried : bool
+        The flights agree on one value: the effect is in every flight's model, shared.
+    dropped : dict
+        ``{flight: (effect, ...)}``: the flight's own effects the backward check dropped once it was carried.
+    fall : float
+        ``2 (J_before - J_one)``: what carrying it changed in the joint fit (same number of parameters).
+    note : str
+        Why it could not be tried (empty when it was).
+    """
+
+    effect: str
+    found_in: tuple
+    to: tuple
+    statistic: float
+    dof: int
+    p_value: float
+    carried: bool
+    dropped: dict = field(default_factory=dict)
+    fall: float = math.nan
+    note: str = ""
+
+    def sentence(self) -> str:
+        where = f"found in {', '.join(self.found_in)}, tried in {', '.join(self.to)}"
+        if self.note:
+            return f"{self.effect} ({where}): not carried ({self.note})"
+        test = f"one value for every flight costs 2 dJ = {self.statistic:.4g} for {self.dof} degree(s) of freedom, " \
+               f"p = {self.p_value:.2g}"
+        if not self.carried:
+            return f"{self.effect} ({where}): the flights do not agree on one value ({test}): kept where it was found"
+        out = f"{self.effect} ({where}): carried to every flight, one value ({test}; the joint J falls by " \
+              f"{self.fall / 2:.4g})"
+        drops = "; ".join(f"{l} drops {', '.join(d)}" for l, d in self.dropped.items() if d)
+        return out + (f"; no longer needed with it: {drops}" if drops else "")
+
+    def to_dict(self) -> dict:
+        return {"effect": self.effect, "found_in": list(self.found_in), "to": list(self.to),
+                "statistic": finite_or_none(self.statistic), "dof": int(self.dof),
+                "p_value": finite_or_none(self.p_value), "carried": bool(self.carried),
+                "dropped": {l: list(d) for l, d in self.dropped.items()}, "fall": finite_or_none(self.fall),
+                "note": self.note}
+
+
+@dataclass(frozen=True)
 class JointFinal:
     """All flights fitted at once with the effects their diagnoses found.
 
@@ -126,6 +193,8 @@ class JointFinal:
         The effects fitted with one value for the flights that found them.
     tests : tuple of SharingTest
         One per vehicle effect found in two or more flights.
+    carried : tuple of Carried
+        One per vehicle effect found in some flights but not all, tried in the others.
     result : JointResult or None
         The final joint fit (None when it failed: :attr:`failed`).
     base_chi2_per_dof : float
@@ -148,6 +217,7 @@ class JointFinal:
     failed: str = ""
     notes: tuple = ()
     parameters_of: dict = field(default_factory=dict, repr=False, compare=False)
+    carried: tuple = ()
 
     @property
     def chi2_per_dof(self) -> float:
@@ -194,6 +264,7 @@ class JointFinal:
         out = [f"Joint fit with each flight's effects: chi2/dof {_chi2(self.base_chi2_per_dof)} (base model) -> "
                f"{_chi2(self.chi2_per_dof)}" + ("" if self.result.success else " (did not converge)") + "."]
         out += [t.sentence() + "." for t in self.tests]     # effect names keep their case
+        out += [c.sentence() + "." for c in self.carried]
         rows = self.per_flight()
         over = [f"{l} {c:.4g} (band {b:.4g})" for l, (c, b, ok) in rows.items() if not ok]
         if self.fits_to_noise:
@@ -211,6 +282,8 @@ class JointFinal:
         items: list = [("chi2 / dof", f"{_chi2(self.base_chi2_per_dof)} (base model) -> {_chi2(self.chi2_per_dof)}"),
                        ("status", "converged" if self.result.success else f"FAILED ({self.result.message})"),
                        ("shared", ", ".join(self.shared) or "none"),
+                       ("carried", ", ".join(f"{c.effect} to {', '.join(c.to)}" for c in self.carried if c.carried)
+                        or "none"),
                        Table(("flight", "effects", "chi2/dof joint", "band", "at the noise"), rows,
                              (None, None, ".4g", ".4g", None))]
         values = self._values()
@@ -221,6 +294,7 @@ class JointFinal:
     def to_dict(self) -> dict:
         d: dict = {"effects": {l: list(e) for l, e in self.effects.items()}, "nature": dict(self.nature),
                    "shared": list(self.shared), "tests": [t.to_dict() for t in self.tests],
+                   "carried": [c.to_dict() for c in self.carried],
                    "base_chi2_per_dof": finite_or_none(self.base_chi2_per_dof), "failed": self.failed,
                    "notes": list(self.notes)}
         if self.result is not None:
@@ -326,6 +400,7 @@ def joint_final(flights: Sequence, reports: Sequence, base_chi2_per_dof: float, 
         None when some flight's diagnosis did not search for effects (``confirm_top=0``) or none added one.
     """
     from ..joint import joint_estimate, joint_prepare
+    from .effects import with_effects
 
     finals = [r.discovery for r in reports]
     if any(d is None for d in finals):
@@ -350,15 +425,20 @@ def joint_final(flights: Sequence, reports: Sequence, base_chi2_per_dof: float, 
 
     base_own = set(per_flight)
     fits: dict = {}
+    found_cfg = {l: tuple(d.effects) for l, d in zip(labels, finals)}
 
-    def fit(own: set):
-        # one fit per choice of per-flight parameters: the final fit is often one of the tests' (every effect
-        # kept per flight, or the one shared effect's)
-        key = frozenset((own | base_own) & _names(fl_final))
+    def fit(own: set, cfg: Mapping | None = None):
+        # one fit per model of each flight and choice of per-flight parameters: the final fit is often one of
+        # the tests' (every effect kept per flight, or the one shared effect's)
+        cfg = found_cfg if cfg is None else cfg
+        fls = [fl if cfg[fl.label] == found_cfg[fl.label] else
+               replace(fl, spec=with_effects(d.base_fit.spec, list(cfg[fl.label])))
+               for fl, d in zip(fl_final, finals)]
+        key = (frozenset((own | base_own) & _names(fls)), tuple(tuple(e.name for e in cfg[l]) for l in labels))
         if key not in fits:
-            prepared = joint_prepare(fl_final, per_flight=sorted(key))
-            fits[key] = joint_estimate(fl_final, prepared=prepared, guess=_guess(prepared.layout, values),
-                                       sigma=sigma, options=options)
+            prepared = joint_prepare(fls, per_flight=sorted(key[0]))
+            fits[key] = joint_estimate(fls, prepared=prepared, guess=_guess(prepared.layout, _carry_values(
+                values, labels, cfg, found_cfg)), sigma=sigma, options=options)
         return fits[key]
 
     tests = []
@@ -398,8 +478,99 @@ def joint_final(flights: Sequence, reports: Sequence, base_chi2_per_dof: float, 
         failed = ""
     except RocketidError as exc:
         result, failed = None, str(exc)
+    carried: list = []
+    if result is not None and result.success:
+        owner: dict = {}
+        for items in declared.values():
+            for e, _, ps in items:
+                for n in ps:
+                    owner.setdefault(n, set()).add(e)
+        differ = {t.effect for t in tests if not t.shared}
+        cfg, own = dict(found_cfg), set(kept_own)
+        for e, finders, effect, ps in _to_carry(labels, finals, nature, params, owner, differ):
+            lacking = tuple(l for l in labels if l not in finders)
+            step = _carry(fit, cfg, own, effect, ps, finders, lacking, result, level, notes)
+            carried.append(step[0])
+            if step[0].carried:
+                _, cfg, own, result = step
+                if e not in shared:
+                    shared.append(e)
+                for l in lacking:
+                    params[(l, e)] = ps
+        effects = {l: tuple(x.name for x in cfg[l]) for l in labels}
     return JointFinal(effects, nature, tuple(shared), tuple(tests), result, float(base_chi2_per_dof), bands,
-                      failed, tuple(notes), parameters_of=params)
+                      failed, tuple(notes), parameters_of=params, carried=tuple(carried))
+
+
+def _to_carry(labels, finals, nature: dict, params: dict, owner: dict, differ: set) -> list:
+    """``[(effect name, finders, Effect, parameters)]``: the vehicle effects found in some flights but not all,
+    whose parameters no other effect declares and on whose value the finders do not differ."""
+    out, seen = [], set()
+    for l, d in zip(labels, finals):
+        for e in d.effects:
+            if e.name in seen or nature.get(e.name) != "vehicle" or e.name in differ:
+                continue
+            seen.add(e.name)
+            finders = tuple(m for m, dm in zip(labels, finals) if e.name in {x.name for x in dm.effects})
+            ps = params[(l, e.name)]
+            if len(finders) < len(labels) and ps and all(owner.get(n) == {e.name} for n in ps):
+                out.append((e.name, finders, e, ps))
+    return out
+
+
+def _carry(fit, cfg: dict, own: set, effect, ps: tuple, finders: tuple, lacking: tuple, before, level: float,
+           notes: list) -> tuple:
+    """Try ``effect`` in the flights ``lacking`` it (module notes). Returns ``(Carried, cfg, own, result)``: the
+    models of each flight, the per-flight parameters and the joint fit after it (those given when not carried)."""
+    ext = {l: cfg[l] + ((effect,) if l in lacking else ()) for l in cfg}
+    n_f = len(finders) + len(lacking)
+    dof = len(ps) * (n_f - 1)
+    try:
+        each, one = fit(own | set(ps), ext), fit(own - set(ps), ext)
+    except RocketidError as exc:
+        return Carried(effect.name, finders, lacking, math.nan, dof, math.nan, False, note=str(exc)), cfg, own, before
+    if not (each.success and one.success):
+        return (Carried(effect.name, finders, lacking, math.nan, dof, math.nan, False,
+                        note="a joint fit with it in every flight did not converge"), cfg, own, before)
+    stat = max(0.0, 2.0 * (one.objective - each.objective))
+    p = float(stats.chi2.sf(stat, dof))
+    fall = 2.0 * (before.objective - one.objective)
+    if p < level:
+        return Carried(effect.name, finders, lacking, stat, dof, p, False, fall=fall), cfg, own, before
+    cfg, own, result = ext, own - set(ps), one
+    dropped: dict = {}
+    for l in lacking:
+        for x in reversed(cfg[l][:-1]):             # the flight's own effects, the latest first
+            fewer = {m: tuple(y for y in cfg[m] if not (m == l and y is x)) for m in cfg}
+            try:
+                r = fit(own, fewer)
+            except RocketidError as exc:
+                notes.append(f"the joint fit of {l} without {x.name} failed: {exc}")
+                continue
+            if r.success and _bic(r) < _bic(result):
+                cfg, result = fewer, r
+                dropped.setdefault(l, []).append(x.name)
+    return (Carried(effect.name, finders, lacking, stat, dof, p, True, {l: tuple(d) for l, d in dropped.items()},
+                    fall), cfg, own, result)
+
+
+def _bic(res) -> float:
+    """The joint fit's BIC, ``2 J + k ln n`` (``k`` joint parameters, ``n`` data)."""
+    return 2.0 * float(res.objective) + res.layout.n * math.log(max(1, res.n_data))
+
+
+def _carry_values(values: Sequence[dict], labels: Sequence[str], cfg: Mapping, found: Mapping) -> list:
+    """Each flight's guesses, with an effect carried to it started from the mean of the flights that found it."""
+    out = [dict(v) for v in values]
+    for i, l in enumerate(labels):
+        for e in cfg[l]:
+            if e in found[l]:
+                continue
+            for n in e.parameter_names:
+                vals = [values[j][n] for j, m in enumerate(labels) if n in values[j] and e in found[m]]
+                if vals and n not in out[i]:
+                    out[i][n] = float(np.mean(vals))
+    return out
 
 
 def _chi2(value: float) -> str:
