@@ -336,3 +336,25 @@ def test_diagnose_refuses_a_bad_holdout(bp_data):
         diagnose(bp_data, "ra66m", holdout=(40.0, 10.0))
     with pytest.raises(SettingsError, match="max_effects"):
         diagnose(bp_data, "ra66m", max_effects=0)
+
+
+def test_a_refit_whose_standard_errors_could_not_be_formed_says_so_instead_of_printing_nan(explained):
+    """On real telemetry far from its model (Falcon 9, a throttle window with a 14-knot wind) the final refit's
+    covariance could not be formed and the verdict printed ``d_window = 0.1656 +- nan``: the words now say that
+    these values are not estimates of known precision, and why."""
+    from dataclasses import replace
+    if not _available("refit"):
+        pytest.skip("rocketid.diagnostics.refit not installed")
+    rep, _ = explained
+    best = rep.best
+    nan = float("nan")
+    broken = replace(best, effect_estimates={n: (v, nan, (nan, nan)) for n, (v, _, _) in best.effect_estimates.items()},
+                     notes=best.notes + ("no uncertainty for the effect's parameters: the reduced Hessian is singular",))
+    line = next(s for s in replace(rep, confirmations=(broken,)).verdict() if s.startswith("Refit with"))
+    assert "nan" not in line
+    assert "A_e_vac = 0.4" in line or "A_e_vac = 0.39" in line, line
+    assert "no standard errors: the data at this fit do not determine every parameter -- the reduced Hessian is " \
+           "singular; these values are not estimates of known precision" in line
+    # with its standard errors the line is as before
+    good = next(s for s in rep.verdict() if s.startswith("Refit with"))
+    assert "A_e_vac = " in good and " +- " in good and "no standard errors" not in good

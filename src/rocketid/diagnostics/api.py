@@ -238,7 +238,12 @@ class DiagnosisReport:
         b = self.best
         if b is not None:
             name = self.effect_name(b)
-            est = "; ".join(f"{k} = {v[0]:.4g} +- {v[1]:.2g}" for k, v in b.effect_estimates.items())
+            est = "; ".join(f"{k} = {v[0]:.4g}" + (f" +- {v[1]:.2g}" if math.isfinite(v[1]) else "")
+                            for k, v in b.effect_estimates.items())
+            if any(not math.isfinite(v[1]) for v in b.effect_estimates.values()):
+                why = next((n.split(": ", 1)[1] for n in b.notes if n.startswith("no uncertainty")), "")
+                est += (" (no standard errors: the data at this fit do not determine every parameter"
+                        + (f" -- {why}" if why else "") + "; these values are not estimates of known precision)")
             out.append(f"Refit with {name} ({'confirmed' if b.confirmed else 'NOT confirmed'}): chi2/dof "
                        f"{b.fit.chi2_per_dof:.4g} (was {self.fit.chi2_per_dof:.4g}), LR {_p(b.lr_p_value)}, "
                        f"BIC {b.bic[0]:.6g} -> {b.bic[1]:.6g}; {est}.")
