@@ -16,6 +16,8 @@ import json
 import multiprocessing as mp
 import time
 
+import numpy as np
+
 import pytest
 from click.testing import CliRunner
 
@@ -125,3 +127,71 @@ def test_the_search_reports_its_progress_step_by_step(data):
     # the seconds since the search started never go back
     secs = [float(l.split(" s: ", 1)[0].split()[1]) for l in lines]
     assert secs == sorted(secs) and secs[-1] <= rep.discovery.timings["discover_s"] + 1
+
+
+# ---- checkpoints: a search stopped or interrupted goes on from the refits it made ---------------------------------
+
+def test_refits_kept_as_checkpoints_are_taken_instead_of_run_and_a_changed_task_is_run(base, tmp_path):
+    from rocketid.diagnostics.refit import refit_checkpoints, task_key
+    ctx = _ctx(base)
+    tasks = [ctx.task(base, [CATALOGUE[n]], (n,)) for n in ("thrust_level", "bias_h")]
+    with refit_checkpoints(tmp_path):
+        first = refit_all(tasks, workers=2)
+    keys = [task_key(t) for t in tasks]
+    assert len(set(keys)) == 2 and sorted(p.stem for p in tmp_path.glob("*.pkl")) == sorted(keys)
+    t0 = time.perf_counter()
+    with refit_checkpoints(tmp_path):
+        again = refit_all(tasks, workers=2)
+    assert time.perf_counter() - t0 < 2.0                       # read, not refitted
+    for a, b in zip(first, again):
+        assert a.name == b.name and a.objective == b.objective and a.seconds == b.seconds
+        assert np.array_equal(a.p, b.p)
+    # another start is another refit: its key differs and it is run (and kept)
+    moved = ctx.task(base, [CATALOGUE["thrust_level"]], ("thrust_level",), {"eps_thrust": 0.01})
+    assert task_key(moved) not in keys
+    with refit_checkpoints(tmp_path):
+        (r,) = refit_all([moved], workers=1)
+    assert r.success and len(list(tmp_path.glob("*.pkl"))) == 3
+    # a torn file is refitted, not trusted
+    (tmp_path / f"{keys[0]}.pkl").write_bytes(b"torn")
+    with refit_checkpoints(tmp_path):
+        (r0,) = refit_all(tasks[:1], workers=1)
+    assert r0.objective == pytest.approx(first[0].objective, rel=1e-9)
+    # with no folder nothing is kept
+    with refit_checkpoints(None):
+        refit_all([ctx.task(base, [CATALOGUE["scale_v"]], ("scale_v",))], workers=1)
+    assert len(list(tmp_path.glob("*.pkl"))) == 3
+
+
+def test_a_diagnosis_stopped_at_its_budget_resumes_from_its_checkpoints_to_the_same_answer(data, tmp_path):
+    csv = data.to_csv(tmp_path / "flight.csv")
+    args = ["diagnose", str(csv), "--model", "ra66", "--max-effects", "2", "--holdout", "none"]
+    t0 = time.perf_counter()
+    whole = CliRunner().invoke(main, args + ["--out", str(tmp_path / "whole")])
+    took = time.perf_counter() - t0
+    assert whole.exit_code == 0, whole.output
+    ref = json.loads((tmp_path / "whole" / "diagnosis.json").read_text())["final"]
+    assert ref["effects"] == ["thrust_level", "bias_h"] and ref["verdict"] == "explained"
+    assert not (tmp_path / "whole" / "checkpoints").exists()           # a search that ended leaves none
+
+    out = tmp_path / "cut"
+    cut = CliRunner().invoke(main, args + ["--out", str(out), "--budget", f"{0.5 * took:.1f}"])
+    assert cut.exit_code == 0, cut.output
+    d = json.loads((out / "diagnosis.json").read_text())
+    assert d["search_stopped"], "the budget did not stop the search"
+    kept = list((out / "checkpoints").glob("*.pkl"))
+    assert kept and any(n.startswith("checkpoints: the ") and "--resume" in n for n in d["notes"])
+
+    again = CliRunner().invoke(main, args + ["--out", str(out)])
+    assert again.exit_code == 2 and "holds the refits of an unfinished diagnosis" in again.output
+    assert "--resume" in again.output
+
+    t0 = time.perf_counter()
+    resumed = CliRunner().invoke(main, args + ["--out", str(out), "--resume"])
+    assert resumed.exit_code == 0, resumed.output
+    final = json.loads((out / "diagnosis.json").read_text())["final"]
+    assert final["effects"] == ref["effects"] and final["verdict"] == ref["verdict"]
+    assert final["chi2_per_dof"] == pytest.approx(ref["chi2_per_dof"], rel=1e-6)
+    for n, v in ref["parameters"].items():
+        assert final["parameters"][n]["value"] == pytest.approx(v["value"], rel=1e-6, abs=1e-9), n
+    assert not (out / "checkpoints").exists()                          # ended: removed

@@ -66,7 +66,10 @@ __all__ = ["command"]
 @click.option("--budget", type=float, default=None, metavar="SECONDS",
               help="Stop the search for missing effects after this long (each flight's, with several files): the "
                    "step under way is not completed, the steps before it stand, and the report says where it "
-                   "stopped. Default: no limit. Run again with more: the models built are kept in the code cache.")
+                   "stopped. Default: no limit. Continue with --resume and a larger budget.")
+@click.option("--resume", is_flag=True,
+              help="Continue a diagnosis interrupted or stopped at its --budget: the refits it made, kept in "
+                   "DIR/checkpoints (DIR/<flight>/checkpoints), are taken instead of run again.")
 @click.option("--locate-window", "locate_window", type=float, default=None, metavar="SECONDS",
               help="Window length of the located statistics (default: the flight's span / 22).")
 @click.option("--window", "window_text", default=None, metavar="T0:T1",
@@ -99,7 +102,7 @@ __all__ = ["command"]
 @unmeasured_option_decl()
 @verbose_option
 def command(data_files, out, model, level, confirm_top, holdout, max_effects, workers, refit_timeout, budget,
-            locate_window,
+            resume, locate_window,
             window_text, columns, time_column, wild_points, correlated_noise, size_opts, per_flight, sigmas,
             sigma_columns, unmeasured):
     """Fit a model to DATA.csv and diagnose what it misses; write DIR/report.html.
@@ -115,7 +118,7 @@ def command(data_files, out, model, level, confirm_top, holdout, max_effects, wo
     DIR/index.html say which effects are found in every flight and which in one
     flight only.
     """
-    from ..diagnostics.api import diagnose, resolve_model
+    from ..diagnostics.api import diagnose, end_checkpoints, resolve_model
 
     if not 0 < level < 1:
         raise SettingsError(f"--level must be between 0 and 1, got {level:g}")
@@ -152,7 +155,7 @@ def command(data_files, out, model, level, confirm_top, holdout, max_effects, wo
                  settings=dict(level=level, confirm_top=confirm_top, window=window, holdout=holdout,
                                max_effects=max_effects, workers=workers, refit_timeout=refit_timeout,
                                candidates=candidates, wild_points=wild_points, sizes=sizes,
-                               correlated_noise=correlated_noise, budget=budget))
+                               correlated_noise=correlated_noise, budget=budget, resume=resume))
         return
     data_file = data_files[0]
     data = read_data(data_file, spec, time_column=time_column, columns=assignments(columns, "--column"),
@@ -165,9 +168,11 @@ def command(data_files, out, model, level, confirm_top, holdout, max_effects, wo
         report = diagnose(data, spec, level=level, confirm_top=confirm_top, window=window, holdout=holdout,
                           max_effects=max_effects, workers=workers, refit_timeout=refit_timeout, sigma=sigma,
                           flight_window=flight, candidates=candidates, wild_points=wild_points, sizes=sizes,
-                          correlated_noise=correlated_noise, budget=budget, progress=status)
+                          correlated_noise=correlated_noise, budget=budget, progress=status,
+                          checkpoints=Path(out) / "checkpoints", resume=resume)
         report = _relabel(report, label, str(data_file))
         path = report.write(out)
+        end_checkpoints(Path(out) / "checkpoints", bool(report.search_stopped), [])
     for line in report.verdict():
         click.echo(line)
     click.echo(f"wrote {path} and {path.parent / 'candidates.json'} ({time.perf_counter() - t0:.1f} s)")

@@ -298,11 +298,13 @@ def diagnose_flights(datas: Sequence, labels: Sequence[str], spec, *, files: Seq
     **settings
         Passed to :func:`rocketid.diagnostics.diagnose` for each flight (``level``,
         ``confirm_top``, ``holdout``, ``max_effects``, ``workers``, ``refit_timeout``, ``window``,
-        ``wild_points``, ``correlated_noise``, ``budget``: each flight's search its own). The joint fit sees each flight's data as its diagnosis
+        ``wild_points``, ``correlated_noise``, ``budget``: each flight's search its own, ``resume``: each
+        flight's refits kept in ``out/<label>/checkpoints``). The joint fit sees each flight's data as its diagnosis
         did: without the wild points it dropped, thinned where its errors were correlated.
     """
     from ..cli import windowed_inputs
     from ..diagnostics import diagnose
+    from ..diagnostics.api import end_checkpoints
     from ..diagnostics.flights import joint_final
     from ..joint import Flight, joint_estimate
     from ..solve import check_determined
@@ -319,7 +321,8 @@ def diagnose_flights(datas: Sequence, labels: Sequence[str], spec, *, files: Seq
     reports = []
     for label, f, data in zip(labels, files, datas):
         said = None if progress is None else (lambda m, label=label: progress(f"flight {label}: {m}"))
-        rep = diagnose(data, spec, sigma=sigma, flight_window=flight_window, progress=said, **settings)
+        rep = diagnose(data, spec, sigma=sigma, flight_window=flight_window, progress=said,
+                       checkpoints=None if out is None else Path(out) / label / "checkpoints", **settings)
         rep = replace(rep, model=model_label or spec.name, data_label=f)
         if out is not None:
             rep.write(Path(out) / label)
@@ -347,6 +350,10 @@ def diagnose_flights(datas: Sequence, labels: Sequence[str], spec, *, files: Seq
                               joint=joint, joint_failed=failed, timings=timings, joint_noise=noise, final=final)
     if out is not None:
         result.write_joint(out)
+        # every flight's refits were kept until the whole command had ended (a flight resumed after another's
+        # interruption goes through its own in no time); a flight stopped at its budget keeps them
+        for label, rep in zip(labels, reports):
+            end_checkpoints(Path(out) / label / "checkpoints", bool(rep.search_stopped), [])
     return result
 
 

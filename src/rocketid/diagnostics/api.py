@@ -256,6 +256,15 @@ class DiagnosisReport:
                        + f" (chi2/dof {v.chi2_per_dof:.4g}).")
         return out
 
+    @property
+    def search_stopped(self) -> str:
+        """Where the search's time budget ran out (the variant's search's, prefixed), empty when it did not."""
+        own = _stopped(self.discovery)
+        if own:
+            return own
+        var = _stopped(self.variant.discovery) if self.variant is not None else ""
+        return f"the Mach-indexed variant's search: {var}" if var else ""
+
     def _base_fits(self) -> bool:
         if self.discovery is not None:
             from .accept import fits_to_noise
@@ -328,8 +337,7 @@ class DiagnosisReport:
                "final": None if self.final is None else self.final.to_dict(),
                "steps": [s.to_dict() for s in self.steps],
                "noise_band": None if self.discovery is None else self.discovery.band.to_dict(),
-               "search_stopped": None if self.discovery is None or not self.discovery.stopped
-               else self.discovery.stopped,
+               "search_stopped": self.search_stopped or None,
                "variant": None if self.variant is None else {
                    "model": self.variant.fit.spec.name,
                    "final": None if self.variant.final is None else self.variant.final.to_dict(),
@@ -397,6 +405,42 @@ def _check_settings(level, confirm_top, max_effects, refit_timeout, budget=None)
     if budget is not None and (isinstance(budget, bool) or not isinstance(budget, (int, float, np.floating))
                                or not budget > 0 or not math.isfinite(budget)):
         raise SettingsError(f"budget must be a positive number of seconds (or None: no limit), got {budget!r}")
+
+
+def _check_checkpoints(folder, resume: bool) -> None:
+    """Refuse, before any work, a checkpoint folder that holds an unfinished diagnosis's refits without
+    ``resume`` (they would be mixed with another search's)."""
+    if folder is None:
+        return
+    kept = sorted(Path(folder).glob("*.pkl")) if Path(folder).is_dir() else []
+    if kept and not resume:
+        raise SettingsError(f"{folder} holds the refits of an unfinished diagnosis ({len(kept)}): continue it with "
+                            "--resume (diagnose(resume=True)), or remove that folder to start afresh")
+
+
+def _stopped(disc) -> str:
+    return "" if disc is None else disc.stopped
+
+
+def end_checkpoints(folder: Path, stopped: bool, notes: list, *, remove: bool = True) -> None:
+    """Remove the refits kept in ``folder`` while a search ran, once it has ended (``remove``: the caller
+    that set the folder up may keep them until its own work ends -- several flights, each resumed from
+    its own); keep them, with a note, when it was stopped at its budget (a run with ``resume`` and a
+    larger budget goes on from them)."""
+    kept = sorted(folder.glob("*.pkl")) if folder.is_dir() else []
+    if stopped:
+        if kept:
+            notes.append(f"checkpoints: the {len(kept)} refits made are kept in {folder}: run again with --resume "
+                         "(diagnose(resume=True)) and a larger budget to go on from them")
+        return
+    if not remove:
+        return
+    for f in kept:
+        f.unlink(missing_ok=True)
+    try:
+        folder.rmdir()
+    except OSError:
+        pass          # not empty (someone else's files) or already gone
 
 
 def _noise_from_data(sigma, meas, notes: list, from_data: dict, known: Mapping | None = None) -> tuple:
@@ -710,7 +754,8 @@ def _final(disc, ranking, level, window) -> FinalModel | None:
                 f"the residual sits in: {_where(fit, level, window)}. Try {_suggest(ranking)}.")
     if disc.stopped:
         text += (f" The search was cut short: {disc.stopped}. A larger budget (--budget, diagnose(budget=)) lets it "
-                 "go on; the models already built are kept in the code cache.")
+                 "go on; with --resume (diagnose(resume=True)) from the refits it made (kept with an output folder) "
+                 "and the models already built (the code cache).")
     return FinalModel(disc.effect_names, params, float(fit.chi2_per_dof), bool(disc.fits_to_noise), disc.verdict,
                       text[0].upper() + text[1:], fit)
 
@@ -769,7 +814,8 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
              sigma: str | Mapping[str, float | str] | None = None,
              flight_window: Sequence[float] | None = None, wild_points: str = "drop",
              sizes: Mapping[str, float] | None = None, correlated_noise: str = "thin",
-             budget: float | None = None, progress=None) -> DiagnosisReport:
+             budget: float | None = None, progress=None, checkpoints: str | Path | None = None,
+             resume: bool = False) -> DiagnosisReport:
     """Fit ``model`` to ``data`` and find what it misses::
 
         fit -> compare -> locate -> plausibility
@@ -857,6 +903,16 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
         Called with one line of text at each stage of the search (the contenders refitted at
         each step, the effect taken, the second path, the variant's search); ``rocketid
         diagnose`` prints them on a terminal or with ``--verbose``.
+    checkpoints : path, optional
+        Folder where the search keeps every refit it completes, as it completes it (default:
+        ``out/checkpoints`` when ``out`` is given, else none). It is removed when the search ends;
+        kept when it was interrupted or stopped at its ``budget``, and then a folder holding refits
+        is refused unless ``resume``.
+    resume : bool
+        Take the refits kept in ``checkpoints`` instead of running them again: the same inputs give
+        the same search, which goes through what was done in no time and on from there (with a
+        larger ``budget``, past where it stopped). The files are Python pickles: resume only from
+        checkpoints you wrote.
 
     Returns
     -------
@@ -873,6 +929,10 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
         raise SettingsError(f"variant must be 'auto', True or False, got {variant!r}")
     spec, label = resolve_model(model)
     holdout_window(spec, holdout)           # refuse a bad window before any work
+    owned = checkpoints is None and out is not None       # the folder is ours to remove when the search ends
+    if owned:
+        checkpoints = Path(out) / "checkpoints"
+    _check_checkpoints(checkpoints, resume)
     meas, data_label = _read_data(data, spec)
     notes: list[str] = []
     if flight_window is not None:
@@ -902,41 +962,50 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
     effects = _stated(_candidate_effects(candidates), sizes, fit, notes)
     disc, ranking, failed = None, None, ""
     t_search = time.perf_counter()
-    if confirm_top > 0:
-        try:
-            from .accept import noise_band
-            band = noise_band(fit, estimated=counts) if counts else None
-            disc = timed("discover_s", discover, fit, effects, level=level, max_effects=int(max_effects),
-                         workers=workers, timeout=float(refit_timeout), options=options, refine=refine,
-                         holdout=holdout, band=band, budget=budget, progress=progress)
-        except RocketidError as exc:
-            notes.append(f"the discovery failed: {exc}")
-        if disc is not None:
-            notes.extend(disc.notes)
-            ranking = disc.steps[0].screen.ranking if disc.steps else None
-            failed = disc.ranking_failed
-    else:
-        from .screen import screen
-        scr = timed("rank_s", screen, fit, effects, level=level)
-        ranking, failed = scr.ranking, scr.failed
-    if failed:
-        notes.append(f"the candidate ranking failed: {failed}")
-    confs, names, pls = timed("confirm_s", _confirm_final, fit, disc, holdout, level, refit_timeout, options, notes)
-    disc = _prediction_check(disc, confs, notes)
-    history = _history(spec, fit, disc, notes)
-    after = compare(disc.fit, level=level) if disc is not None and disc.effects else None
-    final = _final(disc, ranking, level, window)
-    var = None
-    if confirm_top > 0 and (variant is True or (variant == "auto" and (final is None or final.verdict != "explained"))):
-        settings = dict(level=level, confirm_top=confirm_top, window=window, options=options,
-                        max_effects=max_effects, workers=workers, refit_timeout=refit_timeout, refine=refine,
-                        sigma=asked if counts else None)     # the same data, the same noise (and a widened band)
-        left = None if budget is None else budget - (time.perf_counter() - t_search)
-        if left is not None and left <= 0:
-            notes.append("the Mach-indexed variant of the time-knot drag was not searched: the time budget had run out")
+    from .refit import refit_checkpoints
+    with refit_checkpoints(checkpoints):
+        if confirm_top > 0:
+            try:
+                from .accept import noise_band
+                band = noise_band(fit, estimated=counts) if counts else None
+                disc = timed("discover_s", discover, fit, effects, level=level, max_effects=int(max_effects),
+                             workers=workers, timeout=float(refit_timeout), options=options, refine=refine,
+                             holdout=holdout, band=band, budget=budget, progress=progress)
+            except RocketidError as exc:
+                notes.append(f"the discovery failed: {exc}")
+            if disc is not None:
+                notes.extend(disc.notes)
+                ranking = disc.steps[0].screen.ranking if disc.steps else None
+                failed = disc.ranking_failed
         else:
-            said = None if progress is None else (lambda m: progress(f"Mach-indexed variant: {m}"))
-            var = timed("variant_s", _variant, fit, meas, effects, dict(settings, budget=left, progress=said), notes)
+            from .screen import screen
+            scr = timed("rank_s", screen, fit, effects, level=level)
+            ranking, failed = scr.ranking, scr.failed
+        if failed:
+            notes.append(f"the candidate ranking failed: {failed}")
+        confs, names, pls = timed("confirm_s", _confirm_final, fit, disc, holdout, level, refit_timeout, options,
+                                  notes)
+        disc = _prediction_check(disc, confs, notes)
+        history = _history(spec, fit, disc, notes)
+        after = compare(disc.fit, level=level) if disc is not None and disc.effects else None
+        final = _final(disc, ranking, level, window)
+        var = None
+        if confirm_top > 0 and (variant is True or (variant == "auto"
+                                                    and (final is None or final.verdict != "explained"))):
+            settings = dict(level=level, confirm_top=confirm_top, window=window, options=options,
+                            max_effects=max_effects, workers=workers, refit_timeout=refit_timeout, refine=refine,
+                            sigma=asked if counts else None)     # the same data, the same noise (and a widened band)
+            left = None if budget is None else budget - (time.perf_counter() - t_search)
+            if left is not None and left <= 0:
+                notes.append("the Mach-indexed variant of the time-knot drag was not searched: the time budget had "
+                             "run out")
+            else:
+                said = None if progress is None else (lambda m: progress(f"Mach-indexed variant: {m}"))
+                var = timed("variant_s", _variant, fit, meas, effects, dict(settings, budget=left, progress=said),
+                            notes)
+    if checkpoints is not None:
+        stopped = bool(_stopped(disc) or (var is not None and _stopped(var.discovery)))
+        end_checkpoints(Path(checkpoints), stopped, notes, remove=owned)
     report = DiagnosisReport(model=label, data_label=data_label, fit=fit, comparison=comp, location=loc,
                              plausibility=plaus, ranking=ranking, confirmations=confs, confirmed=names,
                              refit_plausibility=pls, after=after, history=history, level=float(level),

@@ -24,9 +24,11 @@ It reports, base against new:
 
 from __future__ import annotations
 
+import hashlib
 import math
 import time
 from contextlib import contextmanager
+from pathlib import Path
 from dataclasses import dataclass, field, replace
 from typing import Any, Mapping, NamedTuple, Sequence
 
@@ -1219,6 +1221,94 @@ def time_budget(seconds: float | None):
         _DEADLINE.pop()
 
 
+_STORE: list = []     # the folders of the enclosing :func:`refit_checkpoints`, innermost last
+
+CHECKPOINT_VERSION = 1
+"""Format of a refit's checkpoint file (``DIR/checkpoints/refits/<key>.pkl``)."""
+
+
+@contextmanager
+def refit_checkpoints(folder: str | Path | None):
+    """Within this block :func:`refit_all` keeps every refit it completes in ``folder`` (one file per
+    refit, named by :func:`task_key`, written atomically as it arrives) and takes a refit found there
+    in place of running it: a diagnosis interrupted, or stopped at its time budget, is run again with
+    the same inputs and goes through the refits it had made in no time. None keeps nothing.
+
+    The files are Python pickles of :class:`Refit`: read only checkpoints you wrote yourself. A refit
+    that gave up at its time limit is not kept (a less loaded machine may finish it)."""
+    if folder is None:
+        yield
+        return
+    _STORE.append(Path(folder))
+    try:
+        yield
+    finally:
+        _STORE.pop()
+
+
+def _code_fingerprint() -> str:
+    """The source of the diagnostics and of every stage a fit runs through: a checkpoint made by other code
+    is not taken."""
+    from ..sampling.worker import code_fingerprint
+    h = hashlib.sha256(code_fingerprint().encode())
+    for f in sorted(Path(__file__).resolve().parent.glob("*.py")):
+        h.update(f.name.encode())
+        h.update(f.read_bytes())
+    return h.hexdigest()[:16]
+
+
+def task_key(task: RefitTask) -> str:
+    """A refit's identity: the model with its effects (its symbolic fingerprint), the data, the mesh, the
+    start, the sizes and every setting of the refit, and the code that runs it (hex, 32 characters)."""
+    h = hashlib.sha256(f"{CHECKPOINT_VERSION}:{_code_fingerprint()}".encode())
+    h.update(with_effects(task.base_spec, list(task.effects)).fingerprint().encode())
+    for ch in task.data.channels:
+        h.update(ch.name.encode())
+        for a in (ch.times, ch.values):
+            h.update(np.ascontiguousarray(a, dtype=float).tobytes())
+        h.update(np.ascontiguousarray(ch.sigma, dtype=float).tobytes())
+    if task.mesh is not None:
+        h.update(np.ascontiguousarray(task.mesh.boundaries, dtype=float).tobytes())
+        h.update(str(task.mesh.K).encode())
+
+    def items(d):
+        return sorted((repr(k), repr(float(v)) if isinstance(v, (int, float, np.floating)) else repr(v))
+                      for k, v in dict(d).items())
+    h.update(repr((task.added, items(task.start), items(task.sizes), items(task.options), items(task.base_values),
+                   items(task.changes), task.base_parameters, float(task.base_objective), int(task.base_n_estimated),
+                   float(task.timeout), float(task.level), float(task.band_upper),
+                   float(task.base_chi2_per_dof))).encode())
+    return h.hexdigest()[:32]
+
+
+def _checkpoint_file(folder: Path, key: str) -> Path:
+    return folder / f"{key}.pkl"
+
+
+def _load_checkpoint(folder: Path, key: str) -> Refit | None:
+    """The refit kept under ``key`` (None when there is none, or it cannot be read: it is then refitted)."""
+    import pickle
+    path = _checkpoint_file(folder, key)
+    if not path.is_file():
+        return None
+    try:
+        with open(path, "rb") as fh:
+            version, refit = pickle.load(fh)
+    except Exception:  # noqa: BLE001 - a torn or foreign file is refitted, not trusted
+        return None
+    return refit if version == CHECKPOINT_VERSION and isinstance(refit, Refit) else None
+
+
+def _keep(folder: Path, key: str, refit: Refit) -> None:
+    import pickle
+
+    from ..output import atomic_open
+    if refit.gave_up:
+        return
+    with atomic_open(_checkpoint_file(folder, key), "wb") as fh:
+        pickle.dump((CHECKPOINT_VERSION, refit), fh, protocol=pickle.HIGHEST_PROTOCOL)
+
+
 def budget_spent() -> bool:
     """Whether the time budget of the enclosing :func:`time_budget` has run out (False without one)."""
     return bool(_DEADLINE) and time.perf_counter() >= _DEADLINE[-1]
@@ -1260,27 +1350,46 @@ def refit_all(tasks: Sequence[RefitTask], *, workers: int | None = None) -> tupl
     here, in turn, with IPOPT's wall-time limit as the guard.
 
     Within a :func:`time_budget` that has run out, no refit is started and those running are
-    stopped: :class:`BudgetSpent` is raised (a batch is never returned in part).
+    stopped: :class:`BudgetSpent` is raised (a batch is never returned in part). Within
+    :func:`refit_checkpoints` a refit kept there is taken instead of run, and each refit
+    completed is kept as it arrives.
 
     Returns
     -------
     tuple of Refit
         In the order of ``tasks``.
     """
-    import multiprocessing as mp
-    import os
-
     tasks = list(tasks)
     if not tasks:
         return ()
     _check_budget()
+    store = _STORE[-1] if _STORE else None
+    if store is not None:
+        keys = [task_key(t) for t in tasks]
+        kept = [_load_checkpoint(store, k) for k in keys]
+        todo = [i for i, r in enumerate(kept) if r is None]
+        done = _run_refits([tasks[i] for i in todo], workers,
+                           lambda j, r: _keep(store, keys[todo[j]], r)) if todo else ()
+        for i, r in zip(todo, done):
+            kept[i] = r
+        return tuple(kept)
+    return _run_refits(tasks, workers)
+
+
+def _run_refits(tasks: list, workers: int | None, on_result=None) -> tuple:
+    """:func:`refit_all`'s work: ``on_result(index, refit)`` as each refit completes (a checkpoint)."""
+    import multiprocessing as mp
+    import os
+
     if workers is None:
         workers = min(2, os.cpu_count() or 1)
     if workers <= 1 or len(tasks) == 1 or "fork" not in mp.get_all_start_methods():
         out = []
-        for t in tasks:
+        for j, t in enumerate(tasks):
             _check_budget()
             out.append(run_refit(t)[0])
+            if on_result is not None:
+                on_result(j, out[-1])
         return tuple(out)
     from multiprocessing.connection import wait
 
@@ -1308,6 +1417,8 @@ def refit_all(tasks: Sequence[RefitTask], *, workers: int | None = None) -> tupl
                 i, proc, start, limit = running.pop(conn)
                 try:
                     results[i] = conn.recv()
+                    if on_result is not None:
+                        on_result(i, results[i])
                 except EOFError:
                     results[i] = _failed(tasks[i], f"the refit's worker ended without a result (exit code "
                                                    f"{proc.exitcode})", time.perf_counter() - start)
