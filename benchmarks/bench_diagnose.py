@@ -14,6 +14,10 @@ check, the report files):
 
 Each data set hides a +2 % thrust error (``thrust_level``), seed 0.
 
+``--resume`` adds, for this tree, the warm new-model diagnosis stopped at half its time
+(``--budget``) and then continued (``--resume``, no budget): what an interrupted or budgeted
+run costs against the whole one, and that it ends with the same model.
+
 ``--against SRC`` times another source tree (``SRC`` holds its ``rocketid`` package, e.g. an
 older commit unpacked with ``git archive``) in the same run: each row runs both trees one
 after the other (each with its own empty code cache), so that both see the same load.
@@ -60,13 +64,13 @@ def _data(model: str, out: Path) -> Path:
     return data.to_csv(out)
 
 
-def _run(csv: Path, model: str, cache: str, out: Path, src: str | None = None) -> tuple[float, str]:
+def _run(csv: Path, model: str, cache: str, out: Path, src: str | None = None, extra: tuple = ()) -> tuple[float, str]:
     env = dict(os.environ, ROCKETID_CACHE_DIR=cache)
     if src is not None:
         env["PYTHONPATH"] = os.pathsep.join([src] + [p for p in env.get("PYTHONPATH", "").split(os.pathsep) if p])
     t0 = time.perf_counter()
     cmd = [sys.executable, "-c", "from rocketid.cli import main; main()", "diagnose", str(csv), "--out", str(out),
-           "--model", model]
+           "--model", model, *extra]
     res = subprocess.run(cmd, env=env, capture_output=True, text=True)
     dt = time.perf_counter() - t0
     if res.returncode not in (0, 1):
@@ -90,6 +94,16 @@ def _rows(args, tmp: Path, trees: dict, csvs: dict) -> dict:
         each("new model, warm cache", csvs["user"], args.model, "r2")
     each(None, csvs["ra66"], "ra66", "r3")                                   # warm the cache
     each("RA-66, warm cache", csvs["ra66"], "ra66", "r4")
+    if args.resume and not args.only_ra66:
+        whole = rows["this"]["new model, warm cache"][0]
+        cache, out = str(tmp / "cache-this"), tmp / "this-r5"
+        budget = 0.5 * whole
+        cut = _run(csvs["user"], args.model, cache, out, None, ("--budget", f"{budget:.1f}"))
+        stopped = json.loads((out / "diagnosis.json").read_text()).get("search_stopped")
+        kept = len(list((out / "checkpoints").glob("*.pkl")))
+        again = _run(csvs["user"], args.model, cache, out, None, ("--resume",))
+        rows["this"][f"new model, warm cache, stopped at --budget {budget:.1f} ({stopped}; {kept} refits kept)"] = cut
+        rows["this"]["... then --resume"] = again
     return rows
 
 
@@ -99,6 +113,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--json", default=None)
     ap.add_argument("--only-ra66", action="store_true", help="only the RA-66 row")
     ap.add_argument("--against", default=None, help="another source tree to time in the same run (its src folder)")
+    ap.add_argument("--resume", action="store_true", help="add the budget-stopped and resumed rows (this tree)")
     args = ap.parse_args(argv)
     load0 = os.getloadavg()[0]
     with tempfile.TemporaryDirectory() as tmp:

@@ -24,6 +24,7 @@ It reports, base against new:
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import math
 import time
@@ -1246,9 +1247,10 @@ def refit_checkpoints(folder: str | Path | None):
         _STORE.pop()
 
 
+@functools.lru_cache(maxsize=None)
 def _code_fingerprint() -> str:
-    """The source of the diagnostics and of every stage a fit runs through: a checkpoint made by other code
-    is not taken."""
+    """The source of the diagnostics and of every stage a fit runs through (read once per process): a
+    checkpoint made by other code is not taken."""
     from ..sampling.worker import code_fingerprint
     h = hashlib.sha256(code_fingerprint().encode())
     for f in sorted(Path(__file__).resolve().parent.glob("*.py")):

@@ -50,7 +50,9 @@ Forward selection with a backward check, capped at ``max_effects``:
    it stand, the stages after it (exchange, second path, simpler shape, finding) are not tried, and
    :attr:`Discovery.stopped` says where it stopped. The verdict is that of the model reached: a search cut
    short is never "nothing missing" nor, without an effect that reaches the noise, "explained". A second
-   run with a larger budget costs less: the models already built are in the code cache.
+   run with a larger budget costs less: the models already built are in the code cache, and with
+   checkpoints (``diagnose(out=..., resume=True)``, :func:`~rocketid.diagnostics.refit.refit_checkpoints`)
+   every refit already made is read instead of run.
 
 The model each step keeps is fitted again here from the chosen refit's own solution (primal and dual), and
 is judged again when it lands anywhere else (:func:`_judged_again`): the verdict is the test of the model
@@ -866,6 +868,10 @@ def _forward(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Effect]
     steps: list = []
     ambiguous, rivals = "", ""
     ok, detail = fits_to_noise(fit, ctx.band)
+
+    def cut_short(number: int) -> _Path:        # the time budget ran out during step ``number``
+        return _Path(tuple(steps), chosen, current, last, bool(ok), detail, ambiguous, rivals, stopped=number)
+
     for number in range(1, max_effects + 1):
         # once an effect has brought the model to the noise band the search stops. (Going on for refits that
         # pass every check was tried: on RA-66M with a jet-stream wind it added a spurious misalignment after
@@ -873,7 +879,7 @@ def _forward(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Effect]
         if number > 1 and ok:
             break
         if budget_spent() and not (number == 1 and first is not None):      # a given first step refits nothing
-            return _Path(tuple(steps), chosen, current, last, bool(ok), detail, ambiguous, rivals, stopped=number)
+            return cut_short(number)
         keep = tuple(e.name for e in chosen)
         if number == 1 and first is not None:
             scr, accs, i = first
@@ -888,7 +894,7 @@ def _forward(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Effect]
                 scr, accs, effect, pick, why, amb, riv = _next_choice(ctx, current, chosen, candidates, number, notes,
                                                                       steps)
             except BudgetSpent:
-                return _Path(tuple(steps), chosen, current, last, bool(ok), detail, ambiguous, rivals, stopped=number)
+                return cut_short(number)
             ambiguous, rivals = amb or ambiguous, riv or rivals
             if effect is None:
                 break
@@ -904,13 +910,13 @@ def _forward(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Effect]
         try:
             new_effects, dropped = _backward(ctx, current, chosen + [effect], pick)
         except BudgetSpent:
-            return _Path(tuple(steps), chosen, current, last, bool(ok), detail, ambiguous, rivals, stopped=number)
+            return cut_short(number)
         if dropped:
             notes.append(f"step {number}: the backward check dropped {', '.join(dropped)} (BIC lower without it)")
         try:
             new_fit, pick = _fit_chosen(ctx, current, new_effects, effect, pick, bool(dropped), notes, number)
         except BudgetSpent:
-            return _Path(tuple(steps), chosen, current, last, bool(ok), detail, ambiguous, rivals, stopped=number)
+            return cut_short(number)
         except RocketidError as exc:
             notes.append(f"step {number}: the chosen model could not be fitted here ({exc}); the search stops")
             steps.append(Step(number, scr, tuple(accs), None, why, tuple(dropped), keep, None))
