@@ -83,6 +83,26 @@ def test_an_effect_that_differs_between_flights_is_kept_per_flight(flight_files,
     assert {"CL[A]", "CL[C]"} <= set(d["joint"]["parameters"]) and "CL" not in d["joint"]["parameters"]
     assert "thrust_level: differs between flights A, C" in res.output
     assert "not one property of the vehicle" in res.output
+    # in engineering terms beside the test's: 0.015 apart, three quarters of a realistic thrust error (2 %)
+    width, share = test["spread"]["eps_thrust"]["width"], test["spread"]["eps_thrust"]["of_realistic_size"]
+    assert abs(width - 0.015) < 1e-3 and abs(share - 0.75) < 0.06
+    assert "eps_thrust 0.015 apart (75 % of its realistic size)" in res.output
+    assert "small in engineering terms" not in res.output
+
+
+def test_a_spread_the_test_resolves_but_smaller_than_a_tenth_of_a_realistic_size_is_called_small():
+    from rocketid.diagnostics.flights import SMALL_SPREAD, SharingTest
+    own = {"A": {"eps_thrust": (0.0200, 2e-5)}, "B": {"eps_thrust": (0.0203, 2e-5)}}
+    t = SharingTest("thrust_level", ("A", "B"), ("eps_thrust",), own, 250.0, 1, 1e-50, False,
+                    sizes={"eps_thrust": 0.02})
+    (width, share), = t.spread().values()
+    assert width == pytest.approx(3e-4) and share == pytest.approx(0.015) and share < SMALL_SPREAD
+    text = t.sentence()
+    assert "differs between flights A, B" in text and "(1.5 % of its realistic size)" in text
+    assert "differ by less than 10 % of a realistic size" in text and "small in engineering terms" in text
+    # without a realistic size there is no yardstick, and no such words
+    bare = SharingTest("thrust_level", ("A", "B"), ("eps_thrust",), own, 250.0, 1, 1e-50, False)
+    assert "eps_thrust 0.0003 apart)" in bare.sentence() and "engineering" not in bare.sentence()
 
 
 def test_the_nature_of_an_effect_follows_its_physics():

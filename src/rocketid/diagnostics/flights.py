@@ -57,6 +57,11 @@ __all__ = ["FLIGHT_KINDS", "SharingTest", "Carried", "JointFinal", "effect_natur
 #: Effect kinds that are a property of one flight, never shared.
 FLIGHT_KINDS = ("sensor", "environment", "kinematics")
 
+SMALL_SPREAD = 0.1
+"""Flights whose own values of an effect parameter lie within this share of its realistic size of each other
+differ little in engineering terms; when the likelihood-ratio test still says they differ (long flights at
+low noise resolve differences far below any tolerance), the report says so beside the verdict."""
+
 
 def effect_nature(effect) -> str:
     """``"flight"`` for an effect that belongs to one flight (its sensors, its air, its start, its
@@ -91,6 +96,9 @@ class SharingTest:
         The flights agree (``p_value >= level``): the effect is shared in the final joint fit.
     note : str
         Why the test could not be made (empty when it was).
+    sizes : dict
+        ``{parameter: realistic size}`` (the effect's, for the vehicle): the yardstick of the spread
+        between the flights' own values, in engineering terms beside the test's.
     """
 
     effect: str
@@ -102,6 +110,19 @@ class SharingTest:
     p_value: float
     shared: bool
     note: str = ""
+    sizes: dict = field(default_factory=dict)
+
+    def spread(self) -> dict:
+        """``{parameter: (max - min of the flights' own values, that as a share of its realistic size)}`` (the
+        share NaN without a size)."""
+        out = {}
+        for n in self.parameters:
+            vals = [d[n][0] for d in self.own.values() if n in d and math.isfinite(d[n][0])]
+            if len(vals) > 1:
+                width = max(vals) - min(vals)
+                size = self.sizes.get(n, math.nan)
+                out[n] = (width, width / size if size and math.isfinite(size) and size > 0 else math.nan)
+        return out
 
     def sentence(self) -> str:
         values = "; ".join(f"{l}: " + ", ".join(f"{n} {v:.4g} +- {s:.2g}" for n, (v, s) in d.items())
@@ -111,15 +132,22 @@ class SharingTest:
         cost = f"sharing costs 2 dJ = {self.statistic:.4g} for {self.dof} degree(s) of freedom, p = {self.p_value:.2g}"
         if self.shared:
             return f"{self.effect}: one value for flights {', '.join(self.flights)} ({cost}; alone {values})"
-        return (f"{self.effect}: differs between flights {', '.join(self.flights)} ({values}; {cost}): not one "
-                "property of the vehicle, kept per flight")
+        apart = "; ".join(f"{n} {w:.3g} apart" + (f" ({100 * r:.2g} % of its realistic size)" if math.isfinite(r) else "")
+                          for n, (w, r) in self.spread().items())
+        small = [n for n, (_, r) in self.spread().items() if math.isfinite(r) and r < SMALL_SPREAD]
+        return (f"{self.effect}: differs between flights {', '.join(self.flights)} ({values}; {cost}"
+                + (f"; {apart}" if apart else "") + "): not one property of the vehicle, kept per flight"
+                + (f" -- though {', '.join(small)} differ by less than {100 * SMALL_SPREAD:g} % of a realistic "
+                   "size: a difference the data resolve, small in engineering terms" if small else ""))
 
     def to_dict(self) -> dict:
         return {"effect": self.effect, "flights": list(self.flights), "parameters": list(self.parameters),
                 "own": {l: {n: {"value": finite_or_none(v), "std": finite_or_none(s)} for n, (v, s) in d.items()}
                         for l, d in self.own.items()},
                 "statistic": finite_or_none(self.statistic), "dof": int(self.dof),
-                "p_value": finite_or_none(self.p_value), "shared": bool(self.shared), "note": self.note}
+                "p_value": finite_or_none(self.p_value), "shared": bool(self.shared), "note": self.note,
+                "spread": {n: {"width": finite_or_none(w), "of_realistic_size": finite_or_none(r)}
+                           for n, (w, r) in self.spread().items()}}
 
 
 @dataclass(frozen=True)
@@ -469,7 +497,8 @@ def joint_final(flights: Sequence, reports: Sequence, base_chi2_per_dof: float, 
             stat = max(0.0, 2.0 * (one.objective - own.objective))
             dof = len(ps) * (len(fs) - 1)
             p = float(stats.chi2.sf(stat, dof))
-            tests.append(SharingTest(e, tuple(fs), ps, own_vals, stat, dof, p, p >= level))
+            tests.append(SharingTest(e, tuple(fs), ps, own_vals, stat, dof, p, p >= level,
+                                     sizes=_sizes_of(finals, labels, fs, e)))
             if p >= level:
                 shared.append(e)
     kept_own = always_own | {n for t in tests if not t.shared for n in t.parameters}
@@ -552,6 +581,17 @@ def _carry(fit, cfg: dict, own: set, effect, ps: tuple, finders: tuple, lacking:
                 dropped.setdefault(l, []).append(x.name)
     return (Carried(effect.name, finders, lacking, stat, dof, p, True, {l: tuple(d) for l, d in dropped.items()},
                     fall), cfg, own, result)
+
+
+def _sizes_of(finals, labels, flights, name: str) -> dict:
+    """The realistic sizes of effect ``name``'s parameters for the vehicle of the first flight that found it."""
+    for l, d in zip(labels, finals):
+        vehicle = getattr(d, "vehicle", None)
+        if l in flights and vehicle is not None:
+            for e in d.effects:
+                if e.name == name:
+                    return {k: float(v) for k, v in e.sizes(vehicle).items()}
+    return {}
 
 
 def _bic(res) -> float:
