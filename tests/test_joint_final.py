@@ -67,6 +67,8 @@ def test_an_effect_the_flights_agree_on_is_fitted_once_and_a_flights_own_stays_i
     assert "Joint model with the effects found" in res.output
     assert "thrust_level: one value for flights A, B" in res.output
     assert any(v.startswith("Every flight reaches its noise in the joint model") for v in d["verdict"])
+    # each flight's refits were kept while the command ran, and removed when it ended
+    assert (tmp_path / "diag" / "A" / "report.html").is_file() and not list((tmp_path / "diag").glob("*/checkpoints"))
 
 
 def test_an_effect_that_differs_between_flights_is_kept_per_flight(flight_files, tmp_path):
