@@ -352,12 +352,10 @@ def sharing_plan(declared: Mapping[str, Sequence[tuple]]) -> tuple[dict, set]:
         declares a parameter of the same name: two drag tables on other knots both name ``dCD_M0``), and
         the set of effect parameters that are always per flight.
     """
-    owner: dict = {}
+    owner = _owners(declared)
     found: dict = {}
     for flight, items in declared.items():
         for effect, nature, ps in items:
-            for n in ps:
-                owner.setdefault(n, set()).add(effect)
             if nature == "vehicle":
                 found.setdefault(effect, [])
                 if flight not in found[effect]:
@@ -370,6 +368,17 @@ def sharing_plan(declared: Mapping[str, Sequence[tuple]]) -> tuple[dict, set]:
             shareable[effect] = (tuple(flights), ps)
     sharing = {n for _, ps in shareable.values() for n in ps}
     return shareable, set(owner) - sharing
+
+
+def _owners(declared: Mapping[str, Sequence[tuple]]) -> dict:
+    """``{parameter: {effects that declare it}}`` over every flight's final effects (:func:`sharing_plan`'s
+    ``declared``)."""
+    owner: dict = {}
+    for items in declared.values():
+        for effect, _, ps in items:
+            for n in ps:
+                owner.setdefault(n, set()).add(effect)
+    return owner
 
 
 def _effect_parameters(base_spec, effect) -> tuple:
@@ -509,11 +518,7 @@ def joint_final(flights: Sequence, reports: Sequence, base_chi2_per_dof: float, 
         result, failed = None, str(exc)
     carried: list = []
     if result is not None and result.success:
-        owner: dict = {}
-        for items in declared.values():
-            for e, _, ps in items:
-                for n in ps:
-                    owner.setdefault(n, set()).add(e)
+        owner = _owners(declared)
         differ = {t.effect for t in tests if not t.shared}
         cfg, own = dict(found_cfg), set(kept_own)
         for e, finders, effect, ps in _to_carry(labels, finals, nature, params, owner, differ):

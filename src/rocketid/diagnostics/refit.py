@@ -29,8 +29,8 @@ import hashlib
 import math
 import time
 from contextlib import contextmanager
-from pathlib import Path
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import Any, Mapping, NamedTuple, Sequence
 
 import numpy as np
@@ -1209,26 +1209,30 @@ class BudgetSpent(Exception):
 
 
 @contextmanager
-def time_budget(seconds: float | None):
-    """Within this block :func:`refit_all` starts no refit after ``seconds`` from now, stops those still
-    running at that time, and raises :class:`BudgetSpent`; None sets no budget."""
-    if seconds is None:
+def _pushed(stack: list, value):
+    """``value`` on top of ``stack`` within the block (nothing pushed for None): the innermost block wins."""
+    if value is None:
         yield
         return
-    _DEADLINE.append(time.perf_counter() + float(seconds))
+    stack.append(value)
     try:
         yield
     finally:
-        _DEADLINE.pop()
+        stack.pop()
+
+
+def time_budget(seconds: float | None):
+    """Within this block :func:`refit_all` starts no refit after ``seconds`` from now, stops those still
+    running at that time, and raises :class:`BudgetSpent`; None sets no budget."""
+    return _pushed(_DEADLINE, None if seconds is None else time.perf_counter() + float(seconds))
 
 
 _STORE: list = []     # the folders of the enclosing :func:`refit_checkpoints`, innermost last
 
 CHECKPOINT_VERSION = 1
-"""Format of a refit's checkpoint file (``DIR/checkpoints/refits/<key>.pkl``)."""
+"""Format of a refit's checkpoint file (``<folder>/<key>.pkl``; ``rocketid diagnose``: ``DIR/checkpoints``)."""
 
 
-@contextmanager
 def refit_checkpoints(folder: str | Path | None):
     """Within this block :func:`refit_all` keeps every refit it completes in ``folder`` (one file per
     refit, named by :func:`task_key`, written atomically as it arrives) and takes a refit found there
@@ -1237,14 +1241,7 @@ def refit_checkpoints(folder: str | Path | None):
 
     The files are Python pickles of :class:`Refit`: read only checkpoints you wrote yourself. A refit
     that gave up at its time limit is not kept (a less loaded machine may finish it)."""
-    if folder is None:
-        yield
-        return
-    _STORE.append(Path(folder))
-    try:
-        yield
-    finally:
-        _STORE.pop()
+    return _pushed(_STORE, None if folder is None else Path(folder))
 
 
 @functools.lru_cache(maxsize=None)

@@ -49,7 +49,8 @@ Forward selection with a backward check, capped at ``max_effects``:
    step chosen from part of its contenders would be a choice on part of the evidence), the steps before
    it stand, the stages after it (exchange, second path, simpler shape, finding) are not tried, and
    :attr:`Discovery.stopped` says where it stopped. The verdict is that of the model reached: a search cut
-   short is never "nothing missing" nor, without an effect that reaches the noise, "explained". A second
+   short is "nothing missing" only when the base model itself reaches the noise, and never "explained"
+   without an effect that reaches the noise (``rocketid.diagnostics.api`` words the cut). A second
    run with a larger budget costs less: the models already built are in the code cache, and with
    checkpoints (``diagnose(out=..., resume=True)``, :func:`~rocketid.diagnostics.refit.refit_checkpoints`)
    every refit already made is read instead of run.
