@@ -87,35 +87,6 @@ def test_diagnosis_finds_the_throttle_down_and_the_throttle_closes_it(flight):
     _errors_last_as_the_page_says(fit_s, fit, data)
 
 
-@pytest.mark.slow
-def test_the_screen_scans_a_throttle_window_although_the_model_absorbs_a_constant_thrust_error():
-    """The model estimates its thrust scale (k_P), so a constant thrust error is absorbed entirely and scores
-    nothing; a throttle bucket is not absorbed with it. The screen scores the thrust family's located shapes
-    anyway, and the window's scan puts the throttle-down where the broadcast says (its events file, the
-    answer key, read only here)."""
-    from rocketid.diagnostics.screen import screen
-    from rocketid.diagnostics.effects import CATALOGUE
-
-    data = falcon9_measurements("CRS-11")
-    events = falcon9_events("CRS-11")
-    fit0 = ri.estimate(falcon9_model(data), data, options={"max_iter": 500})
-    scr = screen(fit0, list(CATALOGUE.values()))
-    thrust = scr.ranking.candidates[[c.name for c in scr.ranking.candidates].index("thrust_level")]
-    assert not thrust.significant and thrust.absorbed_by                  # k_P takes it all
-    (c,) = [c for c in scr.contenders if c.effect.name == "thrust_level"]
-    assert c.located in ("throttle_window", "throttle_step") and "located shape" in c.why
-    t0 = fit0.spec.t0
-    where = [t0 + w for w in scr_peak_where(c.why)]
-    assert events["throttle_down_start"] - 5 <= where[0] <= events["throttle_down_end"]
-
-
-def scr_peak_where(why: str) -> list:
-    """The scan's location(s) from a contender's reason ("... at 28.9-53.8 (p ...)"), s after the start."""
-    import re
-    m = re.search(r"at (-?[0-9.e+]+)(?:-([0-9.e+]+))? \(p", why)
-    return [float(g) for g in m.groups() if g is not None]
-
-
 def _acf(r, lag):
     r = np.asarray(r, float) - np.mean(r)
     return float(np.dot(r[:-lag], r[lag:]) / np.dot(r, r))

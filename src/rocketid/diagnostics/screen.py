@@ -23,10 +23,7 @@ leader's). Such a family is a contender when its best scan location is
 significant after correcting for the locations scored and the candidates
 (Bonferroni), and its predicted fall is within :data:`WITHIN` of the leader's;
 it is marked (:attr:`Contender.located`) so that the refits try its located
-shapes. A family whose constant shape the model's own parameters absorb (not
-significant, :attr:`~rocketid.diagnostics.score.CandidateScore.absorbed_by` set) is
-scanned the same way: a model that estimates its thrust scale absorbs a constant
-thrust error entirely, not a throttle bucket (the Falcon 9 flights).
+shapes.
 
 The vehicle's scales (:class:`~rocketid.diagnostics.effects.Vehicle`: thrust,
 mass flow, speed, the altitude and Mach ranges flown) are read from the fit
@@ -267,11 +264,7 @@ def screen(fit: EstimationResult, candidates: Sequence[Effect], *, level: float 
     # the significant candidates left out whose located shapes' scans qualify them (module notes)
     scans: dict = {}
     named = {c.name for c, _ in chosen[:MAX_CONTENDERS]}
-    # and the families whose constant shape the model's own parameters absorb (a thrust-level error on a model
-    # that estimates its thrust scale): a throttle window is not absorbed with it
-    absorbed = [c for c in ranking.candidates if not c.significant and c.absorbed_by]
-    located = _located(fit, ranking, [c for c in sig if c.name not in named] + absorbed, vehicle, level, lead,
-                       scans)
+    located = _located(fit, ranking, [c for c in sig if c.name not in named], vehicle, level, lead, scans)
     if len(chosen) > MAX_CONTENDERS:
         cut = [c.name for c, _ in chosen[MAX_CONTENDERS:] if c.name not in located]
         if cut:
