@@ -157,6 +157,22 @@ def test_window_ending_early_keeps_the_launch_state(ra66_spec, ra66_seed5):
     assert 0.9 < fit.chi2_per_dof < 1.1
 
 
+
+def test_diagnose_in_a_flight_window_fits_the_cut_model(ra66_spec, ra66_seed5):
+    """``diagnose(flight_window=)`` cuts the model and the data before the base fit (the initial states at
+    the window's start estimated); a mesh given with a window is refused before any work."""
+    from rocketid.diagnostics import diagnose
+    from rocketid.errors import SettingsError
+
+    rep = diagnose(ra66_seed5, ra66_spec, flight_window=(20.0, 66.0), confirm_top=0, holdout=None)
+    assert rep.fit.spec.t0 == 20.0 and rep.fit.spec.tf == 66.0
+    assert rep.fit.spec.parameter_names[-4:] == ("x_0", "h_0", "v_0", "theta_0")
+    assert rep.fit.n_data == 3 * 4601 and 0.9 < rep.fit.chi2_per_dof < 1.1
+    assert any("CD0 acts only outside the window" in n for n in rep.notes)
+    assert rep.ranking is not None and rep.discovery is None       # confirm_top=0: the screen's ranking alone
+    with pytest.raises(SettingsError, match="flight_window cuts the model: give no mesh"):
+        diagnose(ra66_seed5, ra66_spec, flight_window=(20.0, 66.0), mesh=ri.default_mesh(ra66_spec), confirm_top=0)
+
 def test_cli_window(tmp_path, ra66_seed5):
     path = ra66_seed5.to_csv(tmp_path / "d.csv")
     out = tmp_path / "w.json"

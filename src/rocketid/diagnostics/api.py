@@ -805,6 +805,84 @@ def _variant(fit, meas, effects, settings: dict, notes: list):
     return rep
 
 
+def _timed(timings: dict, key: str, fn, *args, **kw):
+    """``fn(*args, **kw)``, its wall time kept in ``timings[key]`` (the report's timings)."""
+    t0 = time.perf_counter()
+    value = fn(*args, **kw)
+    timings[key] = time.perf_counter() - t0
+    return value
+
+
+def _setup(model, holdout, variant, sizes, checkpoints, out, resume) -> tuple:
+    """Every setting refused before any work: the model resolved, the hold-out window, the variant, the stated
+    sizes and the checkpoint folder (``out/checkpoints`` when none is given and a report is written -- then it
+    is the diagnosis's own, removed when the search ends). Returns ``(spec, label, sizes, checkpoints, owned)``."""
+    from .effects import check_sizes
+    from .refit import holdout_window
+    sizes = check_sizes(sizes)
+    if variant not in (True, False, "auto"):
+        raise SettingsError(f"variant must be 'auto', True or False, got {variant!r}")
+    spec, label = resolve_model(model)
+    holdout_window(spec, holdout)
+    owned = checkpoints is None and out is not None
+    if owned:
+        checkpoints = Path(out) / "checkpoints"
+    _check_checkpoints(checkpoints, resume)
+    return spec, label, sizes, checkpoints, owned
+
+
+def _windowed(spec, meas, flight_window, guess, mesh, notes: list) -> tuple:
+    """The model and the data cut to ``flight_window`` (:func:`rocketid.start.apply_window`), with the guess
+    carried over; unchanged without a window. Returns ``(spec, meas, guess)``."""
+    if flight_window is None:
+        return spec, meas, guess
+    from ..start import apply_window, window_guess
+    if mesh is not None:
+        raise SettingsError("flight_window cuts the model: give no mesh (the default mesh of the window is used)")
+    p_full = spec.parameter_vector(guess)
+    spec_w, meas, wnotes = apply_window(spec, meas, flight_window, p_full)
+    notes.extend(wnotes)
+    return spec_w, meas, window_guess(spec, spec_w, p_full)
+
+
+def _searched(fit, effects, counts, confirm_top: int, search: dict, timings: dict, notes: list) -> tuple:
+    """The search for missing effects (:func:`~rocketid.diagnostics.step.discover`, its noise band widened
+    for noise estimated from the data), or with ``confirm_top`` 0 the screen's ranking alone.
+    Returns ``(discovery or None, ranking, why the ranking failed)``."""
+    from .step import discover
+    if confirm_top <= 0:
+        from .screen import screen
+        scr = _timed(timings, "rank_s", screen, fit, effects, level=search["level"])
+        disc, ranking, failed = None, scr.ranking, scr.failed
+    else:
+        disc, ranking, failed = None, None, ""
+        try:
+            from .accept import noise_band
+            band = noise_band(fit, estimated=counts) if counts else None
+            disc = _timed(timings, "discover_s", discover, fit, effects, band=band, **search)
+        except RocketidError as exc:
+            notes.append(f"the discovery failed: {exc}")
+        if disc is not None:
+            notes.extend(disc.notes)
+            ranking = disc.steps[0].screen.ranking if disc.steps else None
+            failed = disc.ranking_failed
+    if failed:
+        notes.append(f"the candidate ranking failed: {failed}")
+    return disc, ranking, failed
+
+
+def _variant_search(fit, meas, effects, settings: dict, budget, t_search: float, progress, timings: dict,
+                    notes: list):
+    """The Mach-indexed variant's search (:func:`_variant`) with what is left of the ``budget``, or a note
+    that it ran out first."""
+    left = None if budget is None else budget - (time.perf_counter() - t_search)
+    if left is not None and left <= 0:
+        notes.append("the Mach-indexed variant of the time-knot drag was not searched: the time budget had run out")
+        return None
+    said = None if progress is None else (lambda m: progress(f"Mach-indexed variant: {m}"))
+    return _timed(timings, "variant_s", _variant, fit, meas, effects, dict(settings, budget=left, progress=said), notes)
+
+
 def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Model = "ra66", *,
              out: str | Path | None = None, candidates: Sequence | None = None, level: float = 0.05,
              confirm_top: int = 2, window: float | None = None, guess: Mapping | Sequence[float] | None = None,
@@ -919,72 +997,27 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
     DiagnosisReport
         :attr:`~DiagnosisReport.final` holds the final model and the verdict.
     """
-    from .refit import holdout_window
-    from .step import discover
-
     _check_settings(level, confirm_top, max_effects, refit_timeout, budget)
-    from .effects import check_sizes
-    sizes = check_sizes(sizes)
-    if variant not in (True, False, "auto"):
-        raise SettingsError(f"variant must be 'auto', True or False, got {variant!r}")
-    spec, label = resolve_model(model)
-    holdout_window(spec, holdout)           # refuse a bad window before any work
-    owned = checkpoints is None and out is not None       # the folder is ours to remove when the search ends
-    if owned:
-        checkpoints = Path(out) / "checkpoints"
-    _check_checkpoints(checkpoints, resume)
-    meas, data_label = _read_data(data, spec)
+    spec, label, sizes, checkpoints, owned = _setup(model, holdout, variant, sizes, checkpoints, out, resume)
     notes: list[str] = []
-    if flight_window is not None:
-        from ..start import apply_window, window_guess
-        p_full = spec.parameter_vector(guess)
-        spec_w, meas, wnotes = apply_window(spec, meas, flight_window, p_full)
-        notes.extend(wnotes)
-        guess = window_guess(spec, spec_w, p_full)
-        spec = spec_w
-        if mesh is not None:
-            raise SettingsError("flight_window cuts the model: give no mesh (the default mesh of the window is used)")
+    meas, data_label = _read_data(data, spec)
+    spec, meas, guess = _windowed(spec, meas, flight_window, guess, mesh, notes)
     timings: dict = {}
-
-    def timed(key, fn, *args, **kw):
-        t0 = time.perf_counter()
-        value = fn(*args, **kw)
-        timings[key] = time.perf_counter() - t0
-        return value
-
     from_data: dict = {}
-    asked = sigma
-    fit, sigma, counts, wild, corr = timed("fit_s", base_fit, spec, meas, asked, guess=guess, mesh=mesh,
-                                           options=options, notes=notes, from_data=from_data,
-                                           wild_points=wild_points, correlated_noise=correlated_noise)
+    fit, _, counts, wild, corr = _timed(timings, "fit_s", base_fit, spec, meas, sigma, guess=guess, mesh=mesh,
+                                        options=options, notes=notes, from_data=from_data,
+                                        wild_points=wild_points, correlated_noise=correlated_noise)
     meas = fit.prepared.measurements  # with the sigmas of the fit (without the wild points dropped, thinned)
-    comp, loc, plaus = timed("describe_s", _describe, fit, level, window, notes)
+    comp, loc, plaus = _timed(timings, "describe_s", _describe, fit, level, window, notes)
     effects = _stated(_candidate_effects(candidates), sizes, fit, notes)
-    disc, ranking, failed = None, None, ""
+    search = dict(level=level, max_effects=int(max_effects), workers=workers, timeout=float(refit_timeout),
+                  options=options, refine=refine, holdout=holdout, budget=budget, progress=progress)
     t_search = time.perf_counter()
     from .refit import refit_checkpoints
     with refit_checkpoints(checkpoints):
-        if confirm_top > 0:
-            try:
-                from .accept import noise_band
-                band = noise_band(fit, estimated=counts) if counts else None
-                disc = timed("discover_s", discover, fit, effects, level=level, max_effects=int(max_effects),
-                             workers=workers, timeout=float(refit_timeout), options=options, refine=refine,
-                             holdout=holdout, band=band, budget=budget, progress=progress)
-            except RocketidError as exc:
-                notes.append(f"the discovery failed: {exc}")
-            if disc is not None:
-                notes.extend(disc.notes)
-                ranking = disc.steps[0].screen.ranking if disc.steps else None
-                failed = disc.ranking_failed
-        else:
-            from .screen import screen
-            scr = timed("rank_s", screen, fit, effects, level=level)
-            ranking, failed = scr.ranking, scr.failed
-        if failed:
-            notes.append(f"the candidate ranking failed: {failed}")
-        confs, names, pls = timed("confirm_s", _confirm_final, fit, disc, holdout, level, refit_timeout, options,
-                                  notes)
+        disc, ranking, failed = _searched(fit, effects, counts, confirm_top, search, timings, notes)
+        confs, names, pls = _timed(timings, "confirm_s", _confirm_final, fit, disc, holdout, level, refit_timeout,
+                                   options, notes)
         disc = _prediction_check(disc, confs, notes)
         history = _history(spec, fit, disc, notes)
         after = compare(disc.fit, level=level) if disc is not None and disc.effects else None
@@ -994,15 +1027,8 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
                                                     and (final is None or final.verdict != "explained"))):
             settings = dict(level=level, confirm_top=confirm_top, window=window, options=options,
                             max_effects=max_effects, workers=workers, refit_timeout=refit_timeout, refine=refine,
-                            sigma=asked if counts else None)     # the same data, the same noise (and a widened band)
-            left = None if budget is None else budget - (time.perf_counter() - t_search)
-            if left is not None and left <= 0:
-                notes.append("the Mach-indexed variant of the time-knot drag was not searched: the time budget had "
-                             "run out")
-            else:
-                said = None if progress is None else (lambda m: progress(f"Mach-indexed variant: {m}"))
-                var = timed("variant_s", _variant, fit, meas, effects, dict(settings, budget=left, progress=said),
-                            notes)
+                            sigma=sigma if counts else None)     # the same data, the same noise (and a widened band)
+            var = _variant_search(fit, meas, effects, settings, budget, t_search, progress, timings, notes)
     if checkpoints is not None:
         stopped = bool(_stopped(disc) or (var is not None and _stopped(var.discovery)))
         end_checkpoints(Path(checkpoints), stopped, notes, remove=owned)
