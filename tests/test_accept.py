@@ -256,6 +256,9 @@ def test_a_final_model_at_the_noise_with_a_coefficient_at_a_bound_is_not_explain
     assert final_verdict(True, False, False, good)[0] == "partly explained"
     assert final_verdict(False, False, True, None)[0] == "nothing missing"
     assert final_verdict(False, False, False, None)[0] == "not explained by the catalogue"
+    # a tie at the first step: nothing added, but catalogue effects reach the noise -- not "not explained"
+    assert final_verdict(False, False, False, None, ambiguous="thrust_level or start_mass")[0] == "partly explained"
+    assert final_verdict(False, False, True, None, ambiguous="thrust_level or start_mass")[0] == "nothing missing"
 
 
 def test_identifiability_reports_a_coefficient_the_effect_inflates():

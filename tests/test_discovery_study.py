@@ -260,8 +260,9 @@ def test_hidden_effect_case(case_id):
 KNOWN_VARIED: dict[str, str] = {
     "v-m-thrust_level": "thrust_level and start_mass both reach the noise (chi2/dof 0.989, BIC within 10); the "
                         "hold-out window does not reach CD_M_6, so its predictions (start_mass 4.02, thrust_level "
-                        "24.2 sigma^2) decide nothing: 'not explained by the catalogue', the two named as rivals "
-                        "(before the rule: start_mass called explained)",
+                        "24.2 sigma^2) decide nothing: the two named as rivals, nothing added (headed 'not explained "
+                        "by the catalogue' then; a first-step tie is 'partly explained' since 2026-11-28; before the "
+                        "rule: start_mass called explained)",
     "v-s30-density-neg": "density explained (chi2/dof 1.004, the non-identifiable direction of its profile named), "
                          "CD_6 0.239 for 0.27 (11 %, 5 std)",
 }

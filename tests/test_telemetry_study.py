@@ -43,8 +43,9 @@ from telemetry_study.cases import (A_EXIT, ALL, BIAS_V, BY_NAME, DM0, EPS_THRUST
 KNOWN_FAILURES: dict[str, str] = {
     "light-load": "588676e: start_mass (dm_start -492 kg for -500) and thrust_level (eps 0.0103) reach the noise "
                   "within BIC 10 and the hold-out (fitted on 12-72 s) predicts neither (mean squared error / "
-                  "sigma^2 23.8 and 69.2): 'not explained by the catalogue', the tie named -- x, h and v see "
-                  "thrust and mass only through their ratio",
+                  "sigma^2 23.8 and 69.2): the tie named -- x, h and v see thrust and mass only through their "
+                  "ratio; headed 'not explained by the catalogue' until a first-step tie became 'partly explained' "
+                  "(2026-11-28, the same case re-run: the same tie, nothing added)",
     "filtered-hot-engine": "2c5ac39: the speed's filtered errors are found and thinned (rho 0.82, every 14th sample, its "
                            "noise 0.240 for 0.25), but the altitude's (rho 0.37 at 2 Hz) are hidden under the thrust "
                            "error's misfit on the base fit: its noise from the data is 4.59 m for 6, and thrust_level "

@@ -729,6 +729,11 @@ def _final(disc, ranking, level, window) -> FinalModel | None:
             text += f" These data cannot show whether these are present too, as the coefficients take them up: {blind}."
         if disc.rivals:
             text += f" Rivals: {disc.rivals}."
+    elif disc.ambiguous and not disc.effects:
+        text = (f"the catalogue explains the misfit in more than one way and these data cannot say which: "
+                f"{disc.ambiguous} (chi2/dof {fit.chi2_per_dof:.4g} without them, band <= {band.upper:.4g}); no effect "
+                f"is added; the residual sits in: {_where(fit, level, window)}. Other data (another channel, a "
+                "measured thrust or mass, an atmosphere sounding) would separate them.")
     elif disc.verdict == "partly explained":
         if disc.fits_to_noise:
             why = disc.not_an_explanation
@@ -745,10 +750,6 @@ def _final(disc, ranking, level, window) -> FinalModel | None:
         text = (f"no effect was added before the search was cut short (chi2/dof {fit.chi2_per_dof:.4g}, band <= "
                 f"{band.upper:.4g}); not every candidate was tried, so this does not say the catalogue cannot explain "
                 f"it; the residual sits in: {_where(fit, level, window)}.")
-    elif disc.ambiguous:
-        text = (f"{disc.ambiguous} (chi2/dof {fit.chi2_per_dof:.4g} without them, band <= {band.upper:.4g}); the "
-                f"residual sits in: {_where(fit, level, window)}. Other data (another channel, a measured thrust or "
-                "mass, an atmosphere sounding) would separate them.")
     else:
         text = (f"no catalogue effect explains the misfit (chi2/dof {fit.chi2_per_dof:.4g}, band <= {band.upper:.4g}); "
                 f"the residual sits in: {_where(fit, level, window)}. Try {_suggest(ranking)}.")

@@ -433,10 +433,17 @@ def final_verdict(added: bool, fits: bool, base_fits: bool, last: Acceptance | N
         One of :data:`VERDICTS`. ``"explained"`` needs the final model to pass every check of an
         explanation, not only to reach the noise: an effect set that reaches it with a coefficient
         held at a bound or a redrawn drag table, or with an implausible size, is "partly explained".
+        So is a tie the data cannot decide, at any step: at the first step no effect is added, but
+        the catalogue explains the misfit in more than one way, and "not explained by the catalogue"
+        would say it does not.
     notes : list of str
     """
     if not added:
-        return ("nothing missing" if base_fits else "not explained by the catalogue"), []
+        if base_fits:
+            return "nothing missing", []
+        # a tie at the first step: catalogue effects reach the noise, the data cannot say which -- the catalogue
+        # explains the misfit more than one way, which "not explained by the catalogue" would deny
+        return ("partly explained" if ambiguous else "not explained by the catalogue"), []
     if not fits:
         return "partly explained", []
     notes = []
