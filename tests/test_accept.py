@@ -733,6 +733,12 @@ def test_an_event_shape_is_a_ladder_of_its_own():
     assert S._family("mass_jettison") == "start_mass" and S._family("misalignment_onset") == "misalignment"
     assert S._family("throttle_step") == "thrust_level" and S._family("throttle_window") == "thrust_level"
     assert S._family("burn_rate") == "thrust_level"
+    # a shape an earlier step took is not offered again (the model cannot hold it twice: Petrel-V's step 3
+    # asked for burn_rate a second time and the discovery failed on it)
+    burn = next(v for v in CATALOGUE["thrust_level"].refinements(veh) if v.name == "burn_rate")
+    again = S._ladders([CATALOGUE["thrust_level"].refinements(veh)], [CATALOGUE["bias_v"], burn])
+    assert [[v.name for v in f] for f in again] == [["thrust_profile_3", "thrust_profile_5", "thrust_profile_9"],
+                                                     ["throttle_step"], ["throttle_window"]]
 
 
 def test_event_shapes_of_two_families_within_bic_tie_are_rivals():

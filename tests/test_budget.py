@@ -163,6 +163,22 @@ def test_refits_kept_as_checkpoints_are_taken_instead_of_run_and_a_changed_task_
     assert len(list(tmp_path.glob("*.pkl"))) == 3
 
 
+def test_a_refit_whose_model_cannot_be_built_fails_as_a_refit_with_checkpoints_on(base, tmp_path):
+    """A task whose model cannot be built (here an effect given twice) is a failed refit that says why, with
+    checkpoints on as without -- keying it for its checkpoint must not raise and end the whole search (it did
+    on Petrel-V, where a refined shape was asked for a second time: 'the discovery failed')."""
+    from rocketid.diagnostics.refit import refit_checkpoints, task_key
+    ctx = _ctx(base)
+    bad = ctx.task(base, [CATALOGUE["bias_h"], CATALOGUE["bias_h"]], ("bias_h",))
+    good = ctx.task(base, [CATALOGUE["bias_h"]], ("bias_h",))
+    assert task_key(bad) != task_key(good)
+    for folder in (tmp_path, None):
+        with refit_checkpoints(folder):
+            r_bad, r_good = refit_all([bad, good], workers=1)
+        assert not r_bad.success and "effect 'bias_h' is given twice" in r_bad.message, r_bad.message
+        assert r_good.success
+
+
 def test_a_diagnosis_stopped_at_its_budget_resumes_from_its_checkpoints_to_the_same_answer(data, tmp_path):
     csv = data.to_csv(tmp_path / "flight.csv")
     args = ["diagnose", str(csv), "--model", "ra66", "--max-effects", "2", "--holdout", "none"]

@@ -1260,7 +1260,12 @@ def task_key(task: RefitTask) -> str:
     """A refit's identity: the model with its effects (its symbolic fingerprint), the data, the mesh, the
     start, the sizes and every setting of the refit, and the code that runs it (hex, 32 characters)."""
     h = hashlib.sha256(f"{CHECKPOINT_VERSION}:{_code_fingerprint()}".encode())
-    h.update(with_effects(task.base_spec, list(task.effects)).fingerprint().encode())
+    try:
+        h.update(with_effects(task.base_spec, list(task.effects)).fingerprint().encode())
+    except RocketidError as exc:
+        # a model that cannot be built: the refit fails and says why (:func:`run_refit`); keying it must not
+        # take the whole search down with it
+        h.update(f"{task.base_spec.fingerprint()}|{[e.name for e in task.effects]}|{exc}".encode())
     for ch in task.data.channels:
         h.update(ch.name.encode())
         for a in (ch.times, ch.values):

@@ -545,13 +545,19 @@ def _near_rivals(accs: Sequence[Acceptance], scr: Screen, vehicle: Vehicle, chos
     return near[:REFINE_FAMILIES]
 
 
-def _ladders(refinements: Sequence[Sequence[Effect]]) -> list[list[Effect]]:
+def _ladders(refinements: Sequence[Sequence[Effect]], chosen: Sequence[Effect] = ()) -> list[list[Effect]]:
     """Each family's refined shapes as the ladders :func:`_refine_families` climbs: the smooth shapes in
     order of flexibility (more knots) form one ladder; a shape with an estimated event time
     (:attr:`Effect.starts`) is not one more rung of it -- it is no more flexible than the knots -- and is
-    a ladder of its own, tried beside them."""
+    a ladder of its own, tried beside them. A shape already in the model (``chosen``: an earlier step took
+    it) is left out: the model cannot hold an effect twice. (Measured on Petrel-V, a high-site liquid
+    booster: step 2 took ``burn_rate`` as the thrust family's refined shape, step 3 refined the thrust family
+    again and asked for ``burn_rate`` a second time, and with checkpoints on -- ``rocketid diagnose``'s
+    default -- the whole discovery failed on it.)"""
+    have = {e.name for e in chosen}
     out = []
     for shapes in refinements:
+        shapes = [v for v in shapes if v.name not in have]
         smooth = [v for v in shapes if not v.starts]
         out += ([smooth] if smooth else []) + [[v] for v in shapes if v.starts]
     return out
@@ -1217,7 +1223,7 @@ def _refit_contenders(ctx: _Search, current: EstimationResult, chosen: list, scr
         if fam:
             ctx.say(f"no contender is admissible: refining the shapes of {len(fam)} famil"
                     f"{'y' if len(fam) == 1 else 'ies'}")
-            found = _refine_families(_ladders([scr.contenders[j].effect.refinements(ctx.vehicle) for j in fam]),
+            found = _refine_families(_ladders([scr.contenders[j].effect.refinements(ctx.vehicle) for j in fam], chosen),
                                      _variant_task(ctx, current, chosen), _judge(ctx, n_tests), ctx.workers,
                                      current, ctx.vehicle, scr.scans, ctx.level / max(1, n_tests))
             va = [a for _, a in found]
@@ -1256,7 +1262,7 @@ def _refine_choice(ctx: _Search, current: EstimationResult, chosen: list, scr: S
         return scr, accs, effect, pick, why
     fam = _near_rivals(accs, scr, ctx.vehicle, i, ctx.band) if snug else \
         _families_to_refine(accs, scr, ctx.vehicle, i, ctx.level)
-    families = _ladders([scr.contenders[j].effect.refinements(ctx.vehicle) for j in fam])
+    families = _ladders([scr.contenders[j].effect.refinements(ctx.vehicle) for j in fam], chosen)
     families = [f for f in families if f and f[0].name not in {a.refit.name for a in accs}]
     if not families:
         return scr, accs, effect, pick, why
