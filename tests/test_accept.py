@@ -880,3 +880,20 @@ def test_a_prediction_that_holds_a_parameter_at_its_guess_decides_no_tie(monkeyp
     i, note = run(())
     assert i == 1 and "prefers start_mass" in note
 
+
+
+def test_a_model_that_reaches_the_noise_takes_an_effect_only_on_decisive_evidence():
+    """Once the model reaches the noise, an effect is added only when its LR test is significant at the noise
+    band's own level (0.001, Bonferroni over the contenders), not only at the search's 0.05: Petrel-V on a cold
+    day reached the noise and took ``base_drag`` for a 3-sigma wiggle (LR p = 0.0012), a wrong effect called
+    explained; RA-66M's density profile found on a base model at the noise had p = 1.6e-10."""
+    from rocketid.diagnostics import step as S
+
+    n = N_DATA - 8
+    weak = accept(refit("base_drag", 1.0, value=-0.007, size=0.1, base_chi2=(10.5 + (N_DATA - 9)) / n), BAND,
+                  n_tests=4)
+    assert 1e-3 < weak.refit.lr_p_value < 0.05 / 4
+    assert weak.accepted and not S._decisive(weak)
+    assert "not below 0.00025" in S._not_decisive(weak) and "over the 4 contender(s)" in S._not_decisive(weak)
+    strong = accept(refit("density", 0.9774, value=0.02, size=0.05, base_chi2=0.9798), BAND, n_tests=5)
+    assert strong.refit.lr_p_value < 1e-9 and strong.accepted and S._decisive(strong)
