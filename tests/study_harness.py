@@ -144,11 +144,14 @@ class Study:
         diag = out / "diagnosis.json"
         if code in (0, 1) and diag.exists():
             d = json.loads(diag.read_text())
+            # a diagnosis whose discovery failed holds nulls ("final", "noise_band"): read as absent, the case is
+            # then "diagnosis failed" and the study goes on (found by the Petrel-V study's first run)
             record["final"] = d.get("final")
-            record["base_chi2"] = d.get("comparison", {}).get("chi2_per_dof")
-            record["band"] = d.get("noise_band", {}).get("upper")
+            record["base_chi2"] = (d.get("comparison") or {}).get("chi2_per_dof")
+            record["band"] = (d.get("noise_band") or {}).get("upper")
             record["steps"] = [{"number": s.get("number"), "contenders": s.get("contenders"), "why": s.get("why")}
-                               for s in d.get("steps", [])]
+                               for s in d.get("steps") or []]
+            record["notes"] = d.get("notes") or []
         return record
 
     def classify(self, case, record) -> str:

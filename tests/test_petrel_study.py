@@ -1,0 +1,213 @@
+"""``rocketid diagnose`` on a high-site liquid booster and hidden physics the team never tuned on.
+
+Petrel-V (``tests/vehicles/petrel.py``) is a pressure-fed liquid suborbital booster declared from the
+user documentation: a sampled, regressive sea-level thrust table with a cutoff and a coast, the mass
+as a state, a rail exit 1420 m above sea level at 30 m/s, CD and the lift slope as Mach tables, a
+sampled pitch program with the attack angle ``pitch_cmd - theta``, GNSS data at 10 Hz. Its truth
+(``tests/petrel_study/truth.py``) flies Earth-centred Cartesian position and velocity with scipy's
+integrator, its own 1976 atmosphere, and every hidden effect in its own shape.
+
+The normal suite checks the instruments (a few seconds): the truth without effects reproduces the
+estimation model, the truth's atmosphere is rocketid's us76 where the model uses it, the vehicle fits
+clean data to the noise, and every hidden effect changes the flight by a stated amount. The diagnoses
+run ``rocketid diagnose`` from the command line, one per case, and are ``slow``:
+``pytest -m slow tests/test_petrel_study.py``. The results table and the command that made it are in
+docs/effects.md ("Evaluation on a high-site liquid booster (Petrel-V)").
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+HERE = Path(__file__).resolve().parent
+for extra in (HERE, HERE / "vehicles"):
+    if str(extra) not in sys.path:
+        sys.path.insert(0, str(extra))
+
+import petrel as V  # noqa: E402
+
+import rocketid as ri  # noqa: E402
+from petrel_study import truth  # noqa: E402
+from petrel_study.cases import ALL, BY_NAME, JET, MIS, Hidden  # noqa: E402
+from petrel_study.run import STUDY  # noqa: E402
+
+#: Cases measured not to meet the bar (``STUDY.acceptable``), with the measured reason.
+KNOWN_FAILURES: dict[str, str] = {
+    "cold-day": "b06d8d2: the base model is at the noise (chi2/dof 1.068, band 1.106, white: the 10 K colder column is "
+                "absorbed by CD and CLa, noise-free 2J 27 over 1792 dof); base_drag added on LR p 0.0012 (BIC -3), "
+                "dCD_base -0.0069 +- 0.0021, and called explained: WRONG called explained",
+    "doppler-scale": "b06d8d2: scale_v finds k_v 0.003017 +- 1.7e-5 (truth 0.003) at chi2/dof 1.019, but the hold-out "
+                     "fit on 0-40.9 s (Mach <= 2.53) leaves the Mach-3.5 drag knot undetermined (CD_5 1.00 +- 2.2 with "
+                     "scale_v, 0.385 +- 1.6 without) and its prediction of 41-60 s is worse (x RMS 70 against 26 m): "
+                     "partly explained",
+    "v-latency": "b06d8d2: 'the discovery failed: effect 'burn_rate' is given twice' (diagnosis.json final and "
+                 "noise_band null): diagnosis failed, no verdict",
+    "blowdown+jet-wind": "b06d8d2: 'the discovery failed: effect 'temperature' is given twice' after 544 s: "
+                         "diagnosis failed, no verdict",
+    "cold-day+ellipsoid-height": "b06d8d2: bias_h 24.87 +- 0.23 explained at chi2/dof 1.021; the cold day is absorbed "
+                                 "by the coefficients as in cold-day, density never needed: right but partly",
+    "vacuum-nozzle+doppler-scale": "b06d8d2: back_pressure (A_e 0.0599) + scale_v (k_v 0.00305) + time_offset (tau "
+                                   "-0.0155 s), chi2/dof 1.172 > band 1.107, v not white, partly explained: the truth "
+                                   "fades its nozzle term with the table over the 1 s tail-off, the catalogue holds it "
+                                   "to 40 % of peak (1.30 m/s in v at 51 s at the true A_e; back_pressure + scale_v on "
+                                   "the noise-free data leave 2J 677)",
+}
+
+
+@pytest.fixture(scope="module")
+def petrel_spec():
+    return V.build_model()
+
+
+@pytest.fixture(scope="module")
+def clean_outputs():
+    return truth.exact_outputs(Hidden(), V.sample_times())
+
+
+def test_truth_reproduces_the_vehicle_model(petrel_spec, clean_outputs):
+    """Cartesian position and velocity about the Earth's centre (truth) against speed and path angle
+    (model), through the cutoff, the tail-off and the coast: < 1 mm (measured 3e-5 m)."""
+    model = ri.simulate(petrel_spec, V.truth(petrel_spec), V.sample_times()).outputs()
+    for name in ("x", "h", "v"):
+        assert np.max(np.abs(clean_outputs[name] - model[name])) < 1e-3, name
+
+
+def test_the_truth_s_atmosphere_is_the_1976_standard():
+    """The truth's own layers and hydrostatic integration against rocketid's us76 over 0-50 km: density,
+    pressure and speed of sound agree to 1e-9 (measured 2e-13), far below what moves the flight."""
+    from rocketid.physics.atmosphere import density, speed_of_sound, us76_pressure
+    hs = np.linspace(0.0, 50_000.0, 201)
+    air = truth.air(0.0)
+    rho = np.array([air.density(h) for h in hs])
+    sound = np.array([air.sound_speed(h) for h in hs])
+    pressure = np.array([air.pressure(h) for h in hs])
+    assert np.max(np.abs(rho / density(hs, "us76") - 1)) < 1e-9
+    assert np.max(np.abs(sound / speed_of_sound(hs) - 1)) < 1e-9
+    assert np.max(np.abs(pressure / np.array([float(us76_pressure(h)) for h in hs]) - 1)) < 1e-9
+
+
+def test_the_cold_day_is_hydrostatic_from_the_standard_sea_level():
+    """10 K colder: the sea-level pressure the standard's, density +3.6 % there, +3.1 % at the pad, -15 %
+    at 30 km; the speed of sound unchanged (a pure density change)."""
+    std, cold = truth.air(0.0), truth.air(-10.0)
+    assert cold.pressure(0.0) == pytest.approx(101_325.0, rel=1e-12)
+    assert cold.density(1420.0) / std.density(1420.0) - 1 == pytest.approx(0.0307, abs=5e-4)
+    assert cold.density(30_000.0) / std.density(30_000.0) - 1 == pytest.approx(-0.146, abs=2e-3)
+    assert cold.sound_speed(20_000.0) == std.sound_speed(20_000.0)
+
+
+def test_the_flight_is_a_booster_s(clean_outputs, petrel_spec):
+    """Realistic flight conditions: Mach 3.4 at cutoff, 31 km at 60 s, a coast after the tail-off."""
+    from rocketid.physics.atmosphere import speed_of_sound
+    states = ri.simulate(petrel_spec, V.truth(petrel_spec), V.sample_times()).states
+    mach = states[:, 2] / speed_of_sound(states[:, 1])
+    assert 3.2 < mach.max() < 3.6
+    assert 28_000.0 < clean_outputs["h"][-1] < 34_000.0
+    assert clean_outputs["v"][-1] < clean_outputs["v"][499]            # slowing in the coast
+    assert states[-1, 4] == pytest.approx(states[510, 4], abs=1e-6)    # no mass flow after 51 s
+
+
+def test_vehicle_fits_clean_data_to_the_noise(petrel_spec):
+    """The base model at the noise on clean data (seed 7, not a study seed), every coefficient within 3 %."""
+    data = truth.measurements(Hidden(), seed=7)
+    fit = ri.estimate(petrel_spec, data)
+    assert fit.success, fit.message
+    dof = fit.n_data - fit.n_estimated
+    assert abs(fit.chi2_per_dof - 1) < 4 * math.sqrt(2 / dof)
+    for name, true in V.truth(petrel_spec).items():
+        assert abs(fit.value(name) / true - 1) < 0.03, name
+
+
+def test_vehicle_fits_noise_free_truth_exactly(petrel_spec, clean_outputs):
+    """The cutoff, the 1 s tail-off and the coast on the default mesh: noise-free truth data fit to
+    2J < 0.01 (measured 3e-4), the coefficients to 1e-3."""
+    data = ri.Measurements.from_arrays(V.sample_times(), clean_outputs, sigma=dict(V.SIGMA))
+    fit = ri.estimate(petrel_spec, data)
+    assert fit.success, fit.message
+    assert fit.chi2_per_dof * (fit.n_data - fit.n_estimated) < 0.01
+    for name, true in V.truth(petrel_spec).items():
+        assert abs(fit.value(name) / true - 1) < 1e-3, name
+
+
+def test_the_blowdown_loses_six_percent_at_cutoff():
+    """The thrust factor ``1 - c m_used`` is 0.94 at cutoff, from the flight's own propellant used."""
+    flight = truth.Flight(Hidden(blowdown=0.06))
+    mass = flight.states(np.array([truth.V.T_CUTOFF]))[0, 4]
+    assert 1 - flight.c_blow * (flight.m0 - mass) == pytest.approx(0.94, abs=1e-8)
+
+
+def test_the_nozzle_adds_its_pressure_term_from_the_pad_up():
+    """At the rail exit (1420 m) the 0.06 m^2 exit adds A_e (p_sl - p) = 0.96 kN, and nothing in the coast."""
+    y = truth.Flight(Hidden()).initial()
+    for t, added in ((0.0, 0.06 * (101_325.0 - truth.air(0.0).pressure(1420.0))), (55.0, 0.0)):
+        plain = np.array(truth.Flight(Hidden()).rhs(t, y))
+        nozzle = np.array(truth.Flight(Hidden(A_e=0.06)).rhs(t, y))
+        force = np.hypot(*(nozzle - plain)[2:4]) * y[4]
+        assert force == pytest.approx(added, rel=1e-9, abs=1e-9)
+    assert 950.0 < 0.06 * (101_325.0 - truth.air(0.0).pressure(1420.0)) < 960.0
+
+
+def test_the_wind_profile():
+    """4 m/s at the pad, 8 m/s 1 km above it (log law), 25 m/s more at the jet's core."""
+    hid = Hidden(jet_wind=JET)
+    assert truth.wind(hid, 1400.0) == pytest.approx(4.0 + 25.0 * math.exp(-0.5 * (9.6 / 2.0) ** 2), abs=1e-9)
+    assert truth.wind(hid, 2400.0) == pytest.approx(8.0 + 25.0 * math.exp(-0.5 * (8.6 / 2.0) ** 2), abs=1e-9)
+    assert truth.wind(hid, 11_000.0) == pytest.approx(33.0, abs=1e-9)
+
+
+@pytest.mark.parametrize("hidden, channel, low, high", [          # measured: the largest change
+    (Hidden(blowdown=0.06), "v", 40.0, 100.0),                     # 65.7 m/s
+    (Hidden(A_e=0.06), "v", 80.0, 150.0),                          # 113 m/s
+    (Hidden(cold_dT=-10.0), "v", 2.5, 5.0),                        # 3.7 m/s (25 sigma)
+    (Hidden(jet_wind=JET), "x", 450.0, 900.0),                     # 672 m
+    (Hidden(dm0=40.0), "v", 20.0, 45.0),                           # 32.8 m/s
+    (Hidden(delta=MIS), "x", 25.0, 60.0),                          # 42 m (14 sigma)
+    (Hidden(bias_h=25.0), "h", 24.99, 25.01),                      # 25 m
+    (Hidden(scale_v=0.003), "v", 2.5, 3.5),                        # 0.3 % of 1000 m/s
+    (Hidden(v_latency=0.12), "v", 2.5, 5.0),                       # 3.7 m/s in the tail-off (25 sigma)
+])
+def test_each_hidden_effect_changes_the_flight(clean_outputs, hidden, channel, low, high):
+    """Every hidden effect moves the outputs by a realistic amount (largest change in range): at least
+    a few sigma somewhere."""
+    moved = truth.exact_outputs(hidden, V.sample_times())[channel]
+    change = float(np.max(np.abs(moved - clean_outputs[channel])))
+    assert low < change < high, change
+    assert change > 3 * V.SIGMA[channel]
+
+
+def test_the_speed_latency_moves_the_speed_channel_only(clean_outputs):
+    moved = truth.exact_outputs(Hidden(v_latency=0.12), V.sample_times())
+    assert np.array_equal(moved["x"], clean_outputs["x"]) and np.array_equal(moved["h"], clean_outputs["h"])
+    late = truth.exact_outputs(Hidden(), V.sample_times()[5:] - 0.12)["v"]        # on-grid shifted samples
+    assert np.max(np.abs(moved["v"][5:] - late)) < 1e-9
+
+
+def test_classification_rules():
+    """A wrong family called explained is the worst outcome; the out-of-catalogue case passes only
+    without "explained"."""
+    case = BY_NAME["vacuum-nozzle"]
+    final = {"effects": ["back_pressure"], "verdict": "explained", "parameters": {}}
+    assert STUDY.classify(case, {"final": final}) == "right & explained"
+    assert STUDY.classify(case, {"final": {**final, "effects": ["thrust_profile_5"]}}) == "WRONG called explained"
+    latency = BY_NAME["v-latency"]
+    assert not STUDY.acceptable(latency, {"final": {**final, "effects": ["time_offset"]}})
+    assert STUDY.acceptable(latency, {"final": {**final, "effects": ["time_offset"], "verdict": "partly explained"}})
+    pair = BY_NAME["blowdown+jet-wind"]
+    assert STUDY.classify(pair, {"final": {**final, "effects": ["burn_rate"]}}) == "right but partly"
+    assert STUDY.classify(pair, {"final": {**final, "effects": ["burn_rate", "wind_pl_6"]}}) == "right & explained"
+    clean = BY_NAME["clean-520"]
+    assert not STUDY.acceptable(clean, {"final": final})
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case", ALL, ids=[c.name for c in ALL])
+def test_diagnose_on_petrel_case(case, tmp_path, monkeypatch, request):
+    """``rocketid diagnose`` (CLI) on the case: clean data add nothing, an effect the base fit does not
+    show may go unfound, a visible one is found and explained, the out-of-catalogue speed latency is
+    not called explained, and a wrong family is never reported as explained."""
+    STUDY.check_case(case, KNOWN_FAILURES, tmp_path, monkeypatch, request)
