@@ -434,7 +434,7 @@ def confirm(fit: EstimationResult, effect: Effect | str | Sequence[Effect | str]
     else:
         sizes = {}
     times = {n: float(v) for n, v in zip(new.spec.parameter_names, new.p) if n in {t for e in effects for t in e.locations}}
-    hold = _holdout(fit, new, window, options, timeout, sizes, times)
+    hold = _holdout(fit, new, window, options, timeout, sizes, times, declared=spec)
     t3 = time.perf_counter()
     return Confirmation(
         effects=tuple(e.name for e in effects), fit=new, base_fit=fit, lr_statistic=test.lr, lr_p_value=test.lr_p,
@@ -619,12 +619,14 @@ def _loose_coefficients(window_fits: Sequence[EstimationResult], names: Sequence
 
 def _holdout(fit: EstimationResult, new: EstimationResult, window: tuple[float, float] | None,
              options: Mapping[str, Any], timeout: float, sizes: Mapping[str, float] | None = None,
-             times: Mapping[str, float] | None = None) -> _Holdout:
+             times: Mapping[str, float] | None = None, declared=None) -> _Holdout:
     """Fit the base model and the model with the effect on ``window`` (None: no check) from their
     own guesses, and predict the samples after it; ``sizes`` (the effect parameters' realistic
     magnitudes) to find those the window does not determine. ``times``: the locations of the new
     model's located shapes (event times, a hump's Mach number), where its window fit starts them (held
-    first, then freed: from the model's guess, 0, an event time is not found)."""
+    first, then freed: from the model's guess, 0, an event time is not found). ``declared``: the model with
+    the effect as declared (:func:`~rocketid.diagnostics.effects.with_effects` of the base model), whose
+    guesses its window fit starts from (default ``new.spec``)."""
     if window is None:
         return _Holdout(None, None, ())
     data, mesh = fit.prepared.measurements, fit.prepared.transcription.mesh
@@ -640,16 +642,22 @@ def _holdout(fit: EstimationResult, new: EstimationResult, window: tuple[float, 
         # reach is held at its guess, and a guess taken from the full-data estimate would carry
         # the predicted samples into the prediction -- except where a located shape sits (``times``):
         # its size still starts at zero, so the window's data alone say how large it is
-        fn, blind_n = _fit_window(new.spec, win, mesh, dict(times or {}) or None, options, new.p,
+        # the new model as declared (the base model's guesses, the effect's neutral ones), not ``new.spec``: a
+        # model fitted by the search carries the full fit's estimates as its guesses, and its window fit would
+        # hold the parameters the window does not reach at values the predicted samples made (before
+        # 2026-11-28 the diagnosis's confirmation did: a drag knot held at its full-data estimate with the
+        # effect, at its declared guess without)
+        spec = declared if declared is not None else new.spec
+        fn, blind_n = _fit_window(spec, win, mesh, dict(times or {}) or None, options, new.p,
                                   held=tuple(times or ()))
         # the base model's coefficients (not the start's states, which the window's own start determines)
         starts = {str(st.initial_parameter) for st in fit.spec.states if st.free}
         shared = [n for n in fit.spec.parameter_names if n in set(new.spec.parameter_names) and n not in starts]
         loose = _loose_coefficients((fb, fn), shared)
         if loose:
-            # held at their guesses in both window fits, as those the window does not reach
+            # held in both window fits, as those the window does not reach (at the model's own guesses)
             fb, blind_b = _fit_window(fit.spec, win, mesh, None, options, fit.p, loose=loose)
-            fn, blind_n = _fit_window(new.spec, win, mesh, dict(times or {}) or None, options, new.p,
+            fn, blind_n = _fit_window(spec, win, mesh, dict(times or {}) or None, options, new.p,
                                       held=tuple(times or ()), loose=loose)
             blind_b, blind_n = ([n for n in b if n not in loose] for b in (blind_b, blind_n))
         fits = (fb, fn)
