@@ -284,7 +284,10 @@ class Study:
 
 
 def git_commit() -> str:
-    """The last commit that changed ``src/rocketid`` (what the diagnoses ran)."""
+    """The last commit that changed ``src/rocketid`` (what the diagnoses ran); ``$ROCKETID_STUDY_COMMIT`` when set
+    (a study run from a ``git archive`` of a commit, which holds no history to ask)."""
+    if os.environ.get("ROCKETID_STUDY_COMMIT"):
+        return os.environ["ROCKETID_STUDY_COMMIT"]
     try:
         return subprocess.run(["git", "-C", str(REPO), "log", "-1", "--format=%h", "--", "src/rocketid"],
                               capture_output=True, text=True, check=True).stdout.strip()
