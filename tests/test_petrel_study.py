@@ -41,8 +41,8 @@ KNOWN_FAILURES: dict[str, str] = {
     "blowdown+jet-wind": "511eec0: time_offset_2 + temperature, chi2/dof 1456 -> 1002, partly explained: every wind "
                          "refit at step 1 runs to 170-470 m/s at its knots (the wind takes up the thrust's fall), the "
                          "thrust family is no contender until step 2 (thrust_level 839), and the second path from "
-                         "wind_pl_13 ends at 2.80 without a second effect (b06d8d2: the discovery failed on an effect "
-                         "asked twice)",
+                         "wind_pl_13 ends at 2.80 without a second effect; the pair fitted directly, wind_pl_9 + "
+                         "thrust_profile_3, reaches 0.961 (b06d8d2: the discovery failed on an effect asked twice)",
     "cold-day+ellipsoid-height": "b06d8d2 and 511eec0: bias_h 24.87 +- 0.23 explained at chi2/dof 1.021; the cold day "
                                  "is absorbed by the coefficients as in cold-day (there: nothing missing), density "
                                  "never needed: right but partly",
