@@ -638,28 +638,26 @@ def _holdout(fit: EstimationResult, new: EstimationResult, window: tuple[float, 
     try:
         win = data.window(a, b)
         fb, blind_b = _fit_window(fit.spec, win, mesh, None, options, fit.p)
-        # from the model's own guesses, as the base model: a parameter the window's data do not
-        # reach is held at its guess, and a guess taken from the full-data estimate would carry
-        # the predicted samples into the prediction -- except where a located shape sits (``times``):
-        # its size still starts at zero, so the window's data alone say how large it is
-        # the new model as declared (the base model's guesses, the effect's neutral ones), not ``new.spec``: a
-        # model fitted by the search carries the full fit's estimates as its guesses, and its window fit would
-        # hold the parameters the window does not reach at values the predicted samples made (before
-        # 2026-11-28 the diagnosis's confirmation did: a drag knot held at its full-data estimate with the
-        # effect, at its declared guess without)
+        # from the model's own guesses, as the base model -- the model as declared (the base model's guesses, the
+        # effect's neutral ones), not ``new.spec``, which after the search carries the full fit's estimates: a
+        # parameter the window's data do not reach is held at its guess, and a guess taken from the full-data
+        # estimate would carry the predicted samples into the prediction (before 2026-11-28 the diagnosis's
+        # confirmation did: a drag knot held at its full-data estimate with the effect, at its declared guess
+        # without) -- except where a located shape sits (``times``): its size still starts at zero, so the
+        # window's data alone say how large it is
         spec = declared if declared is not None else new.spec
         fn, blind_n = _fit_window(spec, win, mesh, dict(times or {}) or None, options, new.p,
                                   held=tuple(times or ()))
         # the base model's coefficients (not the start's states, which the window's own start determines)
         starts = {str(st.initial_parameter) for st in fit.spec.states if st.free}
         shared = [n for n in fit.spec.parameter_names if n in set(new.spec.parameter_names) and n not in starts]
-        loose = _loose_coefficients((fb, fn), shared)
-        if loose:
+        unsettled = _loose_coefficients((fb, fn), shared)
+        if unsettled:
             # held in both window fits, as those the window does not reach (at the model's own guesses)
-            fb, blind_b = _fit_window(fit.spec, win, mesh, None, options, fit.p, loose=loose)
+            fb, blind_b = _fit_window(fit.spec, win, mesh, None, options, fit.p, loose=unsettled)
             fn, blind_n = _fit_window(spec, win, mesh, dict(times or {}) or None, options, new.p,
-                                      held=tuple(times or ()), loose=loose)
-            blind_b, blind_n = ([n for n in b if n not in loose] for b in (blind_b, blind_n))
+                                      held=tuple(times or ()), loose=unsettled)
+            blind_b, blind_n = ([n for n in b if n not in unsettled] for b in (blind_b, blind_n))
         fits = (fb, fn)
         pb, pn = _predict(fb, rest, timeout), _predict(fn, rest, timeout)
         rms = {c.name: (float(np.sqrt(np.mean((pb[c.name] - c.values) ** 2))),
@@ -670,9 +668,10 @@ def _holdout(fit: EstimationResult, new: EstimationResult, window: tuple[float, 
             if blind:
                 notes.append(f"the data of the hold-out window do not reach {', '.join(blind)} of the {label} "
                              "model: held at their guesses in its hold-out fit and prediction")
-        if loose:
-            notes.append(f"the hold-out window's data do not determine {', '.join(loose)} (a standard error above "
-                         "the nominal value in a first window fit): held at their guesses in both models' window fits")
+        if unsettled:
+            notes.append(f"the hold-out window's data do not determine {', '.join(unsettled)} (a standard error "
+                         "above the nominal value in a first window fit): held at their guesses in both models' "
+                         "window fits")
         loose = _undetermined(fn, sizes or {}) if fn.success else ()
         if loose:
             notes.append(f"the hold-out window's data do not determine {', '.join(loose)} (standard error above a "

@@ -78,7 +78,7 @@ import numpy as np
 
 from ..errors import RocketidError, SettingsError
 from ..solve import EstimationResult, estimate
-from .accept import Acceptance, NoiseBand, accept, fits_to_noise
+from .accept import BAND_LEVEL, Acceptance, NoiseBand, accept, fits_to_noise
 from .effects import Effect, Vehicle, with_effects
 from .refit import REFIT_TIMEOUT, BudgetSpent, Refit, RefitTask, budget_spent, refit_all, summarize_task, time_budget
 from .screen import Contender, Screen, screen, vehicle_of
@@ -884,13 +884,11 @@ def _decisive(pick: Acceptance) -> bool:
     explained -- a wrong effect named for a 3-sigma wiggle. The right answers found on a base model that already
     reached the noise in the hidden-effect study are far beyond this level: RA-66M's density profile, LR p =
     1.6e-10, and its back-pressure, 2.4e-39.)"""
-    from .accept import BAND_LEVEL
     p = pick.refit.lr_p_value
     return bool(np.isfinite(p) and p < BAND_LEVEL / max(1, int(pick.n_tests)))
 
 
 def _not_decisive(pick: Acceptance) -> str:
-    from .accept import BAND_LEVEL
     alpha = BAND_LEVEL / max(1, int(pick.n_tests))
     return (f"LR p = {pick.refit.lr_p_value:.2g}, not below {alpha:.2g}: the level at which the noise band calls a fit "
             f"inadequate ({BAND_LEVEL:g}), over the {int(pick.n_tests)} contender(s) -- evidence too weak to overturn "
