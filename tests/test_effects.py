@@ -1016,3 +1016,54 @@ def test_a_thrust_error_over_a_burn_inside_the_horizon_cannot_reverse_the_thrust
     whole = with_effects(ra66m(), [thrust_profile_effect([0.0, 33.0, 66.0])])
     assert any(str(f.symbol).startswith("eps_P") for f in whole.families)
     assert {str(p.symbol): (p.lower, p.upper) for p in whole.parameters}["eps_P1"] == (-math.inf, math.inf)
+
+
+def test_the_back_pressure_fade_is_estimated_where_the_data_see_the_tail_off():
+    """The refined back-pressure shape estimates where the correction fades out in the tail-off. Truth
+    written here by hand on Tern-2 (a 10 s solid burn, its tail-off from 98 kN at 7.75 s to 0 at 10.25 s), the
+    way an engine team might state it: the pressure term scaled with the chamber from the start of the
+    shutdown, ``P + A_e (p0 - p_a(h)) min(1, P / 98 kN)``, ``A_e`` 0.05 m^2. The catalogue's shape (fading below
+    40 % of the peak) leaves a misfit; the refined one reaches the noise with ``s`` near 98 / 114 and the area
+    near the truth. It is offered only for a motor that stops inside the horizon (not Osprey-A's, which burns
+    through its data), and zero parameters give back the base model."""
+    import sys
+    sys.path.insert(0, str(Path(__file__).parent / "vehicles"))
+    import osprey
+    import tern
+
+    from rocketid.diagnostics.effects import CATALOGUE, FADE_SHARES, NOZZLE_FULL_SHARE
+    from rocketid.diagnostics.screen import vehicle_of
+    from rocketid.physics.atmosphere import us76_pressure
+
+    base = tern.build_model()
+    hand = base.to_model()
+    stated, h = hand.thrust_table, hand.h
+    cut = 98e3                                          # the table's value where the shutdown starts (7.75 s)
+    hand.redefine(hand.thrust, stated + 0.05 * (101325.0 - us76_pressure(h)) * sp.Min(1, stated / cut))
+    hand = hand.freeze()
+    t = tern.sample_times()
+    exact = ri.simulate(hand, tern.truth(hand), t).outputs()
+    rng = np.random.default_rng(41)
+    data = ri.Measurements(tuple(ri.Channel(n, t, exact[n] + tern.SIGMA[n] * rng.standard_normal(t.size),
+                                            tern.SIGMA[n]) for n in ("x", "h", "v")))
+    plain = ri.estimate(with_effects(base, ["back_pressure"]), data)
+    veh = vehicle_of(plain)
+    shapes = {e.name: e for e in CATALOGUE["back_pressure"].refinements(veh)}
+    assert set(shapes) == {"back_pressure_vacuum", "back_pressure_fade"}
+    fade = shapes["back_pressure_fade"]
+    fit = ri.estimate(with_effects(base, [fade]), data)
+    est = dict(zip(fit.spec.parameter_names, fit.p))
+    assert fit.success and plain.success
+    lr = 2 * (plain.objective - fit.objective)          # one parameter more: the LR statistic, chi2 on 1 dof
+    assert lr > 100 and fit.chi2_per_dof < 1.05, (lr, plain.chi2_per_dof, fit.chi2_per_dof)
+    assert NOZZLE_FULL_SHARE + est["d_fade"] == pytest.approx(cut / max(tern.THRUST_VALUES), abs=0.05)
+    assert est["A_e"] == pytest.approx(0.05, rel=0.05)
+    assert fade.sizes(veh)["d_fade"] == FADE_SHARES[1] - FADE_SHARES[0]     # a shape: its range, never oversized
+    zero = ri.simulate(with_effects(base, [fade]), {**tern.truth(base), "A_e": 0.0, "d_fade": 0.3}, t).outputs()
+    ref = ri.simulate(base, tern.truth(base), t).outputs()
+    assert np.max(np.abs(zero["x"] - ref["x"])) < 1e-3          # the integrator's tolerance, far below sigma
+    o_spec, o_t = osprey.build_model(), osprey.sample_times()
+    o_exact = ri.simulate(o_spec, osprey.truth(o_spec), o_t).outputs()
+    o_data = ri.Measurements(tuple(ri.Channel(n, o_t, o_exact[n], osprey.SIGMA[n]) for n in ("x", "h", "v")))
+    burns_through = vehicle_of(ri.estimate(o_spec, o_data))
+    assert [e.name for e in CATALOGUE["back_pressure"].refinements(burns_through)] == ["back_pressure_vacuum"]

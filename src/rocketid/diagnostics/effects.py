@@ -480,7 +480,7 @@ def _refine_base_drag(vehicle: "Vehicle | None") -> list[Effect]:
     return [base_drag_mach_effect(np.linspace(lo, hi, n)) for n in (2, 3, 5)]
 
 
-def back_pressure_effect(reference: str = "sea_level", *, name: str | None = None) -> Effect:
+def back_pressure_effect(reference: str = "sea_level", *, fade: bool = False, name: str | None = None) -> Effect:
     """Nozzle back-pressure: the thrust changes with the ambient pressure ``p_a(h)``.
 
     Parameters
@@ -490,18 +490,31 @@ def back_pressure_effect(reference: str = "sea_level", *, name: str | None = Non
         ``"sea_level"`` (a static firing's figure, the default): ``P + A_e (p0 - p_a(h))``,
         the thrust rises as the vehicle climbs. ``"vacuum"``: ``P - A_e p_a(h)``, the
         stated thrust is the vacuum thrust and the atmosphere takes ``A_e p_a`` off it.
+    fade : bool
+        Estimate where the correction fades out in the tail-off (a refined shape, see the notes):
+        one more parameter, ``d_fade``.
     name : str, optional
-        Default ``back_pressure`` (sea level) or ``back_pressure_vacuum``.
+        Default ``back_pressure`` (sea level) or ``back_pressure_vacuum``, with ``_fade`` appended
+        for the refined shape.
 
     Notes
     -----
     ``A_e >= 0`` is the nozzle exit area. When the model's thrust already depends on
     altitude (it has a nozzle term), the effect is a correction ``dA_e`` of that area,
     of either sign, written the same way.
+
+    In the tail-off the correction fades with the stated thrust: it is multiplied by
+    ``min(1, P / (s P_max))``, ``P_max`` the stated thrust's peak. The catalogue's shape takes
+    ``s = 0.4`` (:data:`NOZZLE_FULL_SHARE`: below 40 % of its peak a nozzle expanded for sea level
+    no longer flows full); how an engine's pressure term actually dies away is its own (an engine
+    team may scale it with the chamber pressure from the start of the shutdown), so the refined
+    shape (``fade=True``) estimates ``s = 0.4 + d_fade`` in ``[0.1, 1]``. It is offered only for a
+    motor that stops inside the horizon, where the data see the tail-off.
     """
     if reference not in ("sea_level", "vacuum"):
         raise ModelError(f"back-pressure reference must be 'sea_level' or 'vacuum', got {reference!r}")
-    name = name or ("back_pressure" if reference == "sea_level" else "back_pressure_vacuum")
+    base_name = "back_pressure" if reference == "sea_level" else "back_pressure_vacuum"
+    name = name or (base_name + ("_fade" if fade else ""))
     suffix = "" if reference == "sea_level" else "_vac"
 
     def apply(m: Model) -> tuple:
@@ -515,18 +528,63 @@ def back_pressure_effect(reference: str = "sea_level", *, name: str | None = Non
             area = m.parameter("A_e" + suffix, 0.0, bounds=(0.0, math.inf), nominal=0.4)   # an area: not negative
         pa = _define(m, "p_ambient", us76_pressure(h), name)
         change = area * (SEA_LEVEL_PRESSURE - pa) if reference == "sea_level" else -area * pa
-        m.redefine(sym, thrust + change * _nozzle_flowing(m, thrust))
-        return (area,)
+        if not fade:
+            m.redefine(sym, thrust + change * _nozzle_flowing(m, thrust))
+            return (area,)
+        level = _stated_thrust_levels(m, thrust)
+        if level is None or level.min() >= NOZZLE_FULL_SHARE * level.max():
+            raise ModelError(f"effect {name!r} estimates where the back-pressure correction fades in the tail-off, "
+                             f"but the stated thrust of model {m.name!r} does not fall below "
+                             f"{100 * NOZZLE_FULL_SHARE:g} % of its peak inside the horizon: use {base_name!r}")
+        d = m.parameter("d_fade" + suffix, 0.0, bounds=(FADE_SHARES[0] - NOZZLE_FULL_SHARE,
+                                                       FADE_SHARES[1] - NOZZLE_FULL_SHARE), nominal=0.2)
+        share = thrust / ((NOZZLE_FULL_SHARE + d) * float(level.max()))
+        # min(share, 1), rounded over FADE_ROUNDING of the share: the kink's time moves with d_fade, and a
+        # corner there leaves IPOPT cycling (a hard min stopped on its iteration limit at Petrel-V's tail-off)
+        r = FADE_ROUNDING
+        m.redefine(sym, thrust + change * (share + 1 - sp.sqrt((share - 1) ** 2 + r * r)) / 2)
+        return (area, d)
 
     what = ("P + A_e (p0 - p_a(h)): the stated thrust P holds at sea level (p0 = 101325 Pa) and rises as the "
             "ambient pressure falls" if reference == "sea_level" else
             "P - A_e p_a(h): the stated thrust P is the vacuum thrust")
     desc = (f"thrust {what}; p_a the 1976 standard's pressure; A_e >= 0 the nozzle exit area, m^2 (a correction "
-            "dA_e of either sign when the model's thrust already has a nozzle term)")
-    title = "nozzle back-pressure" + (" (vacuum thrust stated)" if reference == "vacuum" else "")
-    return Effect(name, title, "propulsion", apply, desc, {"A_e" + suffix: 0.4},
-                  relative=lambda veh: {"A_e" + suffix: 0.1 * veh.thrust / SEA_LEVEL_PRESSURE,
-                                        "dA_e" + suffix: 0.1 * veh.thrust / SEA_LEVEL_PRESSURE})
+            "dA_e of either sign when the model's thrust already has a nozzle term); in the tail-off the "
+            f"correction fades as min(1, P / (s P_max)), " + (
+                f"s = {NOZZLE_FULL_SHARE:g} + d_fade estimated in [{FADE_SHARES[0]:g}, {FADE_SHARES[1]:g}]"
+                if fade else f"s = {NOZZLE_FULL_SHARE:g}"))
+    title = "nozzle back-pressure" + (" (vacuum thrust stated)" if reference == "vacuum" else "") + \
+        (", its tail-off fade estimated" if fade else "")
+    area_size = {"A_e" + suffix: 0.4}
+    shape = {"d_fade" + suffix: FADE_SHARES[1] - FADE_SHARES[0]} if fade else {}
+
+    def relative(veh):
+        a = 0.1 * veh.thrust / SEA_LEVEL_PRESSURE
+        return {"A_e" + suffix: a, "dA_e" + suffix: a, **shape}
+
+    refine = None if fade else (lambda veh: ([back_pressure_effect("vacuum")] if reference == "sea_level" else [])
+                                + ([back_pressure_effect(reference, fade=True)] if _stops(veh) else []))
+    return Effect(name, title, "propulsion", apply, desc, {**area_size, **shape}, relative=relative, refine=refine)
+
+
+FADE_SHARES = (0.1, 1.0)
+"""The range of the share ``s`` of the stated thrust's peak below which the refined back-pressure shape fades
+its correction out (:func:`back_pressure_effect` with ``fade=True``). Its realistic size is the whole range:
+where in it the fade sits is a shape, not a magnitude to judge."""
+
+
+FADE_ROUNDING = 0.01
+"""Half-width, in the share ``P / (s P_max)``, over which the refined shape's ``min(share, 1)`` is rounded
+(``(share + 1 - sqrt((share - 1)^2 + r^2)) / 2``): 0.5 % below 1 at ``share = 1``, 0.02 % at 1.25. (0.05 was
+tried: its 1.2 % shaved off the correction near the fade biased the fade 14 % early and the area 9 % low on Tern-2.)"""
+
+
+def _stops(vehicle: "Vehicle | None") -> bool:
+    """Whether the motor stops inside the horizon: the thrust's last powered time (:attr:`Vehicle.powered`) more
+    than 1 % of the horizon before its end."""
+    if vehicle is None or not vehicle.powered or not vehicle.knot_times:
+        return False
+    return float(vehicle.powered[1]) < float(vehicle.knot_times[-1]) - 0.01 * float(vehicle.duration)
 
 
 def _thrust_level(m: Model) -> tuple:
@@ -2053,10 +2111,8 @@ def _build_catalogue() -> dict[str, Effect]:
     def rel_bias(channel: str, floor: float, sigmas: float):
         return lambda veh: {f"b_{channel}": max(floor, sigmas * float(veh.sigma.get(channel, 0.0)))}
 
-    bp = back_pressure_effect("sea_level")
-    bp = replace(bp, refine=lambda veh: [back_pressure_effect("vacuum")])
     effects = [
-        bp,
+        back_pressure_effect("sea_level"),
         back_pressure_effect("vacuum"),
         Effect("thrust_level", "thrust-level error", "propulsion", _thrust_level,
                "thrust P (1 + eps_thrust)", {"eps_thrust": 0.02}, refine=_refine_thrust),
