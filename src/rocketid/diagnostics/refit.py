@@ -1091,9 +1091,10 @@ class RefitTask:
     timeout : float
     level : float
     band_upper : float
-        The noise band's chi2/dof: a warm-started refit that ends above it is refitted from the
-        model's own guesses (the base estimate may be distorted by the missing effect), and the
-        better of the two is kept.
+        The noise band's chi2/dof: a warm-started refit that ends above it -- or at it with an effect
+        beyond five realistic sizes or a coefficient of the user's model at a bound (:func:`_distorted`)
+        -- is refitted from the model's own guesses (the base estimate may be distorted by the missing
+        effect), and the better of the two (the lower objective) is kept.
     base_values : dict
         The estimates of the fit before the refit, by name.
     base_chi2_per_dof : float
@@ -1159,15 +1160,16 @@ def run_refit(task: RefitTask) -> tuple[Refit, EstimationResult | None]:
             spec = _times_held_first(spec, _holding(prep, mask, spec.parameter_vector()), options())
         new = estimate(spec, task.data, mesh=task.mesh, options=options(),
                        prepared=None if prep is None else replace(prep, spec=spec))
-        if not (new.success and new.chi2_per_dof <= task.band_upper) and time.perf_counter() < deadline:
+        odd = _distorted(task, new)
+        if (odd or not (new.success and new.chi2_per_dof <= task.band_upper)) and time.perf_counter() < deadline:
             # warm start from a fit the missing effect distorted: also from the model's own guesses (the
-            # same model and NLP: only the start differs)
+            # same model and NLP: only the start differs), and the better optimum is kept
             model = _guesses_start(task, model)
             cold = estimate(model, task.data, mesh=task.mesh, options=options(),
                             prepared=replace(new.prepared, spec=model))
             if cold.success and (not new.success or cold.objective < new.objective):
                 notes.append(f"refitted from the model's guesses (chi2/dof {cold.chi2_per_dof:.4g}; from the current "
-                             f"estimate {new.chi2_per_dof:.4g})")
+                             f"estimate {new.chi2_per_dof:.4g}" + (f", where {odd}" if odd else "") + ")")
                 new = cold
     except RocketidError as exc:
         return _failed(task, f"the refit could not be made: {exc}", time.perf_counter() - t0), None
@@ -1188,6 +1190,29 @@ def summarize_task(task: RefitTask, new: EstimationResult, *, seconds: float = 0
                                                for k, v in e.least.items()},
                            base_values=task.base_values, base_chi2_per_dof=task.base_chi2_per_dof,
                            model_parameters=task.base_spec.parameter_names, changes=task.changes)
+
+
+def _distorted(task: RefitTask, new: EstimationResult) -> str:
+    """Why a warm refit that converged at the noise band sits where a search should not stop without
+    trying the model's guesses: an effect parameter beyond :data:`~rocketid.diagnostics.accept.SIZE_FACTOR`
+    times its realistic size, or a coefficient of the user's model held at a bound ("" when neither, or when
+    the refit did not converge or ended above the band: those are refitted from the guesses anyway).
+
+    The warm start is the fit before the refit, which the missing effects may have pushed far off: Petrel-V
+    (a liquid booster) with a falling thrust and a jet-stream wind, its base fit with the drag's first knot and
+    the lift slope at their bounds, went on from a 13-knot wind to the wind and a 3-knot thrust profile at
+    chi2/dof 1.045 with knot values of 155-449 m/s and the lift slope at 0; the same model from its own
+    guesses reaches 0.956 with the jet's peak at 33 m/s (truth 33)."""
+    from .accept import SIZE_FACTOR
+    if not (new.success and new.chi2_per_dof <= task.band_upper):
+        return ""
+    values = dict(zip(new.spec.parameter_names, (float(v) for v in new.p)))
+    big = [n for n, size in task.sizes.items() if size and n in values and abs(values[n]) > SIZE_FACTOR * size]
+    if big:
+        return f"{', '.join(big)} beyond {SIZE_FACTOR:g} realistic sizes"
+    mine = set(task.base_spec.parameter_names)
+    held = [str(sym) for sym, _ in new.active_bounds() if str(sym) in mine]
+    return f"{', '.join(held)} at a bound" if held else ""
 
 
 def _guesses_start(task: RefitTask, model):
