@@ -741,6 +741,30 @@ def test_an_event_shape_is_a_ladder_of_its_own():
                                                      ["throttle_step"], ["throttle_window"]]
 
 
+def test_the_back_pressure_fade_is_tried_when_its_vacuum_form_was_a_contender():
+    """The back-pressure's vacuum reference is another form of the same physics, not a more flexible rung: it
+    is a ladder of its own, so that its refit as a contender does not keep the estimated tail-off fade from
+    being tried (Petrel-V's nozzle with a speed scale: ``back_pressure_vacuum`` was the step's tenth
+    contender, the ladder it headed was left out as already refitted, and the search ended partly explained
+    at chi2/dof 1.172 where the fade reaches 1.033). The fade is offered only for a motor that stops inside
+    the horizon."""
+    from dataclasses import replace as _replace
+
+    from rocketid.diagnostics import step as S
+    from rocketid.diagnostics.effects import CATALOGUE, Vehicle
+
+    stops = Vehicle(thrust=6e4, mass=2400.0, mass_flow=25.0, speed=1100.0, start_speed=30.0, duration=60.0,
+                    altitude=(1420.0, 40000.0), mach=(0.1, 3.5), sigma={"x": 3.0}, sample_interval=0.1,
+                    knot_times=tuple(np.linspace(0.0, 60.0, 61)), powered=(0.0, 51.0))
+    ladders = S._ladders([CATALOGUE["back_pressure"].refinements(stops)])
+    assert [[v.name for v in f] for f in ladders] == [["back_pressure_fade"], ["back_pressure_vacuum"]]
+    refitted = {"back_pressure", "back_pressure_vacuum"}          # as _refine_choice leaves out a tried head
+    assert [[v.name for v in f] for f in ladders if f[0].name not in refitted] == [["back_pressure_fade"]]
+    burns_through = _replace(stops, powered=(0.0, 60.0))
+    assert [[v.name for v in f] for f in S._ladders([CATALOGUE["back_pressure"].refinements(burns_through)])] == \
+        [["back_pressure_vacuum"]]
+
+
 def test_event_shapes_of_two_families_within_bic_tie_are_rivals():
     """Halcyon-8's 150 kg dropped at 55 s reached the noise as mass_jettison (BIC 2398.8) and as a throttle-up
     (throttle_step, 2407.9): with no decisive hold-out the data cannot tell them apart, and the note says what

@@ -123,6 +123,10 @@ class Effect:
         profile's change between neighbouring knots (a wind's shear across the altitude between them).
         A change beyond :data:`~rocketid.diagnostics.accept.SIZE_FACTOR` times it is implausible, as a
         parameter's size is. Empty for most effects.
+    rung : bool
+        As a refined shape: a more flexible version of its family's shape, climbed in order of flexibility
+        (True, most); False for another form of the same physics, as flexible as the catalogue's (the
+        back-pressure's vacuum reference beside its sea-level one), tried beside the ladder.
     """
 
     name: str
@@ -138,6 +142,7 @@ class Effect:
     scan: "OnsetScan | None" = field(default=None, compare=False, repr=False)
     reading: Callable | None = field(default=None, compare=False, repr=False)
     changes: Mapping[tuple, float] = field(default_factory=dict, compare=False)
+    rung: bool = field(default=True, compare=False)
 
     def __post_init__(self):
         if not isinstance(self.name, str) or not self.name.isidentifier():
@@ -562,7 +567,8 @@ def back_pressure_effect(reference: str = "sea_level", *, fade: bool = False, na
         a = 0.1 * veh.thrust / SEA_LEVEL_PRESSURE
         return {"A_e" + suffix: a, "dA_e" + suffix: a, **shape}
 
-    refine = None if fade else (lambda veh: ([back_pressure_effect("vacuum")] if reference == "sea_level" else [])
+    refine = None if fade else (lambda veh: ([replace(back_pressure_effect("vacuum"), rung=False)]
+                                             if reference == "sea_level" else [])
                                 + ([back_pressure_effect(reference, fade=True)] if _stops(veh) else []))
     return Effect(name, title, "propulsion", apply, desc, {**area_size, **shape}, relative=relative, refine=refine)
 

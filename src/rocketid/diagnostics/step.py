@@ -549,8 +549,12 @@ def _ladders(refinements: Sequence[Sequence[Effect]], chosen: Sequence[Effect] =
     """Each family's refined shapes as the ladders :func:`_refine_families` climbs: the smooth shapes in
     order of flexibility (more knots) form one ladder; a shape with an estimated event time
     (:attr:`Effect.starts`) is not one more rung of it -- it is no more flexible than the knots -- and is
-    a ladder of its own, tried beside them. A shape already in the model (``chosen``: an earlier step took
-    it) is left out: the model cannot hold an effect twice. (Measured on Petrel-V, a high-site liquid
+    a ladder of its own, tried beside them, as is another form of the same physics (:attr:`Effect.rung`
+    False: the back-pressure's vacuum reference), whose refit as a contender must not keep the family's
+    more flexible shapes from being tried (measured on Petrel-V: ``back_pressure_vacuum`` was a contender, and
+    the ladder it headed, with the estimated tail-off fade, was left out as already refitted). A shape
+    already in the model (``chosen``: an earlier step took it) is left out: the model cannot hold an effect
+    twice. (Measured on Petrel-V, a high-site liquid
     booster: step 2 took ``burn_rate`` as the thrust family's refined shape, step 3 refined the thrust family
     again and asked for ``burn_rate`` a second time, and with checkpoints on -- ``rocketid diagnose``'s
     default -- the whole discovery failed on it.)"""
@@ -558,8 +562,8 @@ def _ladders(refinements: Sequence[Sequence[Effect]], chosen: Sequence[Effect] =
     out = []
     for shapes in refinements:
         shapes = [v for v in shapes if v.name not in have]
-        smooth = [v for v in shapes if not v.starts]
-        out += ([smooth] if smooth else []) + [[v] for v in shapes if v.starts]
+        smooth = [v for v in shapes if not v.starts and v.rung]
+        out += ([smooth] if smooth else []) + [[v] for v in shapes if v.starts or not v.rung]
     return out
 
 
