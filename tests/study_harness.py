@@ -89,6 +89,17 @@ def family(effect: str) -> str:
     return effect
 
 
+def run_command(command, timeout: float) -> tuple:
+    """``(exit code or "timeout", stdout, stderr)`` of ``command`` run to its end or for ``timeout`` s."""
+    try:
+        done = subprocess.run(command, capture_output=True, text=True, timeout=timeout)
+        return done.returncode, done.stdout, done.stderr
+    except subprocess.TimeoutExpired as exc:
+        stdout = exc.stdout.decode() if isinstance(exc.stdout, bytes) else (exc.stdout or "")
+        stderr = exc.stderr.decode() if isinstance(exc.stderr, bytes) else (exc.stderr or "")
+        return "timeout", stdout, stderr
+
+
 @dataclass(frozen=True)
 class Study:
     """One vehicle's evaluation (module notes)."""
@@ -130,14 +141,7 @@ class Study:
                    "diagnose", str(csv), "--model", str(self.model_file), "--out", str(out),
                    "--workers", str(workers), *self.extra_args]
         start = time.perf_counter()
-        try:
-            done = subprocess.run(command, capture_output=True, text=True,
-                                  timeout=self.timeout if timeout is None else timeout)
-            code, stdout, stderr = done.returncode, done.stdout, done.stderr
-        except subprocess.TimeoutExpired as exc:
-            code = "timeout"
-            stdout = exc.stdout.decode() if isinstance(exc.stdout, bytes) else (exc.stdout or "")
-            stderr = exc.stderr.decode() if isinstance(exc.stderr, bytes) else (exc.stderr or "")
+        code, stdout, stderr = run_command(command, self.timeout if timeout is None else timeout)
         record = {"case": case.name, "command": "rocketid " + " ".join(command[3:]),
                   "wall_s": time.perf_counter() - start, "exit": code, "stdout": stdout[-4000:],
                   "stderr": stderr[-2000:]}

@@ -231,3 +231,32 @@ def test_a_vehicle_effect_is_not_carried_to_flights_that_disagree_on_its_value(t
         assert final.effects == {"A": ("thrust_level",), other: tuple(e.name for e in effects)}
         assert final.shared == ()
         assert "do not agree on one value" in " ".join(final.sentences())
+
+
+def test_a_flights_own_effect_found_in_two_flights_is_tried_in_each_of_the_others():
+    """A, B and C carry the same altimeter, reading 5 m high; D's reads true. A's and B's searches found the bias;
+    C's is given as having stopped without it (as a search may, between rivals at the noise). The bias is each
+    flight's own (a sensor): never one value for the campaign, but found in two flights it is tried in each of
+    the others with a value of its own -- added to C (5 m), not to D (nothing to take up). Without this, C's
+    misfit stayed in the joint model and the shared coefficients took it up (measured on three Petrel-V flights
+    with a 40 kg adapter nobody declared: the third flight's search tied and added nothing, and the joint model
+    put the other two flights' start masses at 0.08 kg for 40)."""
+    vehicle = ra66_vehicle()
+    bias = {"bias_h": {"b_h": 5.0}}
+    data = {label: measure(vehicle, fx, seed=420 + i)
+            for i, (label, fx) in enumerate({"A": bias, "B": bias, "C": bias, "D": {}}.items())}
+    b_h = CATALOGUE["bias_h"]
+    final = _joint([_as_diagnosed("A", data["A"], [b_h]), _as_diagnosed("B", data["B"], [b_h]),
+                    _as_diagnosed("C", data["C"], []), _as_diagnosed("D", data["D"], [])])
+    tried = {c.to: c for c in final.carried if c.own}
+    assert set(tried) == {("C",), ("D",)}
+    assert all(c.effect == "bias_h" and c.found_in == ("A", "B") and c.dof == 1 for c in tried.values())
+    assert tried[("C",)].carried and tried[("C",)].p_value < 1e-10
+    assert not tried[("D",)].carried
+    assert final.effects == {"A": ("bias_h",), "B": ("bias_h",), "C": ("bias_h",), "D": ()}
+    assert final.shared == ()
+    assert final.fits_to_noise
+    text = " ".join(final.sentences())
+    assert "bias_h (found in A, B, tried in C with a value of its own): added there" in text
+    assert "tried in D with a value of its own): not added" in text
+    assert final.to_dict()["carried"][0]["own"]

@@ -34,6 +34,13 @@ one of whose searches took a start-mass error for it, end with one thrust error)
 is one value for every flight of that vehicle; a flight whose data reject the value keeps its own
 model, and the report says so.
 
+A flight's own effect found in two or more flights but not in all (the same loading error, the same sensor
+fault on several days) is then **tried** in each of the others, with a value of its own: it is added to that
+flight when the likelihood-ratio test of adding it (``2 (J_before - J_with)`` against chi2 with its
+parameters' count) is significant at the level and the joint BIC falls. Without it, a flight whose own
+search stopped between rivals keeps its misfit in the joint model, and the shared coefficients take it up
+(:func:`_try_own`).
+
 The flights' data are those their diagnoses fitted (wild points dropped, correlated channels
 thinned, noise levels taken from the data held fixed), so the joint fits' objectives are
 comparable with each other.
@@ -131,7 +138,7 @@ class SharingTest:
             return f"{self.effect}: kept per flight ({self.note}" + (f"; {values})" if values else ")")
         cost = f"sharing costs 2 dJ = {self.statistic:.4g} for {self.dof} degree(s) of freedom, p = {self.p_value:.2g}"
         if self.shared:
-            return f"{self.effect}: one value for flights {', '.join(self.flights)} ({cost}; alone {values})"
+            return (f"{self.effect}: one value for flights {', '.join(self.flights)} ({cost}; with a value per flight in the joint fit {values})")
         apart = "; ".join(f"{n} {w:.3g} apart" + (f" ({100 * r:.2g} % of its realistic size)" if math.isfinite(r) else "")
                           for n, (w, r) in self.spread().items())
         small = [n for n, (_, r) in self.spread().items() if math.isfinite(r) and r < SMALL_SPREAD]
@@ -173,6 +180,11 @@ class Carried:
         ``2 (J_before - J_one)``: what carrying it changed in the joint fit (same number of parameters).
     note : str
         Why it could not be tried (empty when it was).
+    own : bool
+        A flight's own effect (:data:`FLIGHT_KINDS`, a loading) found in two or more flights, tried in one
+        other flight (``to``) with a value of its own: ``statistic`` is then ``2 (J_before - J_with)``, the
+        likelihood-ratio test of adding it, on ``dof`` = its parameters, and ``carried`` says it was added
+        (p below the level and the joint BIC lower).
     """
 
     effect: str
@@ -185,11 +197,17 @@ class Carried:
     dropped: dict = field(default_factory=dict)
     fall: float = math.nan
     note: str = ""
+    own: bool = False
 
     def sentence(self) -> str:
         where = f"found in {', '.join(self.found_in)}, tried in {', '.join(self.to)}"
         if self.note:
             return f"{self.effect} ({where}): not carried ({self.note})"
+        if self.own:
+            test = f"2 dJ = {self.statistic:.4g} for {self.dof} degree(s) of freedom, p = {self.p_value:.2g}"
+            return (f"{self.effect} ({where} with a value of its own): " +
+                    (f"added there ({test}, the joint BIC lower)" if self.carried else
+                     f"not added ({test}: not significant or the joint BIC not lower)"))
         test = f"one value for every flight costs 2 dJ = {self.statistic:.4g} for {self.dof} degree(s) of freedom, " \
                f"p = {self.p_value:.2g}"
         if not self.carried:
@@ -204,7 +222,7 @@ class Carried:
                 "statistic": finite_or_none(self.statistic), "dof": int(self.dof),
                 "p_value": finite_or_none(self.p_value), "carried": bool(self.carried),
                 "dropped": {l: list(d) for l, d in self.dropped.items()}, "fall": finite_or_none(self.fall),
-                "note": self.note}
+                "note": self.note, "own": bool(self.own)}
 
 
 @dataclass(frozen=True)
@@ -531,6 +549,13 @@ def joint_final(flights: Sequence, reports: Sequence, base_chi2_per_dof: float, 
                     shared.append(e)
                 for l in lacking:
                     params[(l, e)] = ps
+        for e, finders, effect, ps in _to_try_own(labels, finals, nature, params, owner):
+            for l in (m for m in labels if m not in finders):      # each flight on its own: its own value
+                step = _try_own(fit, cfg, own, effect, ps, finders, (l,), result, level)
+                carried.append(step[0])
+                if step[0].carried:
+                    _, cfg, result = step
+                    params[(l, e)] = ps
         effects = {l: tuple(x.name for x in cfg[l]) for l in labels}
     return JointFinal(effects, nature, tuple(shared), tuple(tests), result, float(base_chi2_per_dof), bands,
                       failed, tuple(notes), parameters_of=params, carried=tuple(carried))
@@ -586,6 +611,51 @@ def _carry(fit, cfg: dict, own: set, effect, ps: tuple, finders: tuple, lacking:
                 dropped.setdefault(l, []).append(x.name)
     return (Carried(effect.name, finders, lacking, stat, dof, p, True, {l: tuple(d) for l, d in dropped.items()},
                     fall), cfg, own, result)
+
+
+def _to_try_own(labels, finals, nature: dict, params: dict, owner: dict) -> list:
+    """``[(effect name, finders, Effect, parameters)]``: the flights' own effects (not the vehicle's) found in two
+    or more flights but not all, whose parameters no other effect declares."""
+    out, seen = [], set()
+    for l, d in zip(labels, finals):
+        for e in d.effects:
+            if e.name in seen or nature.get(e.name) == "vehicle":
+                continue
+            seen.add(e.name)
+            finders = tuple(m for m, dm in zip(labels, finals) if e.name in {x.name for x in dm.effects})
+            ps = params[(l, e.name)]
+            if 2 <= len(finders) < len(labels) and ps and all(owner.get(n) == {e.name} for n in ps):
+                out.append((e.name, finders, e, ps))
+    return out
+
+
+def _try_own(fit, cfg: dict, own: set, effect, ps: tuple, finders: tuple, lacking: tuple, before,
+             level: float) -> tuple:
+    """Try a flight's own ``effect``, found in the flights ``finders``, in the flights ``lacking`` it, with a value
+    of its own in each (module notes). Returns ``(Carried, cfg, result)``: the models of each flight and the joint
+    fit after it (those given when it is not added).
+
+    A flight's own effect (its loading, its sensor, its day) is never one value for the campaign, but one found
+    in several flights is a pattern the others may share and their own searches may have missed: measured on
+    three Petrel-V flights that each carried a 40 kg adapter nobody declared, two found ``start_mass`` (40.4 and
+    40.1 kg), the third's search met ``start_mass`` and a thrust profile at the noise alike and added nothing;
+    without the start mass in the third flight the joint model put the shared drag on its misfit (CD_0 1.38) and
+    the other two flights' start masses at 0.08 kg."""
+    ext = {l: cfg[l] + ((effect,) if l in lacking else ()) for l in cfg}
+    dof = len(ps) * len(lacking)
+    try:
+        r = fit(own | set(ps), ext)
+    except RocketidError as exc:
+        return Carried(effect.name, finders, lacking, math.nan, dof, math.nan, False, note=str(exc), own=True), \
+            cfg, before
+    if not r.success:
+        return (Carried(effect.name, finders, lacking, math.nan, dof, math.nan, False,
+                        note="the joint fit with it did not converge", own=True), cfg, before)
+    stat = max(0.0, 2.0 * (before.objective - r.objective))
+    p = float(stats.chi2.sf(stat, dof))
+    added = p < level and _bic(r) < _bic(before)
+    return (Carried(effect.name, finders, lacking, stat, dof, p, added, fall=stat, own=True),
+            ext if added else cfg, r if added else before)
 
 
 def _sizes_of(finals, labels, flights, name: str) -> dict:
