@@ -564,10 +564,16 @@ def joint_final(flights: Sequence, reports: Sequence, base_chi2_per_dof: float, 
 def _to_carry(labels, finals, nature: dict, params: dict, owner: dict, differ: set) -> list:
     """``[(effect name, finders, Effect, parameters)]``: the vehicle effects found in some flights but not all,
     whose parameters no other effect declares and on whose value the finders do not differ."""
+    return _found_in_some(labels, finals, params, owner, lambda n: nature.get(n) == "vehicle" and n not in differ)
+
+
+def _found_in_some(labels, finals, params: dict, owner: dict, wanted) -> list:
+    """``[(effect name, finders, Effect, parameters)]`` of the effects ``wanted(name)`` found in some flights but
+    not all, whose parameters no other effect declares."""
     out, seen = [], set()
     for l, d in zip(labels, finals):
         for e in d.effects:
-            if e.name in seen or nature.get(e.name) != "vehicle" or e.name in differ:
+            if e.name in seen or not wanted(e.name):
                 continue
             seen.add(e.name)
             finders = tuple(m for m, dm in zip(labels, finals) if e.name in {x.name for x in dm.effects})
@@ -616,17 +622,8 @@ def _carry(fit, cfg: dict, own: set, effect, ps: tuple, finders: tuple, lacking:
 def _to_try_own(labels, finals, nature: dict, params: dict, owner: dict) -> list:
     """``[(effect name, finders, Effect, parameters)]``: the flights' own effects (not the vehicle's) found in two
     or more flights but not all, whose parameters no other effect declares."""
-    out, seen = [], set()
-    for l, d in zip(labels, finals):
-        for e in d.effects:
-            if e.name in seen or nature.get(e.name) == "vehicle":
-                continue
-            seen.add(e.name)
-            finders = tuple(m for m, dm in zip(labels, finals) if e.name in {x.name for x in dm.effects})
-            ps = params[(l, e.name)]
-            if 2 <= len(finders) < len(labels) and ps and all(owner.get(n) == {e.name} for n in ps):
-                out.append((e.name, finders, e, ps))
-    return out
+    return [x for x in _found_in_some(labels, finals, params, owner, lambda n: nature.get(n) != "vehicle")
+            if len(x[1]) >= 2]
 
 
 def _try_own(fit, cfg: dict, own: set, effect, ps: tuple, finders: tuple, lacking: tuple, before,
