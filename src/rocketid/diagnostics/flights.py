@@ -138,7 +138,8 @@ class SharingTest:
             return f"{self.effect}: kept per flight ({self.note}" + (f"; {values})" if values else ")")
         cost = f"sharing costs 2 dJ = {self.statistic:.4g} for {self.dof} degree(s) of freedom, p = {self.p_value:.2g}"
         if self.shared:
-            return (f"{self.effect}: one value for flights {', '.join(self.flights)} ({cost}; with a value per flight in the joint fit {values})")
+            return (f"{self.effect}: one value for flights {', '.join(self.flights)} ({cost}; with a value per "
+                    f"flight in the joint fit {values})")
         apart = "; ".join(f"{n} {w:.3g} apart" + (f" ({100 * r:.2g} % of its realistic size)" if math.isfinite(r) else "")
                           for n, (w, r) in self.spread().items())
         small = [n for n, (_, r) in self.spread().items() if math.isfinite(r) and r < SMALL_SPREAD]
