@@ -101,9 +101,24 @@ def evaluate_along(spec: ModelSpec, expr: sp.Expr, times: np.ndarray, states: np
     """Evaluate an expression of (t, states, derivatives, inputs, parameters) along a trajectory."""
     expr = spec.expand(expr)
     times = np.asarray(times, dtype=float)
-    args = (spec.t, *spec.state_symbols, *spec.derivative_symbols, *spec.input_symbols, *spec.local_symbols)
-    # scalar parameters may appear directly (outputs): they are local symbols too
-    key = (expr, args)
+    # only the symbols the expression holds are arguments, so that a model with more parameters (an effect
+    # added) evaluates an unchanged expression with the function already compiled: the cache is keyed on them
+    # (scalar parameters may appear directly, in outputs: they are local symbols too)
+    used = expr.free_symbols
+    groups = (((spec.t,), lambda: (times,)),
+              (spec.state_symbols, lambda: tuple(states.T)),
+              (spec.derivative_symbols,
+               lambda: tuple((derivatives if derivatives is not None else np.full_like(states, np.nan)).T)),
+              (spec.input_symbols, lambda: tuple(spec.input_values(times).T)),
+              (spec.local_symbols, lambda: tuple(_locals_at(spec, times, p))))
+    args, values = [], []
+    for symbols, make in groups:
+        pick = [j for j, sym in enumerate(symbols) if sym in used]
+        if pick:
+            made = make()
+            args += [symbols[j] for j in pick]
+            values += [made[j] for j in pick]
+    key = (expr, tuple(args))
     fn = _ALONG_CACHE.get(key)
     if fn is None:
         if len(_ALONG_CACHE) >= 4 * _CACHE_MAX:
@@ -112,9 +127,8 @@ def evaluate_along(spec: ModelSpec, expr: sp.Expr, times: np.ndarray, states: np
         # atmosphere inside a Mach table's conditions numpy.select cannot take
         fn = _ALONG_CACHE[key] = sp.lambdify(args, expr, modules=[{"functools": functools, "numpy": np}, "numpy"],
                                              printer=_ALONG_PRINTER, cse=True)
-    ders = derivatives if derivatives is not None else np.full_like(states, np.nan)
     with np.errstate(all="ignore"):
-        val = fn(times, *states.T, *ders.T, *spec.input_values(times).T, *_locals_at(spec, times, p))
+        val = fn(*values)
     return np.broadcast_to(np.asarray(val, dtype=float), times.shape).copy()
 
 
