@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import platform
 import subprocess
 import sys
@@ -121,9 +122,11 @@ def main(argv=None) -> int:
         todo = [c for g in args.group for c in GROUPS[g]]
     else:
         todo = C.ALL
+    # a frozen tree (``git archive``) is no checkout: its commit is given, as for the other studies
+    head = os.environ.get("ROCKETID_STUDY_COMMIT", "")
     try:
-        head = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True,
-                              text=True).stdout.strip()
+        head = head or subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True,
+                                      text=True).stdout.strip()
     except OSError:
         head = "?"
     records = []
@@ -177,6 +180,8 @@ def _code() -> str:
     """Which rocketid ran: this checkout's src, or another path."""
     import rocketid
     where = Path(rocketid.__file__).resolve().parents[1]
+    if os.environ.get("ROCKETID_STUDY_COMMIT"):
+        return f"a frozen tree of {os.environ['ROCKETID_STUDY_COMMIT']}"
     return "this checkout" if where == ROOT / "src" else f"rocketid from {where}"
 
 
