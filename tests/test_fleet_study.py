@@ -35,7 +35,7 @@ from fleet_study.run import diagnose_campaign, row, score  # noqa: E402
 
 #: Campaigns measured not to meet the bar (``score(...)["acceptable"]``), with the measured reason.
 KNOWN_FAILURES: dict[str, str] = {}
-# (nozzle+C-wind until 2651fbd: flight C kept a start-mass error beside a 5-knot wind, partly explained; the finer
+# (nozzle+C-wind before 2651fbd: flight C kept a start-mass error beside a 5-knot wind, partly explained; the finer
 # shape mends it -- test_a_coarse_wind_chosen_before_the_nozzle_is_refined_with_it_in)
 
 

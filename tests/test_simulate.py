@@ -34,7 +34,7 @@ def test_an_expression_along_a_trajectory_is_compiled_once_for_a_model_with_more
     traj = ri.simulate(base, ra66m_truth(base), np.linspace(0.0, 60.0, 31))
     _ALONG_CACHE.clear()
     a = evaluate_along(base, expr, traj.times, traj.states, traj.p)
-    p_more = more.parameter_vector({**{str(k): v for k, v in base.parameter_dict(traj.p).items()}})
+    p_more = more.parameter_vector({str(k): v for k, v in base.parameter_dict(traj.p).items()})
     b = evaluate_along(more, expr, traj.times, traj.states, p_more)
     assert len(_ALONG_CACHE) == 1
     np.testing.assert_array_equal(a, b)

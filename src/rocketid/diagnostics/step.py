@@ -767,7 +767,7 @@ def _finer(chosen: Sequence[Effect], last: Acceptance | None, base: EstimationRe
     an early step moved up its family's ladder -- and, with it, each other effect in turn left out -- or None.
 
     A smooth shape (a wind on knots, a density profile, a thrust error in time) chosen before the last effect
-    was in had its knot count chosen by a BIC that the effects still missing distorted; with them in, the
+    was in had its shape (its knot count) chosen by a BIC that the effects still missing distorted; with them in, the
     next :data:`FINER_RUNGS` rungs of its ladder are refitted from the base fit, each as the whole set and as
     the set without each other effect (an effect that carried the coarse shape's misfit no longer helps), and
     the set that passes every check of an explanation with the lowest BIC, below the found set's, replaces it."""
@@ -796,7 +796,7 @@ def _finer(chosen: Sequence[Effect], last: Acceptance | None, base: EstimationRe
     gone = sorted(names - {who} - {e.name for e in effects})
     without = f", without {', '.join(gone)}" if gone else ""
     return effects, acc, (f"{eff.name} in place of {who}{without} explains the data with a lower BIC "
-                          f"({float(last.refit.bic[1]):.6g} -> {bic:.6g}; {who}'s knots were chosen while a later "
+                          f"({float(last.refit.bic[1]):.6g} -> {bic:.6g}; {who}'s shape was chosen while a later "
                           "effect was still missing)")
 
 
@@ -847,7 +847,7 @@ def discover(fit: EstimationResult, candidates: Sequence[Effect], *, level: floa
     budget : float, optional
         Seconds the search may take (None: no limit). When they have run out no refit is started
         and those running are stopped: the step under way is not completed, the steps before it stand
-        (and the exchange, the second path and the simpler shape are not tried), and
+        (and the exchange, the finer shape, the second path and the simpler shape are not tried), and
         :attr:`Discovery.stopped` says where it stopped (module note 12).
     progress : callable, optional
         Called with one line of text as the search goes (the contenders of each step, the effect taken,
@@ -886,8 +886,8 @@ def discover(fit: EstimationResult, candidates: Sequence[Effect], *, level: floa
 
 def _search(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Effect], max_effects: int, base_ok: bool,
             notes: list) -> tuple:
-    """The forward search, then the exchange, the second path and the simpler shape where they apply (module
-    notes 7-10). Returns ``(path, stopped)``: ``stopped`` names the stage during which the time budget ran out
+    """The forward search, then the exchange, the finer shape, the second path and the simpler shape where they
+    apply (module notes 7-10). Returns ``(path, stopped)``: ``stopped`` names the stage during which the time budget ran out
     (empty when it did not); the path is the last one completed."""
     path = _forward(ctx, fit, candidates, max_effects, notes)
     if path.stopped:
