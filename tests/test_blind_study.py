@@ -19,16 +19,12 @@ from __future__ import annotations
 
 import math
 import re
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 HERE = Path(__file__).resolve().parent
-for extra in (HERE, HERE / "vehicles"):
-    if str(extra) not in sys.path:
-        sys.path.insert(0, str(extra))
 
 import halcyon  # noqa: E402
 

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import json
 import math
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -22,9 +21,6 @@ import pytest
 from scipy.signal import lfilter
 
 HERE = Path(__file__).resolve().parent
-for extra in (HERE, HERE / "vehicles"):
-    if str(extra) not in sys.path:
-        sys.path.insert(0, str(extra))
 
 import halcyon as V  # noqa: E402
 

@@ -4,7 +4,6 @@ the base model exactly, its parameter enters the model, and bad effects are refu
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -362,8 +361,6 @@ def test_a_wind_turns_the_thrust_of_a_vehicle_without_lift(ra66m_spec):
     """A vehicle declared without lift flies at its attack angle to the air: the wind turns its thrust by the
     airflow's angle to the path (``atan2(W sin theta, v - W cos theta)``) and leaves the lift coefficient at
     zero; a lifting vehicle holds its attitude (the thrust as declared, the lift at the air-relative angle)."""
-    import sys
-    sys.path.insert(0, str(Path(__file__).parent / "vehicles"))
     import tern
     from rocketid.diagnostics import wind_profile_effect
     finned = tern.build_model()
@@ -634,11 +631,8 @@ def test_temperature_offset_follows_the_hydrostatic_equation():
     """A day 10 K colder than the standard at the standard's sea-level pressure: the effect's density and
     speed of sound against the hydrostatic equation integrated here (the standard's layer temperatures
     written from its table, geopotential altitude, scipy's ODE solver), at 5-40 km."""
-    import sys
-    from pathlib import Path
 
     from scipy.integrate import solve_ivp
-    sys.path.insert(0, str(Path(__file__).parent / "vehicles"))
     import stage30
 
     from rocketid.diagnostics import temperature_effect
@@ -670,9 +664,6 @@ def test_temperature_offset_follows_the_hydrostatic_equation():
 def test_burn_rate_scales_thrust_and_mass_flow_together(monkeypatch):
     """A constant thrust and a mass falling linearly (Stage-30): ``eps_burn`` 0.03 flies as the vehicle
     declared with its thrust and its mass flow both 3 % higher (the specific impulse kept)."""
-    import sys
-    from pathlib import Path
-    sys.path.insert(0, str(Path(__file__).parent / "vehicles"))
     import stage30
 
     from rocketid.diagnostics import burn_rate_effect
@@ -693,9 +684,6 @@ def test_burn_rate_keeps_the_motors_ignition_in_a_window():
     """A thrust table and a mass state (Kestrel-S), cut to a window from 20 s: the motor's clock still
     starts at the table's first time (ignition), ``P(t) = k P_tab(k t)``, and the mass state's
     equation burns ``k`` times faster on that clock."""
-    import sys
-    from pathlib import Path
-    sys.path.insert(0, str(Path(__file__).parent / "vehicles"))
     import kestrel
 
     from rocketid.diagnostics import burn_rate_effect
@@ -732,9 +720,6 @@ def test_back_pressure_stops_with_the_motor():
     correction acts while the nozzle flows full, shrinks with the thrust below 40 % of its peak (the
     tail-off) and is zero in the coast -- not ``A_e p0`` of thrust from nothing. A motor that runs
     through the horizon (Osprey-A: its thrust stays above 42 % of its peak) keeps the plain correction."""
-    import sys
-    from pathlib import Path
-    sys.path.insert(0, str(Path(__file__).parent / "vehicles"))
     import osprey
     import tern
 
@@ -762,9 +747,6 @@ def test_base_drag_acts_once_the_motor_stops(ra66_spec):
     """Power-off base drag on Tern-2 (burn-out at 10.25 s, then a coast): zero gives back the base model; the
     increment is absent while the nozzle flows full, grows through the tail-off and is whole in the coast. A
     motor that burns through the horizon (RA-66) has no power-off phase: the effect says so."""
-    import sys
-    from pathlib import Path
-    sys.path.insert(0, str(Path(__file__).parent / "vehicles"))
     import tern
 
     base = tern.build_model()
@@ -786,8 +768,6 @@ def test_a_throttle_on_a_mass_that_is_a_state():
     same vehicle with the throttle written into its own equations by hand -- thrust and the mass equation's
     right-hand side both times ``1 - d(t)``, the piecewise-linear ``d`` written out here -- the outputs agree
     to the integrator's tolerance. The catalogue's throttle window does the same with its own shape."""
-    import sys
-    sys.path.insert(0, str(Path(__file__).parent / "vehicles"))
     import tern
     from rocketid.diagnostics import throttle_effect
     from rocketid.diagnostics.effects import throttle_window_effect
@@ -886,9 +866,6 @@ def test_a_start_correction_acts_on_a_moving_start_only(name, ra66m_spec):
     zero they give back the base model (same equations, same start), and their parameter moves only the start
     of its state; from rest (RA-66M) they do not apply, and say why."""
     import math
-    import sys
-    from pathlib import Path
-    sys.path.insert(0, str(Path(__file__).resolve().parent / "vehicles"))
     import wren
     base = wren.build_model()
     spec = with_effects(base, [name])
@@ -1026,8 +1003,6 @@ def test_the_back_pressure_fade_is_estimated_where_the_data_see_the_tail_off():
     40 % of the peak) leaves a misfit; the refined one reaches the noise with ``s`` near 98 / 114 and the area
     near the truth. It is offered only for a motor that stops inside the horizon (not Osprey-A's, which burns
     through its data), and zero parameters give back the base model."""
-    import sys
-    sys.path.insert(0, str(Path(__file__).parent / "vehicles"))
     import osprey
     import tern
 

@@ -20,17 +20,11 @@ diagnose`` from the command line, one per case, and are ``slow``:
 from __future__ import annotations
 
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-HERE = Path(__file__).resolve().parent
-for extra in (HERE, HERE / "vehicles"):
-    if str(extra) not in sys.path:
-        sys.path.insert(0, str(extra))
 
 import tern as V  # noqa: E402
 

@@ -12,16 +12,10 @@ term at the motor's burn-out; measured with the time free, before it was tied).
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-HERE = Path(__file__).resolve().parent
-for extra in (HERE, HERE / "vehicles"):
-    if str(extra) not in sys.path:
-        sys.path.insert(0, str(extra))
 
 import tern  # noqa: E402
 import wren  # noqa: E402

@@ -10,14 +10,9 @@ wind.
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
 
 import pytest
 
-HERE = Path(__file__).resolve().parent
-if str(HERE) not in sys.path:
-    sys.path.insert(0, str(HERE))
 
 from rocketid.diagnostics import CATALOGUE, diagnose  # noqa: E402
 from rocketid.diagnostics.effects import Vehicle, check_sizes, state_sizes, stated_names  # noqa: E402

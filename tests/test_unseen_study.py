@@ -17,16 +17,9 @@ made it are in docs/effects.md ("Evaluation on an unseen vehicle").
 from __future__ import annotations
 
 import math
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
-
-HERE = Path(__file__).resolve().parent
-for extra in (HERE, HERE / "vehicles"):
-    if str(extra) not in sys.path:
-        sys.path.insert(0, str(extra))
 
 import kestrel as K  # noqa: E402
 
@@ -46,6 +39,13 @@ KNOWN_FAILURES: dict[str, str] = {
                               "noise draw itself is not white in h (the exact truth: Ljung-Box p 1.1e-4), so no "
                               "model is explained; the second path's true pair wind_pl_14 + back_pressure (1.0396) "
                               "has the higher BIC",
+    "sliver-tailoff+h-bias-drift": "ed8bbbc (fresh pair): thrust_profile_9 + bias_v + start_angle at chi2/dof 1.157, "
+                                   "partly explained -- the altitude drift taken by a speed bias and a start angle, "
+                                   "a wrong family not called explained",
+    "jet+heavy-start": "ed8bbbc (fresh pair): wind_pl_14 at chi2/dof 1.421, partly explained -- the start mass "
+                       "missing, the first drag knot at 1.55 for 0.42",
+    "earth-rotation+h-bias-drift": "ed8bbbc (fresh pair): bias_h_drift (-3.80 m + 0.093 m/s t for -4 + 0.1) at chi2/dof "
+                                   "1.058 above the band, partly explained",
 }
 
 
@@ -136,6 +136,41 @@ def test_the_back_pressure_headwind_noise_draw_is_not_white():
     ok, detail = whiteness_ok(white)
     assert not ok and min(white, key=white.get) == "h", detail
     assert white["x"] > 0.05 and white["v"] > 0.05, white
+
+
+def test_a_misalignment_that_carried_a_coarse_wind_is_dropped_for_the_finer_wind():
+    """Fresh pair heavy-start+headwind (a start mass 25 kg heavy and a headwind growing from 5 to 25 m/s): its
+    search took the catalogue's 4-function wind at step 1 (the knotted winds were then 90 m/s at the surface,
+    carrying the start mass), the start mass at step 2 and a 0.40 deg thrust misalignment at step 3, at the
+    noise (chi2/dof 1.010) -- a wrong effect called explained: the misalignment took up the coarse wind's misfit.
+    The finer shape (step module note 8) also tries a search that ended explained with three effects: the wind
+    one and two rungs up without the last effect. The 6-knot wind with the start mass explains the data at a
+    lower BIC, the start mass within 10 % and the wind within 3 m/s of the truth where the data hold it."""
+    from rocketid.diagnostics import step as S
+    from rocketid.diagnostics.accept import accept, noise_band
+    from rocketid.diagnostics.effects import CATALOGUE
+    from rocketid.diagnostics.refit import run_refit
+    from rocketid.diagnostics.screen import vehicle_of
+    from unseen_study.cases import BY_NAME
+
+    case = BY_NAME["heavy-start+headwind"]
+    data = truth.measurements(case.hidden, case.seed)
+    base = ri.estimate(K.build_model(), data)
+    band = noise_band(base)
+    ctx = S._Search(base.spec, band, vehicle_of(base), 0.05, None, 180.0, 2, True, None)
+    found = [CATALOGUE["wind"], CATALOGUE["start_mass"], CATALOGUE["misalignment"]]
+    last = accept(run_refit(ctx.task(base, found, tuple(e.name for e in found)))[0], band)
+    assert last.accepted, [c.name for c in last.checks if not c.passed]
+    effects, acc, why = S._finer(found, last, base, found, ctx)
+    assert [e.name for e in effects] == ["wind_pl_6", "start_mass"], why
+    assert acc.accepted and "without misalignment" in why, why
+    r = acc.refit
+    assert abs(r.estimate("dm_start")[0] - 25.0) < 2.5
+    # the truth's headwind grows from 5 m/s at the ground towards 25 m/s aloft: so do the knots the data hold
+    # (W_5, at the top of the climb, is loose: +-2.5 m/s)
+    w = [r.estimate(f"W_{j}")[0] for j in range(5)]
+    assert abs(w[0] + 5.0) < 2.5, w
+    assert all(-25.5 < a < -3.0 for a in w) and all(b < a for a, b in zip(w, w[1:])), w
 
 
 def test_classification_rules():

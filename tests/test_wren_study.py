@@ -18,16 +18,12 @@ wren.json``.
 from __future__ import annotations
 
 import math
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 HERE = Path(__file__).resolve().parent
-for extra in (HERE, HERE / "vehicles"):
-    if str(extra) not in sys.path:
-        sys.path.insert(0, str(extra))
 
 import wren as V  # noqa: E402
 

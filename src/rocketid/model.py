@@ -497,6 +497,12 @@ class ModelSpec:
         return expr.xreplace({c: sp.Float(v) for c, v in self.constants})
 
     @cached_property
+    def expanded_equations(self) -> tuple[sp.Expr, ...]:
+        """The residuals ``F`` of :attr:`equations` expanded (:meth:`expand`), computed once per model: the
+        simulation, the code generation, the fingerprint and the checks of a frozen model all need them."""
+        return tuple(self.expand(e) for e in self.equations)
+
+    @cached_property
     def _expanded_definitions(self) -> dict[sp.Symbol, sp.Expr]:
         """Each definition with the definitions it uses substituted, computed once
         (an expression such as ``Max(mach - 0.6, 0)`` is then built once per spec,
@@ -548,7 +554,7 @@ class ModelSpec:
         states = tuple((s.symbol, s.derivative) for s in self.states)
         inputs = tuple(u.symbol for u in self.inputs)
         local = tuple(self.local_symbols)
-        equations = tuple(self.expand(e) for e in self.equations)
+        equations = self.expanded_equations
         outputs = tuple((o.name, self.expand(o.expr)) for o in self.outputs)
         # the hash of a large expression's text costs 0.1-0.4 s on an ascent model with effects, and the
         # same model is prepared many times (each refit, its retry, the hold-out): kept by content
@@ -1299,11 +1305,11 @@ def missing_role_message(model: str, role: str, analysis: str) -> str:
 def _check_symbols(spec: ModelSpec) -> None:
     allowed_dyn = ({spec.t} | set(spec.state_symbols) | set(spec.derivative_symbols)
                    | set(spec.input_symbols) | set(spec.local_symbols))
-    for s, eq in zip(spec.states, spec.equations):
-        extra = spec.expand(eq).free_symbols - allowed_dyn
+    for s, eq in zip(spec.states, spec.expanded_equations):
+        extra = eq.free_symbols - allowed_dyn
         if extra:
             raise ModelError(_unknown_msg(spec, f"the equation of {s.symbol}", extra))
-        d = sp.diff(spec.expand(eq), s.derivative)
+        d = sp.diff(eq, s.derivative)
         if set(spec.derivative_symbols) & d.free_symbols:
             raise ModelError(f"the equation of {s.symbol} is not linear in {s.derivative}")
     allowed_out = ({spec.t} | set(spec.state_symbols) | set(spec.derivative_symbols)

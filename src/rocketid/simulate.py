@@ -146,7 +146,7 @@ def _compiled_rhs(spec: ModelSpec) -> tuple:
     """``(fn, diagonal, n)``: ``fn(t, s, u, l)`` returns the entries of ``A`` (row-major) and ``b``
     of ``F = A ds/dt + b``; ``diagonal`` when ``A`` is."""
     ders = spec.derivative_symbols
-    F = tuple(spec.expand(e) for e in spec.equations)
+    F = spec.expanded_equations
     args = (spec.t, *spec.state_symbols, *spec.input_symbols, *spec.local_symbols)
     key = (F, ders, args)
     hit = _RHS_CACHE.get(key)

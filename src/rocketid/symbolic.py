@@ -261,7 +261,7 @@ def _point_jacobian(spec: ModelSpec) -> tuple:
     of ``dF_k/dz`` to its expression."""
     z, d = point_variables(spec)
     lam = tuple(sp.Symbol(f"lam_{s}") for s in spec.state_symbols)
-    residuals = tuple(spec.expand(e) for e in spec.equations)
+    residuals = spec.expanded_equations
     rows = []
     for F in residuals:
         row = {}

@@ -2442,8 +2442,8 @@ def effect_parameter_problems(spec: ModelSpec, declared: Mapping[str, Sequence[s
     parameters of ``spec`` with guess 0 that enter its equations or outputs."""
     base_names = set(base_names)
     used = set()
-    for eq in spec.equations:
-        used |= spec.expand(eq).free_symbols
+    for eq in spec.expanded_equations:
+        used |= eq.free_symbols
     for o in spec.outputs:
         used |= spec.expand(o.expr).free_symbols
     params = {p.symbol: p for p in spec.parameters}
