@@ -265,13 +265,14 @@ class Study:
             stored["commit"] = git_commit()
             stored.setdefault("when", datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC"))
             stored["machine"] = platform.machine()
+            stored["workers"] = args.workers
             for name in names:
                 record = self.diagnose_cli(self.by_name[name], workers=args.workers)
                 stored["records"][name] = record
                 path.write_text(json.dumps(stored, indent=1))
                 print(self.row(self.by_name[name], record), flush=True)
         title = (f"{self.label}, `rocketid diagnose` of src/rocketid at commit {stored.get('commit')}, "
-                 f"{stored.get('when')}, {stored.get('machine')}, one diagnosis at a time (`--workers {args.workers}`) "
+                 f"{stored.get('when')}, {stored.get('machine')}, one diagnosis at a time (`--workers {stored.get('workers', args.workers)}`) "
                  "on 2 shared cores.")
         text = self.table(stored["records"], title)
         print(text)
