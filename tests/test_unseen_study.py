@@ -171,6 +171,9 @@ def test_a_misalignment_that_carried_a_coarse_wind_is_dropped_for_the_finer_wind
     effects, acc, why = S._finer(found, last, base, found, ctx)
     assert [e.name for e in effects] == ["wind_pl_6", "start_mass"], why
     assert acc.accepted and "without misalignment" in why, why
+    # the backward check from that set's own fit keeps both: neither explains the data alone
+    fit = S._fit_of(ctx.base_spec, effects, acc.refit, data, base.prepared.transcription.mesh, None)
+    assert S._without_one(ctx, base, fit, effects, acc) is None
     r = acc.refit
     assert abs(r.estimate("dm_start")[0] - 25.0) < 2.5
     # the truth's headwind grows from 5 m/s at the ground towards 25 m/s aloft: so do the knots the data hold
