@@ -41,6 +41,15 @@ KNOWN_FAILURES: dict[str, str] = {
                 "once; the truth's body swings into it as a pendulum (the fins' restoring moment against the body's "
                 "inertia: a period of 11.5 s at rail exit, 1.5 s at 300 m/s) with a normal force while it swings, "
                 "so the first seconds differ and the subsonic drag takes it up",
+    "cold-day+heavy-payload": "b7bba7f (fresh pair): thrust_profile_5 at step 1, chi2/dof 1.041, explained -- a wrong "
+                              "effect called explained: a 5-knot thrust error (-2 to -8 %) stands in for the heavier "
+                              "start and the colder air together. The true pair start_mass + temperature, refitted "
+                              "from the base fit by hand, passes every check at 1.032 with dm_start 20.15 (20) and "
+                              "dT_air -14.9 K (-15), a BIC 51 lower; the search stops at the first explanation and "
+                              "never tries a pair of simpler effects against a flexible shape",
+    "heavy-payload+headwind": "b7bba7f (fresh pair): start_angle + start_mass + wind at chi2/dof 1.074 (band 1.075), "
+                              "partly explained -- dm_start 19.77 (20) found; the headwind as in 'headwind' (the "
+                              "weathercocking body is not the catalogue's wind), a start angle beside it",
 }
 
 
@@ -256,8 +265,8 @@ def test_each_hidden_effect_changes_the_flight(clean_outputs, hidden, channel, l
 
 def test_the_cases_are_consistent():
     """Names and seeds unique, every needed family a right one, pairs with one set per effect, six clean
-    seeds, one out-of-catalogue case with nothing right."""
-    assert len(BY_NAME) == len(ALL) == 20 and len({c.seed for c in ALL}) == len(ALL)
+    seeds, no out-of-catalogue case; the study's 20 cases and the eight fresh pairs."""
+    assert len(BY_NAME) == len(ALL) == 28 and len({c.seed for c in ALL}) == len(ALL)
     for case in ALL:
         assert case.needed <= case.right, case.name
         assert all(group <= case.right for group in case.needed_each), case.name
@@ -267,6 +276,29 @@ def test_the_cases_are_consistent():
     # base_drag (2026-11-26) is its family since
     assert not [c.name for c in ALL if c.out_of_catalogue] and BY_NAME["base-drag"].right == {"base_drag"}
     assert set(STUDY.coefficients) == {f"CD_{j}" for j in range(len(V.CD_KNOTS))}
+
+
+def test_the_cold_heavy_pair_explains_at_a_lower_bic_than_the_profile_the_search_takes(tern_spec):
+    """The measured reason of KNOWN_FAILURES["cold-day+heavy-payload"]: from the base fit, the 5-knot thrust
+    profile the search takes at step 1 passes every check of an explanation, and so does the true pair -- a start
+    mass and a temperature offset, at the truth's sizes -- with a BIC more than 10 lower. (When the search weighs
+    such a pair against a flexible shape, the case passes and this test states why.)"""
+    from rocketid.diagnostics import step as S
+    from rocketid.diagnostics.accept import accept, noise_band
+    from rocketid.diagnostics.effects import CATALOGUE
+    from rocketid.diagnostics.refit import run_refit
+    from rocketid.diagnostics.screen import vehicle_of
+    case = BY_NAME["cold-day+heavy-payload"]
+    base = ri.estimate(tern_spec, truth.measurements(case.hidden, case.seed))
+    band = noise_band(base)
+    ctx = S._Search(base.spec, band, vehicle_of(base), 0.05, None, 180.0, 2, True, None)
+    shapes = {e.name: e for f in ("thrust_level", "density") for e in CATALOGUE[f].refinements(ctx.vehicle)}
+    sets = ([shapes["thrust_profile_5"]], [CATALOGUE["start_mass"], shapes["temperature"]])
+    profile, pair = (accept(run_refit(ctx.task(base, found, tuple(e.name for e in found)))[0], band) for found in sets)
+    assert profile.accepted and pair.accepted, [c.name for a in (profile, pair) for c in a.checks if not c.passed]
+    assert pair.refit.bic[1] < profile.refit.bic[1] - 10.0, (pair.refit.bic, profile.refit.bic)
+    assert abs(pair.refit.estimate("dm_start")[0] - DM0) < 1.5
+    assert abs(pair.refit.estimate("dT_air")[0] - DT_COLD) < 1.5
 
 
 def test_classification_rules():
