@@ -1113,7 +1113,8 @@ def _refined_again(ctx: "_Search", fit: EstimationResult, candidates: Sequence[E
     swapped = _apply_set(ctx, fit, steps, swap, notes, "finer shape")
     if swapped is not None:
         cut = _without_one(ctx, fit, swapped[1], swapped[0], swapped[2])
-        swapped = (_apply_set(ctx, fit, steps, cut, notes, "finer shape") if cut is not None else None) or swapped
+        if cut is not None:
+            swapped = _apply_set(ctx, fit, steps, cut, notes, "finer shape") or swapped
     return _landed(ctx, path, steps, swapped)
 
 
@@ -1125,16 +1126,14 @@ def _without_one(ctx: "_Search", base: EstimationResult, fit: EstimationResult, 
     The finer shape's sets are refitted from the base fit, where a model without an effect the data do not need
     may stop at another optimum than the model with it: each set without one effect is refitted from ``fit``, the
     new set's own fit, where the smaller model's optimum near it is found, and judged against ``base``, the fit
-    without effects, as every set is. (Measured, 2026-11-28:
-    flight C of the Petrel-V campaign with a nozzle and a jet stream -- the 9-knot wind with the nozzle's fade
-    from the base fit stopped at chi2/dof 1.064 with x not white, with a 3 kg start-mass error beside it at 0.935;
-    from that fit, the two without the start mass reach 0.936 at a lower BIC.)"""
+    without effects, as every set is. (Measured, 2026-11-28: flight C of the Petrel-V campaign with a nozzle and
+    a jet stream -- the 9-knot wind with the nozzle's fade from the base fit stopped at chi2/dof 1.064 with x not
+    white, with a 1.6 kg start-mass error beside it at 0.935; from that fit, the two without the start mass reach
+    0.936 at a lower BIC.)"""
     if len(effects) < 2 or not pick.refit.success:
         return None
     sets = [[x for x in effects if x is not e] for e in effects]
-    results = ctx.refit([_task(ctx.base_spec, fit, kept, tuple(x.name for x in kept), {}, ctx.vehicle, base=base,
-                               options=ctx.options, timeout=ctx.timeout, level=ctx.level, band_upper=ctx.band.upper)
-                         for kept in sets])
+    results = ctx.refit([ctx.task(fit, kept, tuple(x.name for x in kept), base=base) for kept in sets])
     good = []
     for e, kept, r in zip(effects, sets, results):
         acc = accept(r, ctx.band, level=ctx.level, n_tests=len(sets))
@@ -1347,9 +1346,11 @@ class _Search:
             self.progress(f"search {time.perf_counter() - self.started:5.0f} s: {message}")
 
     def task(self, current: EstimationResult, effects: Sequence[Effect], added: Sequence[str],
-             start: Mapping | None = None) -> RefitTask:
-        """The refit of ``effects`` on the base model, started from ``current`` (``added`` judged)."""
-        return _task(self.base_spec, current, list(effects), tuple(added), start or {}, self.vehicle, base=current,
+             start: Mapping | None = None, base: EstimationResult | None = None) -> RefitTask:
+        """The refit of ``effects`` on the base model, started from ``current`` (``added`` judged), its likelihood
+        ratio and coefficient changes against ``base`` (default ``current``)."""
+        return _task(self.base_spec, current, list(effects), tuple(added), start or {}, self.vehicle,
+                     base=current if base is None else base,
                      options=self.options, timeout=self.timeout, level=self.level, band_upper=self.band.upper)
 
     def refit(self, tasks: Sequence[RefitTask], workers: int | None = None) -> tuple:
