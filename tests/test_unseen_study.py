@@ -152,7 +152,8 @@ def test_a_misalignment_that_carried_a_coarse_wind_is_dropped_for_the_finer_wind
     noise (chi2/dof 1.010) -- a wrong effect called explained: the misalignment took up the coarse wind's misfit.
     The finer shape (step module note 8) also tries a search that ended explained with three effects: the wind
     one and two rungs up without the last effect. The 6-knot wind with the start mass explains the data at a
-    lower BIC, the start mass within 10 % and the wind within 3 m/s of the truth where the data hold it."""
+    lower BIC, the start mass within 10 % of the truth, the surface wind within 2.5 m/s of it and the knots the
+    data hold growing as the truth's headwind does."""
     from rocketid.diagnostics import step as S
     from rocketid.diagnostics.accept import accept, noise_band
     from rocketid.diagnostics.effects import CATALOGUE
