@@ -41,17 +41,6 @@ KNOWN_FAILURES: dict[str, str] = {
                 "once; the truth's body swings into it as a pendulum (the fins' restoring moment against the body's "
                 "inertia: a period of 11.5 s at rail exit, 1.5 s at 300 m/s) with a normal force while it swings, "
                 "so the first seconds differ and the subsonic drag takes it up",
-    "cold-day+heavy-payload": "b7bba7f (fresh pair): thrust_profile_5 at step 1, chi2/dof 1.041, explained -- a wrong "
-                              "effect called explained: a 5-knot thrust error (-2 to -8 %) stands in for the heavier "
-                              "start and the colder air together. The true pair start_mass + temperature, refitted "
-                              "from the base fit by hand, passes every check at 1.032 with dm_start 20.15 (20) and "
-                              "dT_air -14.9 K (-15), a BIC 51 lower; the search stops at the first explanation and "
-                              "never tries a pair of simpler effects against a flexible shape",
-    "back-pressure+cold-day": "b7bba7f (fresh pair): base_drag_mach_2 at step 1, chi2/dof 1.026, explained -- a wrong "
-                              "effect called explained: a power-off drag change of -0.28 at the first Mach knot (a "
-                              "coast with less drag than the burn) stands in for the nozzle and the colder air. The "
-                              "true pair back_pressure + temperature, refitted from the base fit by hand, passes every "
-                              "check at 1.017 with A_e 0.0706 (0.0707) and dT_air -14.5 K (-15), a BIC 34 lower",
     "heavy-payload+headwind": "b7bba7f (fresh pair): start_angle + start_mass + wind at chi2/dof 1.074 (band 1.075), "
                               "partly explained -- dm_start 19.77 (20) found; the headwind as in 'headwind' (the "
                               "weathercocking body is not the catalogue's wind), a start angle beside it",
@@ -289,13 +278,14 @@ def test_the_cases_are_consistent():
     ("back-pressure+cold-day", "base_drag_mach_2", ("back_pressure", "temperature"), {"A_e": (A_EXIT, 0.005),
                                                                                       "dT_air": (DT_COLD, 1.5)}),
 ])
-def test_the_true_pair_explains_at_a_lower_bic_than_the_flexible_shape_the_search_takes(tern_spec, name, flexible,
-                                                                                      pair, truth_sizes):
-    """The measured reason of the fresh pairs' KNOWN_FAILURES: from the base fit, the flexible shape the search
-    takes at step 1 (a 5-knot thrust error; a power-off base drag on two Mach knots, -0.28 at the first) passes
-    every check of an explanation, and so does the true pair of simple effects, at the truth's sizes, with a BIC
-    more than 10 lower. (When the search weighs such a pair against a flexible shape, the cases pass and this
-    test states why.)"""
+def test_the_true_pair_explains_at_a_lower_bic_than_the_flexible_shape_of_the_first_step(tern_spec, name, flexible,
+                                                                                        pair, truth_sizes):
+    """The premise of the pair of simple effects (``rocketid.diagnostics.step``, module note 11), on two fresh pairs
+    that were wrong explanations before it (b7bba7f): from the base fit, the flexible shape the first step takes (a
+    5-knot thrust error; a power-off base drag on two Mach knots, -0.28 at the first) passes every check of an
+    explanation, and so does the true pair of simple effects, at the truth's sizes, with a BIC more than
+    ``BIC_TIE`` (10) lower -- the margin the stage asks before it replaces the flexible shape. The whole
+    diagnosis of each case is ``test_diagnose_on_sounding_case`` (slow)."""
     from rocketid.diagnostics import step as S
     from rocketid.diagnostics.accept import accept, noise_band
     from rocketid.diagnostics.effects import CATALOGUE
