@@ -51,7 +51,6 @@ import argparse
 import cProfile
 import json
 import os
-import platform
 import pstats
 import re
 import shutil
@@ -109,19 +108,9 @@ def ipopt_log(path: str) -> dict:
 
 def versions() -> dict:
     import casadi
-    import scipy
-    import sympy
 
-    import rocketid
-    out = {"python": platform.python_version(), "machine": platform.machine(), "cpus": os.cpu_count(),
-           "rocketid": rocketid.__version__, "numpy": np.__version__, "scipy": scipy.__version__,
-           "sympy": sympy.__version__, "casadi": casadi.__version__}
-    try:
-        from importlib.metadata import version
-        out["cyipopt"] = version("cyipopt-wheels")
-    except Exception:  # noqa: BLE001 - another distribution of cyipopt
-        import cyipopt
-        out["cyipopt"] = getattr(cyipopt, "__version__", "?")
+    from rocketid.output import environment
+    out = {**environment(), "cpus": os.cpu_count(), "casadi": casadi.__version__}
     out["blas_threads_env"] = {k: os.environ[k] for k in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS",
                                                           "MKL_NUM_THREADS") if k in os.environ}
     try:

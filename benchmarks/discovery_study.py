@@ -37,6 +37,8 @@ sys.path.insert(0, str(ROOT / "tests"))
 from discovery_study import cases as C  # noqa: E402
 from discovery_study import harness as H  # noqa: E402
 
+from rocketid.output import environment, environment_line  # noqa: E402
+
 GROUPS = {"single": C.SINGLE, "pairs": C.PAIRS, "clean-ref": C.CLEAN_REF, "clean": C.CLEAN, "varied": C.VARIED}
 
 
@@ -158,16 +160,18 @@ def main(argv=None) -> int:
               f"{rec['base']['chi2_per_dof']:.4f} -> {f['chi2_per_dof']:.4f}, pass {rec['score']['passed']}, "
               f"{rec['seconds']:.0f} s", flush=True)
         if args.json:
-            args.json.write_text(json.dumps({"commit": head, "rocketid": _code(), "records": records}, indent=1,
-                                            default=str))
+            args.json.write_text(json.dumps({"commit": head, "rocketid": _code(), "environment": environment(),
+                                             "records": records}, indent=1, default=str))
     stamp = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
     code = _code()
     if args.rescore:
         code = f"{stored.get('rocketid', '?')}; re-scored from {args.rescore.name}"
     else:
         elapsed = time.perf_counter() - t0
+    env = stored.get("environment") if args.rescore else environment()
+    packages = f" Packages: {environment_line(env)}." if env else ""
     md = (f"Study of commit {head} ({code}), {stamp}, {platform.machine()}; {len(records)} cases in "
-          f"{elapsed:.0f} s.\n\n{summary(records)}\n\n{table(records)}\n")
+          f"{elapsed:.0f} s.{packages}\n\n{summary(records)}\n\n{table(records)}\n")
     print(md)
     if args.md:
         args.md.write_text(md)

@@ -37,6 +37,8 @@ from typing import Callable
 
 import numpy as np
 
+from rocketid.output import environment, environment_line
+
 TESTS = Path(__file__).resolve().parent
 REPO = TESTS.parent
 
@@ -265,6 +267,7 @@ class Study:
             stored["commit"] = git_commit()
             stored.setdefault("when", datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC"))
             stored["machine"] = platform.machine()
+            stored["environment"] = environment()
             stored["workers"] = args.workers
             for name in names:
                 record = self.diagnose_cli(self.by_name[name], workers=args.workers)
@@ -273,7 +276,8 @@ class Study:
                 print(self.row(self.by_name[name], record), flush=True)
         title = (f"{self.label}, `rocketid diagnose` of src/rocketid at commit {stored.get('commit')}, "
                  f"{stored.get('when')}, {stored.get('machine')}, one diagnosis at a time (`--workers {stored.get('workers', args.workers)}`) "
-                 "on 2 shared cores.")
+                 "on 2 shared cores." + (f" Packages: {environment_line(stored['environment'])}."
+                                          if stored.get("environment") else ""))
         text = self.table(stored["records"], title)
         print(text)
         if args.docs:

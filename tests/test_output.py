@@ -80,3 +80,24 @@ def test_checking_a_target_sweeps_its_temporary_files_of_dead_writers_only(tmp_p
             assert other.exists() and live.exists()
         finally:
             live_proc.kill()
+
+
+def test_the_environment_names_the_numerical_stack_a_result_depends_on():
+    """The versions a report and a study table record, read back from the packages themselves (a refit's optimum
+    moved with a release of the stack: 2026-11-28, flight C of the Petrel-V nozzle campaign)."""
+    import platform
+
+    import cyipopt
+    import numpy
+    import scipy
+    import sympy
+
+    from rocketid.output import environment, environment_line
+    env = environment()
+    assert (env["numpy"], env["scipy"], env["sympy"]) == (numpy.__version__, scipy.__version__, sympy.__version__)
+    assert env["ipopt"] == ".".join(map(str, cyipopt.IPOPT_VERSION)) and env["machine"] == platform.machine()
+    assert env["cyipopt"] != "?" and env["rocketid"] != "?"
+    line = environment_line(env)
+    assert line.startswith(f"rocketid {env['rocketid']}, numpy {numpy.__version__}, scipy ") and "ipopt " in line
+    # a stored environment is printed as stored, keys it lacks left out
+    assert environment_line({"numpy": "1.26.4", "ipopt": "3.14.16"}) == "numpy 1.26.4, ipopt 3.14.16"

@@ -155,6 +155,10 @@ def test_the_report_files(report):
     assert d["fails"] is True and d["fit"]["model"] == "RA-66M"
     assert d["location"]["findings"][0]["channel"] == "h"
     assert (out / "summary.txt").read_text().startswith("rocketid diagnosis: RA-66M")
+    # what made it: the numerical stack's versions, in the JSON and at the page's foot
+    import numpy
+    assert d["environment"]["numpy"] == numpy.__version__ and d["environment"]["ipopt"].startswith("3.")
+    assert f"numpy {numpy.__version__}" in (out / "report.html").read_text()
 
 
 def test_candidates_json(report):

@@ -15,6 +15,11 @@ one output folder.
 
 JSON written here refuses NaN and infinity (they are not JSON): callers write
 ``null`` for a missing number and say why.
+
+:func:`environment` names what made a result -- rocketid's version and the numerical stack's
+(NumPy, SciPy, SymPy, cyipopt and the Ipopt it links): reports and study tables record it, as a
+diagnosis can end elsewhere with another release of the stack (a refit's optimum moves with the
+linear algebra's rounding).
 """
 
 from __future__ import annotations
@@ -33,10 +38,50 @@ from .errors import SettingsError
 
 __all__ = ["atomic_open", "write_text", "write_bytes", "write_json", "write_csv", "save_figure", "new_axes", "figure_of",
            "plot_target", "check_file",
-           "check_folder", "folder_lock", "remove_stale_tree", "finite_or_none", "nulls_for_non_finite", "LOCK_NAME"]
+           "check_folder", "folder_lock", "remove_stale_tree", "finite_or_none", "nulls_for_non_finite", "LOCK_NAME",
+           "environment", "environment_line"]
 
 #: The lock file :func:`folder_lock` keeps in a folder while a run writes there.
 LOCK_NAME = ".rocketid.lock"
+
+
+def environment() -> dict[str, str]:
+    """The versions a result depends on: ``python``, ``machine``, ``rocketid``, ``numpy``, ``scipy``, ``sympy``,
+    ``cyipopt`` (the distribution installed: ``cyipopt`` or ``cyipopt-wheels``) and ``ipopt`` (the Ipopt it
+    links); ``"?"`` for one that cannot be read.
+
+    Examples
+    --------
+    >>> env = environment()
+    >>> sorted(env) == ["cyipopt", "ipopt", "machine", "numpy", "python", "rocketid", "scipy", "sympy"]
+    True
+    """
+    import platform
+    from importlib import metadata
+
+    def version(*dists: str) -> str:
+        for dist in dists:
+            try:
+                return metadata.version(dist)
+            except metadata.PackageNotFoundError:
+                continue
+        return "?"
+
+    try:
+        import cyipopt
+        ipopt = ".".join(str(v) for v in cyipopt.IPOPT_VERSION)
+    except (ImportError, AttributeError, TypeError):
+        ipopt = "?"
+    return {"python": platform.python_version(), "machine": platform.machine(),
+            "rocketid": version("rocketid"), "numpy": version("numpy"), "scipy": version("scipy"),
+            "sympy": version("sympy"), "cyipopt": version("cyipopt-wheels", "cyipopt"), "ipopt": ipopt}
+
+
+def environment_line(env: dict | None = None) -> str:
+    """:func:`environment` (or ``env``, one stored with a result) in one line: ``numpy 2.4.6, scipy 1.17.1, ...``."""
+    env = environment() if env is None else env
+    keys = ("rocketid", "numpy", "scipy", "sympy", "cyipopt", "ipopt", "python", "machine")
+    return ", ".join(f"{k} {env[k]}" for k in keys if k in env)
 
 
 def _fail(path: Path, exc: OSError, what: str = "write") -> SettingsError:

@@ -38,6 +38,8 @@ for extra in (TESTS, TESTS / "vehicles"):
 
 from study_harness import family, git_commit, run_command  # noqa: E402
 
+from rocketid.output import environment, environment_line  # noqa: E402
+
 from fleet_study.cases import BY_NAME, CAMPAIGNS, write_campaign  # noqa: E402
 
 MODEL = TESTS / "vehicles" / "petrel.py"
@@ -342,6 +344,7 @@ def main(argv=None) -> int:
         stored["commit"] = git_commit()
         stored["when"] = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
         stored["machine"] = platform.machine()
+        stored["environment"] = environment()
         for name in names:
             record = diagnose_campaign(BY_NAME[name], workers=args.workers, timeout=args.timeout)
             stored["records"][name] = record
@@ -354,7 +357,8 @@ def main(argv=None) -> int:
     path.write_text(json.dumps(stored, indent=1))
     title = (f"Petrel-V fleet (3 flights a campaign, `--sigma estimate`), `rocketid diagnose` of src/rocketid at commit "
              f"{stored.get('commit')}, {stored.get('when')}, {stored.get('machine')}, one diagnosis at a time "
-             f"(`--workers {args.workers}`) on 2 shared cores.")
+             f"(`--workers {args.workers}`) on 2 shared cores."
+             + (f" Packages: {environment_line(stored['environment'])}." if stored.get("environment") else ""))
     print(f"<!-- {MARKER}:start -->")
     print(table(stored["records"], title))
     print(f"<!-- {MARKER}:end -->")

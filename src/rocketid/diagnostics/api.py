@@ -26,6 +26,7 @@ from ..cases.registry import BUILTIN_MODELS, resolve_model
 from ..data import Measurements, read_csv
 from ..errors import DataError, RocketidError, SettingsError
 from ..model import Model, ModelSpec
+from ..output import environment
 from ..solve import EstimationResult, estimate
 from .compare import Comparison, compare
 from .locate import Location, locate
@@ -346,7 +347,7 @@ class DiagnosisReport:
                                    for c, (v, n) in self.noise_from_data.items()},
                "wild_points": None if self.wild_points is None else self.wild_points.to_dict(),
                "correlated_noise": None if self.correlated_noise is None else self.correlated_noise.to_dict(),
-               "timings": dict(self.timings), "notes": list(self.notes)}
+               "timings": dict(self.timings), "notes": list(self.notes), "environment": environment()}
         return out
 
     def write(self, out: str | Path) -> Path:

@@ -25,7 +25,7 @@ from typing import Any, Iterable, Sequence
 import numpy as np
 
 from ..errors import SettingsError
-from ..output import figure_of, new_axes, nulls_for_non_finite, write_bytes, write_json, write_text
+from ..output import environment_line, figure_of, new_axes, nulls_for_non_finite, write_bytes, write_json, write_text
 
 __all__ = ["write_report", "render_html", "figure_png", "data_uri", "html_table", "PAGE"]
 
@@ -627,7 +627,8 @@ def render_html(report, figures_folder: Path | None = None) -> tuple[str, list[P
         steps=_steps_section(report, figs),
         confirm=_confirm_section(report, figs), history=_history_section(report, figs),
         fit_summary=_e(str(fit.summary())),
-        footer=_e(f"Made by rocketid {_version()} on {_dt.datetime.now().strftime('%Y-%m-%d %H:%M')}; "
+        footer=_e(f"Made by rocketid {_version()} on {_dt.datetime.now().strftime('%Y-%m-%d %H:%M')} "
+                  f"({environment_line()}); "
                   f"timings: {tm}. Self-contained: no network needed."))
     return figs.render(page), figs.files
 
