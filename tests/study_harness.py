@@ -292,6 +292,35 @@ class Study:
         return 0
 
 
+class SetCheck:
+    """Effect sets refitted together from a base fit and judged as an explanation, as the discovery's later stages
+    do (the exchange, the finer shape, the pair of simple effects): the tests that check a stage's premise on a
+    study case, with its search context (:attr:`ctx`: the noise band, the vehicle's scales, two workers) and the
+    catalogue's shapes for that vehicle by name (:meth:`shapes`)."""
+
+    def __init__(self, base, band=None, *, timeout: float = 180.0, workers: int = 2):
+        from rocketid.diagnostics import step
+        from rocketid.diagnostics.accept import noise_band
+        from rocketid.diagnostics.screen import vehicle_of
+        self.base = base
+        self.band = noise_band(base) if band is None else band
+        self.ctx = step._Search(base.spec, self.band, vehicle_of(base), 0.05, None, timeout, workers, True, None)
+
+    def shapes(self, *families: str) -> dict:
+        """The catalogue's effects and the refined shapes of ``families`` on this vehicle, by name."""
+        from rocketid.diagnostics.effects import CATALOGUE
+        out = dict(CATALOGUE)
+        out.update({e.name: e for f in families for e in CATALOGUE[f].refinements(self.ctx.vehicle)})
+        return out
+
+    def judge(self, effects):
+        """``effects`` refitted together from the base fit, every one judged: the Acceptance."""
+        from rocketid.diagnostics.accept import accept
+        from rocketid.diagnostics.refit import run_refit
+        effects = list(effects)
+        return accept(run_refit(self.ctx.task(self.base, effects, tuple(e.name for e in effects)))[0], self.band)
+
+
 def git_commit() -> str:
     """The last commit that changed ``src/rocketid`` (what the diagnoses ran); ``$ROCKETID_STUDY_COMMIT`` when set
     (a study run from a ``git archive`` of a commit, which holds no history to ask)."""

@@ -198,20 +198,18 @@ def test_a_coarse_wind_chosen_before_the_nozzle_is_refined_with_it_in(tmp_path):
     others in, each also without each other effect: the 9-knot wind with the nozzle alone explains the data, the
     start mass left out, the exit area within 2 % of the truth and the jet's peak within 15 %."""
     from rocketid.diagnostics import step as S
-    from rocketid.diagnostics.accept import accept, noise_band
+    from rocketid.diagnostics.accept import noise_band
     from rocketid.diagnostics.api import base_fit
     from rocketid.diagnostics.effects import CATALOGUE
-    from rocketid.diagnostics.refit import run_refit
-    from rocketid.diagnostics.screen import vehicle_of
+    from study_harness import SetCheck
 
     campaign = BY_NAME["nozzle+C-wind"]
     data = ri.read_csv(write_campaign(campaign, tmp_path)[2])
     base, _, counts, _, _ = base_fit(V.build_model(), data, "estimate")
-    band = noise_band(base, estimated=counts)
-    ctx = S._Search(base.spec, band, vehicle_of(base), 0.05, None, 180.0, 2, True, None)
-    shapes = {e.name: e for f in ("wind", "back_pressure") for e in CATALOGUE[f].refinements(ctx.vehicle)}
-    found = [CATALOGUE["start_mass"], shapes["wind_pl_5"], shapes["back_pressure_fade"]]
-    last = accept(run_refit(ctx.task(base, found, tuple(e.name for e in found)))[0], band)
+    check = SetCheck(base, noise_band(base, estimated=counts))
+    ctx, shapes = check.ctx, check.shapes("wind", "back_pressure")
+    found = [shapes["start_mass"], shapes["wind_pl_5"], shapes["back_pressure_fade"]]
+    last = check.judge(found)
     assert not last.accepted, [c.name for c in last.checks if not c.passed]
     candidates = [CATALOGUE[n] for n in ("start_mass", "wind", "back_pressure")]
     effects, acc, why = S._finer(found, last, base, candidates, ctx)

@@ -286,23 +286,15 @@ def test_the_true_pair_explains_at_a_lower_bic_than_the_flexible_shape_of_the_fi
     explanation, and so does the true pair of simple effects, at the truth's sizes, with a BIC more than
     ``BIC_TIE`` (10) lower -- the margin the stage asks before it replaces the flexible shape. The whole
     diagnosis of each case is ``test_diagnose_on_sounding_case`` (slow)."""
-    from rocketid.diagnostics import step as S
-    from rocketid.diagnostics.accept import accept, noise_band
-    from rocketid.diagnostics.effects import CATALOGUE
-    from rocketid.diagnostics.refit import run_refit
-    from rocketid.diagnostics.screen import vehicle_of
+    from rocketid.diagnostics.step import BIC_TIE
+    from study_harness import SetCheck
     case = BY_NAME[name]
-    base = ri.estimate(tern_spec, truth.measurements(case.hidden, case.seed))
-    band = noise_band(base)
-    ctx = S._Search(base.spec, band, vehicle_of(base), 0.05, None, 180.0, 2, True, None)
-    shapes = dict(CATALOGUE)
-    shapes.update({e.name: e for f in ("thrust_level", "density", "base_drag") for e in CATALOGUE[f].refinements(ctx.vehicle)})
-    sets = ([shapes[flexible]], [shapes[n] for n in pair])
-    shape, truth_pair = (accept(run_refit(ctx.task(base, found, tuple(e.name for e in found)))[0], band)
-                         for found in sets)
+    check = SetCheck(ri.estimate(tern_spec, truth.measurements(case.hidden, case.seed)))
+    shapes = check.shapes("thrust_level", "density", "base_drag")
+    shape, truth_pair = (check.judge(found) for found in ([shapes[flexible]], [shapes[n] for n in pair]))
     assert shape.accepted and truth_pair.accepted, [c.name for a in (shape, truth_pair) for c in a.checks
                                                     if not c.passed]
-    assert truth_pair.refit.bic[1] < shape.refit.bic[1] - 10.0, (truth_pair.refit.bic, shape.refit.bic)
+    assert truth_pair.refit.bic[1] < shape.refit.bic[1] - BIC_TIE, (truth_pair.refit.bic, shape.refit.bic)
     for n, (value, tol) in truth_sizes.items():
         assert abs(truth_pair.refit.estimate(n)[0] - value) < tol, (n, truth_pair.refit.estimate(n))
 

@@ -155,19 +155,17 @@ def test_a_misalignment_that_carried_a_coarse_wind_is_dropped_for_the_finer_wind
     lower BIC, the start mass within 10 % of the truth, the surface wind within 2.5 m/s of it and the knots the
     data hold growing as the truth's headwind does."""
     from rocketid.diagnostics import step as S
-    from rocketid.diagnostics.accept import accept, noise_band
     from rocketid.diagnostics.effects import CATALOGUE
-    from rocketid.diagnostics.refit import run_refit
-    from rocketid.diagnostics.screen import vehicle_of
+    from study_harness import SetCheck
     from unseen_study.cases import BY_NAME
 
     case = BY_NAME["heavy-start+headwind"]
     data = truth.measurements(case.hidden, case.seed)
     base = ri.estimate(K.build_model(), data)
-    band = noise_band(base)
-    ctx = S._Search(base.spec, band, vehicle_of(base), 0.05, None, 180.0, 2, True, None)
+    check = SetCheck(base)
+    ctx = check.ctx
     found = [CATALOGUE["wind"], CATALOGUE["start_mass"], CATALOGUE["misalignment"]]
-    last = accept(run_refit(ctx.task(base, found, tuple(e.name for e in found)))[0], band)
+    last = check.judge(found)
     assert last.accepted, [c.name for c in last.checks if not c.passed]
     effects, acc, why = S._finer(found, last, base, found, ctx)
     assert [e.name for e in effects] == ["wind_pl_6", "start_mass"], why
