@@ -72,7 +72,7 @@ def report_windows(fit, data, noise, n_parameters):
         f = "{:.3f}" if c == "v" else "{:.1f}"
         t = data[c].times
         print(f"  RMS {c} by window {EDGES}: model {fmt(rms_by_window(fit.residuals[c], t), f)}")
-        print(f"      reading noise per window: "
+        print("      reading noise per window: "
               + fmt([reading_noise(data.window(a, b))[c] for a, b in zip(EDGES[:-1], EDGES[1:])], f))
         for step in (5.0, 2.0):
             print(f"      spline, knots every {step:g} s: " + fmt(rms_by_window(spline_floor(data, c, step), t), f))
@@ -224,8 +224,8 @@ def variants(label: str = "CRS-11"):
         print(f"\n-- {name}: chi2/dof (quantization sigma) {fit.chi2_per_dof:.3g}, at the reading noise "
               f"{chi2_at_reading_noise(fit, data, noise, len(spec.parameters)):.3f}; RMS v by window "
               + fmt(rms_by_window(fit.residuals['v'], data['v'].times))
-              + f"; RMS h by window " + fmt(rms_by_window(fit.residuals['h'], data['h'].times), "{:.1f}") + "; CD "
-              + fmt(cd, "{:.2f}") + f"; attitude knots at a bound: "
+              + "; RMS h by window " + fmt(rms_by_window(fit.residuals['h'], data['h'].times), "{:.1f}") + "; CD "
+              + fmt(cd, "{:.2f}") + "; attitude knots at a bound: "
               + str(sum(1 for s, _ in fit.active_bounds() if str(s).startswith("alpha"))))
 
 

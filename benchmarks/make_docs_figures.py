@@ -18,18 +18,18 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
 
-import rocketid as ri  # noqa: E402
-from rocketid.cases import RA66M_CD_TRUTH, RA66M_MACH_KNOTS, ra66m, ra66m_truth  # noqa: E402
-from rocketid.cases.ra66m import ra66m_alpha  # noqa: E402
-from rocketid.diagnostics.compare import compare  # noqa: E402
-from rocketid.diagnostics.effects import with_effects  # noqa: E402
-from rocketid.diagnostics.locate import locate  # noqa: E402
-from rocketid.diagnostics.plausibility import check_plausibility  # noqa: E402
-from rocketid.model import Model  # noqa: E402
-from rocketid.physics.ascent import ascent_dynamics, ascent_states, flight_conditions  # noqa: E402
+import rocketid as ri
+from rocketid.cases import RA66M_CD_TRUTH, RA66M_MACH_KNOTS, ra66m, ra66m_truth
+from rocketid.cases.ra66m import ra66m_alpha
+from rocketid.diagnostics.compare import compare
+from rocketid.diagnostics.effects import with_effects
+from rocketid.diagnostics.locate import locate
+from rocketid.diagnostics.plausibility import check_plausibility
+from rocketid.model import Model
+from rocketid.physics.ascent import ascent_dynamics, ascent_states, flight_conditions
 
 FIGURES = Path(__file__).resolve().parents[1] / "docs" / "figures"
 A_E = 0.1      # m^2: A_e p0 = 10 kN, 2.5 % of the 400 kN thrust

@@ -24,12 +24,12 @@ import numpy as np
 import pytest
 
 
-import osprey as O  # noqa: E402
+import osprey as O
 
-import rocketid as ri  # noqa: E402
-from airlaunch_study import truth  # noqa: E402
-from airlaunch_study.run import STUDY  # noqa: E402
-from airlaunch_study.cases import ALL, BY_NAME, JET, MIS, Hidden  # noqa: E402
+import rocketid as ri
+from airlaunch_study import truth
+from airlaunch_study.run import STUDY
+from airlaunch_study.cases import ALL, BY_NAME, JET, MIS, Hidden
 
 #: Cases measured not to meet the bar (``STUDY.acceptable``), with the measured reason.
 KNOWN_FAILURES: dict[str, str] = {}

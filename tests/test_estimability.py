@@ -18,7 +18,7 @@ from click.testing import CliRunner
 import rocketid as ri
 from rocketid.cli import main
 from rocketid.errors import SettingsError
-from rocketid.estimability import (DEFAULT_THRESHOLD, Estimability, Scaling, analyze, estimate_q1,
+from rocketid.estimability import (DEFAULT_THRESHOLD, Scaling, analyze, estimate_q1,
                                    select_np)
 from rocketid.sensitivity import sensitivity_at
 

@@ -10,7 +10,6 @@ lands elsewhere is judged again where it is.
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 
 import rocketid as ri

@@ -21,11 +21,11 @@ import numpy as np
 import pytest
 
 
-import petrel as V  # noqa: E402
+import petrel as V
 
-import rocketid as ri  # noqa: E402
-from fleet_study.cases import BY_NAME, CAMPAIGNS, CHANNELS, Hidden, exact, noisy, write_campaign  # noqa: E402
-from fleet_study.run import diagnose_campaign, row, score  # noqa: E402
+import rocketid as ri
+from fleet_study.cases import BY_NAME, CAMPAIGNS, CHANNELS, Hidden, exact, noisy, write_campaign
+from fleet_study.run import diagnose_campaign, row, score
 
 #: Campaigns measured not to meet the bar (``score(...)["acceptable"]``), with the measured reason.
 KNOWN_FAILURES: dict[str, str] = {}

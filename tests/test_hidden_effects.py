@@ -250,7 +250,7 @@ def study_table(names=None) -> str:
     b = ra66m()
     s = Study(b, ri.default_mesh(b, refine_first=3))
     cases = {**VISIBLE, **SUBTLE, **SLOW}
-    rows = [f"| effect | truth | base chi2/dof | rank (group) | LM | p corr. | refit chi2/dof | estimate (95 % interval) | covers |",
+    rows = ["| effect | truth | base chi2/dof | rank (group) | LM | p corr. | refit chi2/dof | estimate (95 % interval) | covers |",
             "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     for name in names or cases:
         r = s.run(name, cases[name], holdout=None)

@@ -23,12 +23,12 @@ import numpy as np
 import pytest
 
 
-import petrel as V  # noqa: E402
+import petrel as V
 
-import rocketid as ri  # noqa: E402
-from petrel_study import truth  # noqa: E402
-from petrel_study.cases import ALL, BY_NAME, JET, MIS, Hidden  # noqa: E402
-from petrel_study.run import STUDY  # noqa: E402
+import rocketid as ri
+from petrel_study import truth
+from petrel_study.cases import ALL, BY_NAME, JET, MIS, Hidden
+from petrel_study.run import STUDY
 
 #: Cases measured not to meet the bar (``STUDY.acceptable``), with the measured reason.
 KNOWN_FAILURES: dict[str, str] = {

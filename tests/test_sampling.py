@@ -21,8 +21,7 @@ import scipy.stats as st
 
 import rocketid as ri
 from rocketid.errors import DataError, SettingsError, SolverError
-from rocketid.sampling import (SamplingSettings, prepare_sampling, sample, statistic_criterion, criterion_of,
-                               TERM_NAMES)
+from rocketid.sampling import (SamplingSettings, prepare_sampling, sample, statistic_criterion, TERM_NAMES)
 from rocketid.sampling import worker as worker_mod
 from rocketid.sampling.checkpoint import RunState, checkpoint_path
 from rocketid.sampling.worker import DrawOutcome, trial_parameters

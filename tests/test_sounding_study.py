@@ -26,12 +26,12 @@ import pytest
 from scipy.integrate import solve_ivp
 
 
-import tern as V  # noqa: E402
+import tern as V
 
-import rocketid as ri  # noqa: E402
-from sounding_study import truth  # noqa: E402
-from sounding_study.run import STUDY  # noqa: E402
-from sounding_study.cases import (A_EXIT, ALL, BASE_DRAG, BIAS_H, BY_NAME, DM0, DRAG_STEP, DT_COLD,  # noqa: E402
+import rocketid as ri
+from sounding_study import truth
+from sounding_study.run import STUDY
+from sounding_study.cases import (A_EXIT, ALL, BASE_DRAG, BIAS_H, BY_NAME, DM0, DRAG_STEP, DT_COLD,
                                   K_COLD, K_V, TAU, WALLOPS, WIND, Hidden)
 
 #: Cases measured not to meet the bar (``STUDY.acceptable``), with the measured reason.

@@ -17,14 +17,14 @@ import numpy as np
 import pytest
 
 
-import tern  # noqa: E402
-import wren  # noqa: E402
+import tern
+import wren
 
-import rocketid as ri  # noqa: E402
-from rocketid.diagnostics import CATALOGUE, with_effects  # noqa: E402
-from rocketid.diagnostics.effects import (Vehicle, _rail_exit_ratio, start_exit_effect,  # noqa: E402
+import rocketid as ri
+from rocketid.diagnostics import CATALOGUE, with_effects
+from rocketid.diagnostics.effects import (Vehicle, _rail_exit_ratio, start_exit_effect,
                                           start_mass_exit_effect)
-from rocketid.errors import ModelError  # noqa: E402
+from rocketid.errors import ModelError
 
 DELAY = 0.02     # s: a rail exit 20 ms late (a cold motor leaves Wren-H's rail 27 ms late)
 

@@ -14,9 +14,9 @@ from __future__ import annotations
 import pytest
 
 
-from rocketid.diagnostics import CATALOGUE, diagnose  # noqa: E402
-from rocketid.diagnostics.effects import Vehicle, check_sizes, state_sizes, stated_names  # noqa: E402
-from rocketid.errors import SettingsError  # noqa: E402
+from rocketid.diagnostics import CATALOGUE, diagnose
+from rocketid.diagnostics.effects import Vehicle, check_sizes, state_sizes, stated_names
+from rocketid.errors import SettingsError
 
 THRUST_ERROR = 0.12
 

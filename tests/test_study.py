@@ -11,7 +11,7 @@ from click.testing import CliRunner
 
 from rocketid.cli import main
 from rocketid.errors import SettingsError
-from rocketid.study import CHAPTER, StudySettings, reproduce, run_seeds
+from rocketid.study import StudySettings, reproduce, run_seeds
 
 NAMES = ["CD0", "CD1", "CD2", "CD3", "CD4", "CD5", "CD6", "CL"]
 

@@ -24,13 +24,13 @@ import numpy as np
 import pytest
 
 
-import corvid as V  # noqa: E402
+import corvid as V
 
-import rocketid as ri  # noqa: E402
-from study_harness import Case  # noqa: E402
-from telemetry_study import truth  # noqa: E402
-from telemetry_study.run import STUDY  # noqa: E402
-from telemetry_study.cases import (A_EXIT, ALL, BIAS_V, BY_NAME, DM0, EPS_THRUST, JET, K_H, MEASURED_2J,  # noqa: E402
+import rocketid as ri
+from study_harness import Case
+from telemetry_study import truth
+from telemetry_study.run import STUDY
+from telemetry_study.cases import (A_EXIT, ALL, BIAS_V, BY_NAME, DM0, EPS_THRUST, JET, K_H, MEASURED_2J,
                                    RADAR_OFFSET, TAU, VISIBLE_2J, Hidden)
 
 #: Cases measured not to meet the bar (``STUDY.acceptable``), with the measured reason.

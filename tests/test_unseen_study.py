@@ -21,13 +21,13 @@ import math
 import numpy as np
 import pytest
 
-import kestrel as K  # noqa: E402
+import kestrel as K
 
-import rocketid as ri  # noqa: E402
-from rocketid.physics.atmosphere import us76_pressure  # noqa: E402
-from unseen_study import truth  # noqa: E402
-from unseen_study.run import STUDY  # noqa: E402
-from unseen_study.cases import ALL, CASES, Hidden  # noqa: E402
+import rocketid as ri
+from rocketid.physics.atmosphere import us76_pressure
+from unseen_study import truth
+from unseen_study.run import STUDY
+from unseen_study.cases import ALL, CASES, Hidden
 
 #: Cases measured not to meet the bar (``STUDY.acceptable``), with the measured reason.
 KNOWN_FAILURES: dict[str, str] = {

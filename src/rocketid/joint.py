@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from functools import cached_property
 from typing import Any, Mapping, Sequence
 
@@ -50,8 +50,8 @@ from .errors import DataError, SensitivityError, SettingsError
 from .model import ModelSpec, check_guess
 from .output import finite_or_none
 from .sensitivity import sensitivity_of
-from .solve import EstimationResult, NLPSolution, Prepared, prepare, result_of, solve_nlp
-from .summary import Section, Summary, Table, Text
+from .solve import EstimationResult, NLPSolution, prepare, result_of, solve_nlp
+from .summary import Section, Summary, Table
 
 __all__ = ["Flight", "JointLayout", "JointNLP", "JointResult", "JointEstimability", "joint_estimate",
            "joint_prepare", "joint_estimability"]
@@ -684,7 +684,7 @@ class JointResult:
         if not self.success:
             notes.insert(0, f"IPOPT did not converge: {self.message.rstrip('.')}.")
         if self.sigma_estimated:
-            notes.append(f"sigma estimated with the parameters, each flight's separately ("
+            notes.append("sigma estimated with the parameters, each flight's separately ("
                          + "; ".join(f"{l}: {', '.join(c)}" for l, c in self.sigma_estimated.items())
                          + f"; {self.sigma_iterations} joint fits): chi2/dof is then near 1 by construction and does "
                          "not test the fit; a model error shows as a larger sigma instead.")

@@ -30,7 +30,7 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "vehicles"))
-import halcyon as V  # noqa: E402  (the vehicle's constants and its attitude table only)
+import halcyon as V  # the vehicle's constants and its attitude table only
 
 G0 = 9.80665
 RE = 6_371_000.0

@@ -28,7 +28,6 @@ import warnings
 from dataclasses import asdict
 from pathlib import Path
 
-import rocketid as ri
 from rocketid.data import read_csv
 
 from . import truth as T
