@@ -27,7 +27,7 @@ import petrel as V
 
 import rocketid as ri
 from petrel_study import truth
-from petrel_study.cases import ALL, BY_NAME, JET, MIS, Hidden
+from petrel_study.cases import ALL, BY_NAME, FRESH, JET, MIS, Hidden
 from petrel_study.run import STUDY
 
 #: Cases measured not to meet the bar (``STUDY.acceptable``), with the measured reason.
@@ -185,6 +185,22 @@ def test_classification_rules():
     assert STUDY.classify(pair, {"final": {**final, "effects": ["burn_rate", "wind_pl_6"]}}) == "right & explained"
     clean = BY_NAME["clean-520"]
     assert not STUDY.acceptable(clean, {"final": final})
+
+
+def test_the_cases_are_consistent():
+    """Names and seeds unique, every needed family a right one, a pair with one set per effect; the study's 21
+    cases and the eight fresh pairs (seeds 531-538), none out of the catalogue but the speed latency."""
+    assert len(BY_NAME) == len(ALL) == 29 and len({c.seed for c in ALL}) == len(ALL)
+    for case in ALL:
+        assert case.needed <= case.right, case.name
+        assert all(group <= case.right for group in case.needed_each), case.name
+        assert ("+" in case.name) == bool(case.needed_each), case.name
+    assert [c.name for c in ALL if c.out_of_catalogue] == ["v-latency"]
+    assert [c.seed for c in FRESH] == list(range(531, 539))
+    # a blowdown found with its mass flow is right, not needed
+    assert STUDY.classify(BY_NAME["blowdown+heavy-start"], {"final": {
+        "effects": ["thrust_profile_3", "mass_flow", "start_mass"], "verdict": "explained", "parameters": {}}}) \
+        == "right & explained"
 
 
 def test_the_hold_out_holds_a_drag_knot_its_window_does_not_determine(petrel_spec):

@@ -90,5 +90,42 @@ CASES = (
          needed_each=(_one("back_pressure"), _one("scale_v")), sizes=(("A_e", 0.06), ("k_v", 0.003))),
 ) + tuple(Case(f"clean-{seed}", Hidden(), seed, f"clean (seed {seed})") for seed in range(520, 528))
 
-ALL = CASES
+
+
+def _pair(name: str, hidden: Hidden, seed: int, truth: str, first: frozenset, second: frozenset,
+          sizes: tuple = (), also: frozenset = frozenset()) -> Case:
+    """A case of two hidden effects, each found by one family of its set: both sets right and needed (``also``:
+    families right beside them, not needed -- a blowdown's mass flow)."""
+    return Case(name, hidden, seed, truth, right=first | second | also, needed=first | second,
+                needed_each=(first, second), sizes=sizes)
+
+
+#: Eight more pairs, made on 2026-11-28 as a probe of the pair of simple effects (a flexible shape of a third
+#: family can stand in for two simple effects: Tern-2's cold day with a heavy payload), seeds 531-538.
+FRESH = (
+    _pair("cold-day+heavy-start", Hidden(cold_dT=-10.0, dm0=40.0), 531,
+          "column 10 K colder + 40 kg ballast", _one("density"), _one("start_mass"), sizes=(("dm_start", 40.0),)),
+    _pair("vacuum-nozzle+cold-day", Hidden(A_e=0.06, cold_dT=-10.0), 532,
+          "nozzle exit 0.06 m^2 on a sea-level table + column 10 K colder", _one("back_pressure"), _one("density"),
+          sizes=(("A_e", 0.06),)),
+    _pair("blowdown+heavy-start", Hidden(blowdown=0.06, dm0=40.0), 533,
+          "blowdown -6 % at cutoff + 40 kg ballast", BLOW_NEEDED, _one("start_mass"), sizes=(("dm_start", 40.0),),
+          also=BLOW),
+    _pair("jet-wind+ellipsoid-height", Hidden(jet_wind=JET, bias_h=25.0), 534,
+          "tailwind 4 -> 8 m/s with a 25 m/s jet at 11 km + GNSS height 25 m above sea level", _one("wind"),
+          _one("bias_h"), sizes=(("b_h", 25.0),)),
+    _pair("misalignment+doppler-scale", Hidden(delta=MIS, scale_v=0.003), 535,
+          "thrust misalignment 0.2 deg + speed 0.3 % high", _one("misalignment"), _one("scale_v"),
+          sizes=(("delta_thrust", MIS), ("k_v", 0.003))),
+    _pair("blowdown+cold-day", Hidden(blowdown=0.06, cold_dT=-10.0), 536,
+          "blowdown -6 % at cutoff + column 10 K colder", BLOW_NEEDED, _one("density"), also=BLOW),
+    _pair("heavy-start+jet-wind", Hidden(dm0=40.0, jet_wind=JET), 537,
+          "40 kg ballast + tailwind 4 -> 8 m/s with a 25 m/s jet at 11 km", _one("start_mass"), _one("wind"),
+          sizes=(("dm_start", 40.0),)),
+    _pair("vacuum-nozzle+misalignment", Hidden(A_e=0.06, delta=MIS), 538,
+          "nozzle exit 0.06 m^2 on a sea-level table + thrust misalignment 0.2 deg", _one("back_pressure"),
+          _one("misalignment"), sizes=(("A_e", 0.06), ("delta_thrust", MIS))),
+)
+
+ALL = CASES + FRESH
 BY_NAME = {c.name: c for c in ALL}
