@@ -59,10 +59,11 @@ Forward selection with a backward check, capped at ``max_effects``:
    with more parameters than its family's catalogue shape: a thrust error on knots, a base drag on Mach knots) is
    run again for two steps from the first step's best admissible refit of a simple effect (a catalogue shape) of
    another family; its model replaces the flexible shape when it ends explained, every size plausible, with a BIC
-   lower by :data:`BIC_TIE`, and holds no effect of the flexible shape's family (:func:`_paired`). The first step compares single effects: a pair of simple effects
-   can bend the trajectory as one flexible shape does. Measured on Tern-2 with a cold day and a heavy payload: a
-   5-knot thrust error reached the noise at step 1 (CD_0 at 2.45 for a true 0.40) and was called explained; the
-   start mass with the temperature, far from the noise alone, explain the data at a BIC 51 lower;
+   lower by :data:`BIC_TIE`, and holds no effect of the flexible shape's family (:func:`_paired`). The first step
+   compares single effects: a pair of simple effects can bend the trajectory as one flexible shape does.
+   Measured on Tern-2 with a cold day and a heavy payload: a 5-knot thrust error reached the noise at step 1
+   (CD_0 at 2.45 for a true 0.40) and was called explained; the start mass with the temperature, far from the
+   noise alone, explain the data at a BIC 51 lower;
 12. finding: a search that ends without reaching the noise is replaced by the first step's
    refit that passes every check but its size (:func:`_finding`: a thrust 12 % off its
    stated value), its verdict "partly explained" with the size named -- the user checks
@@ -70,10 +71,9 @@ Forward selection with a backward check, capped at ``max_effects``:
 13. budget: a search given a time budget (``discover(..., budget=)``, ``rocketid diagnose --budget``)
    starts no refit once it has run out and stops those running; the step under way is not completed (a
    step chosen from part of its contenders would be a choice on part of the evidence), the steps before
-   it stand, the stages after it (exchange, finer shape, second path, simpler shape, pair of simple effects, finding)
-   are not tried, and
-   :attr:`Discovery.stopped` says where it stopped. The verdict is that of the model reached: a search cut
-   short is "nothing missing" only when the base model itself reaches the noise, and never "explained"
+   it stand, the stages after it (exchange, finer shape, second path, simpler shape, pair of simple effects,
+   finding) are not tried, and :attr:`Discovery.stopped` says where it stopped. The verdict is that of the model
+   reached: a search cut short is "nothing missing" only when the base model itself reaches the noise, and never "explained"
    without an effect that reaches the noise (``rocketid.diagnostics.api`` words the cut). A second
    run with a larger budget costs less: the models already built are in the code cache, and with
    checkpoints (``diagnose(out=..., resume=True)``, :func:`~rocketid.diagnostics.refit.refit_checkpoints`)
@@ -882,8 +882,7 @@ def discover(fit: EstimationResult, candidates: Sequence[Effect], *, level: floa
         Seconds the search may take (None: no limit). When they have run out no refit is started
         and those running are stopped: the step under way is not completed, the steps before it stand
         (and the exchange, the finer shape, the second path, the simpler shape and the pair of simple effects are
-        not tried), and
-        :attr:`Discovery.stopped` says where it stopped (module note 13).
+        not tried), and :attr:`Discovery.stopped` says where it stopped (module note 13).
     progress : callable, optional
         Called with one line of text as the search goes (the contenders of each step, the effect taken,
         the second path); ``rocketid diagnose`` prints them on a terminal or with ``--verbose``.
@@ -921,8 +920,8 @@ def discover(fit: EstimationResult, candidates: Sequence[Effect], *, level: floa
 
 def _search(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Effect], max_effects: int, base_ok: bool,
             notes: list) -> tuple:
-    """The forward search, then the exchange, the finer shape, the second path and the simpler shape where they
-    apply (module notes 7-11). Returns ``(path, stopped)``: ``stopped`` names the stage during which the time budget ran out
+    """The forward search, then the exchange, the finer shape, the second path, the simpler shape and the pair of
+    simple effects where they apply (module notes 7-11). Returns ``(path, stopped)``: ``stopped`` names the stage during which the time budget ran out
     (empty when it did not); the path is the last one completed."""
     path = _forward(ctx, fit, candidates, max_effects, notes)
     if path.stopped:
