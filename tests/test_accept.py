@@ -441,6 +441,17 @@ def test_a_flexible_shape_that_explains_at_step_1_is_weighed_against_a_pair_of_s
     notes = []
     assert S._paired(ctx, None, candidates, first, notes) is first
     assert "it holds thrust_level, the flexible shape's family" in notes[-1]
+    # the pair's search takes its second step among simple shapes: a temperature offset for the density's profile,
+    # no thrust profile on knots, no throttle window, none at any depth of a ladder
+    simple = {e.name: e for e in S._simple_shapes(candidates)}
+    assert simple["density"] == CATALOGUE["density"] and simple["density"].parameter_names == ("drho_1", "drho_2",
+                                                                                              "drho_3", "drho_4")
+    kept = {v.name for e in simple.values() for v in e.refinements(veh)}
+    assert "temperature" in kept and not any(S._flexible(shapes[n], candidates) for n in kept if n in shapes)
+    assert not {"thrust_profile_3", "throttle_step", "throttle_window", "base_drag_mach_2"} & kept
+    assert all(not w.refinements(veh) or all(len(x.parameter_names) <= 4 for x in w.refinements(veh))
+               for e in simple.values() for w in e.refinements(veh))
+    assert {v.name for v in CATALOGUE["thrust_level"].refinements(veh)} >= {"thrust_profile_3", "throttle_window"}
     # not tried after a search of two effects, one that did not explain, or a simple effect chosen
     calls.clear()
     two = replace(first, chosen=[CATALOGUE["start_mass"], profile])

@@ -58,7 +58,8 @@ Forward selection with a backward check, capped at ``max_effects``:
 11. pair of simple effects: a search that ends explained at its first step by one flexible shape (a refined shape
    with more parameters than its family's catalogue shape: a thrust error on knots, a base drag on Mach knots) is
    run again for two steps from the first step's best admissible refit of a simple effect (a catalogue shape) of
-   another family; its model replaces the flexible shape when it ends explained, every size plausible, with a BIC
+   another family, its second step among simple shapes (no more parameters than their family's catalogue shape,
+   no event); its model replaces the flexible shape when it ends explained, every size plausible, with a BIC
    lower by :data:`BIC_TIE`, and holds no effect of the flexible shape's family (:func:`_paired`). The first step
    compares single effects: a pair of simple effects can bend the trajectory as one flexible shape does.
    Measured on Tern-2 with a cold day and a heavy payload: a 5-knot thrust error reached the noise at step 1
@@ -1179,6 +1180,20 @@ def _flexible(effect: Effect, candidates: Sequence[Effect]) -> bool:
     return parent is not None and len(effect.parameter_names) > len(parent.parameter_names)
 
 
+def _simple_shapes(candidates: Sequence[Effect]) -> list[Effect]:
+    """``candidates`` with their refined shapes cut to the simple ones: no more parameters than the family's
+    catalogue shape, no event (a temperature offset for the density's four-knot profile; no wind, density or
+    thrust profile on knots, no throttle window). The pair of simple effects searches with these: it weighs two
+    simple effects against one flexible shape, and a flexible shape's ladder at its second step would rebuild and
+    refit a knot model per rung."""
+    def simple(effect: Effect, size: int) -> Effect:      # ``size``: the family's catalogue shape's parameters
+        if effect.refine is None:
+            return effect
+        return replace(effect, refine=lambda vehicle: [
+            simple(v, size) for v in effect.refinements(vehicle) if v.scan is None and len(v.parameter_names) <= size])
+    return [simple(c, len(c.parameter_names)) for c in candidates]
+
+
 def _simple_start(s1: Step, taken: Effect) -> int | None:
     """The index, among the first step's refits, of the lowest BIC of the admissible refits of a simple effect (a
     family's catalogue shape, not an event's) of another family than ``taken``'s; None when there is none."""
@@ -1193,7 +1208,8 @@ def _simple_start(s1: Step, taken: Effect) -> int | None:
 def _paired(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Effect], path: _Path, notes: list) -> _Path:
     """The pair of simple effects of module note 11: when the search ended explained at its first step by one
     flexible shape (:func:`_flexible`), a search of two steps started from the first step's best admissible refit
-    of a simple effect of another family (:func:`_simple_start`); its model replaces the flexible shape when it
+    of a simple effect of another family (:func:`_simple_start`), its second step among simple shapes only
+    (:func:`_simple_shapes`); its model replaces the flexible shape when it
     ends explained, every size plausible, with a BIC lower by :data:`BIC_TIE` -- strong evidence, as an
     explanation already reached is overturned -- and holds no effect of the flexible shape's family (a pair that
     does confirms the family: Kestrel-S with a hot motor, the truth a thrust curve 3 % faster and higher, took a
@@ -1218,7 +1234,7 @@ def _paired(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Effect],
     flexible, name = path.chosen[0].name, s1.acceptances[j].refit.name
     ctx.say(f"pair of simple effects: {flexible} explains the data alone; starting again from {name}")
     mine: list = []
-    alt = _forward(ctx, fit, candidates, 2, mine, first=(s1.screen, s1.acceptances, j), first_why=(
+    alt = _forward(ctx, fit, _simple_shapes(candidates), 2, mine, first=(s1.screen, s1.acceptances, j), first_why=(
         f"taken in place of the flexible shape {flexible}: the first step's best admissible refit of a simple effect "
         f"of another family ({name}, chi2/dof {s1.acceptances[j].refit.chi2_per_dof:.4g})"))
     if alt.stopped:
