@@ -127,6 +127,12 @@ def test_the_search_reports_its_progress_step_by_step(data):
     # the seconds since the search started never go back
     secs = [float(l.split(" s: ", 1)[0].split()[1]) for l in lines]
     assert secs == sorted(secs) and secs[-1] <= rep.discovery.timings["discover_s"] + 1
+    # the seconds of each stage tried: the forward search, then the exchange, the finer shape and the simpler
+    # shape (two effects, explained); they add up to no more than the search, and the report keeps them
+    stages = {k: v for k, v in rep.discovery.timings.items() if k.startswith("search_")}
+    assert {"search_forward_s", "search_exchange_s", "search_simpler_shape_s"} <= set(stages), stages
+    assert "search_second_path_s" not in stages and sum(stages.values()) <= rep.discovery.timings["discover_s"]
+    assert stages["search_forward_s"] > 0.5 * sum(stages.values()) and stages.items() <= rep.timings.items()
 
 
 # ---- checkpoints: a search stopped or interrupted goes on from the refits it made ---------------------------------

@@ -866,6 +866,7 @@ def _searched(fit, effects, counts, confirm_top: int, search: dict, timings: dic
             notes.append(f"the discovery failed: {exc}")
         if disc is not None:
             notes.extend(disc.notes)
+            timings.update({k: v for k, v in disc.timings.items() if k.startswith("search_")})
             ranking = disc.steps[0].screen.ranking if disc.steps else None
             failed = disc.ranking_failed
     if failed:

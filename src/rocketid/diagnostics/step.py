@@ -208,6 +208,9 @@ class Discovery:
         One of :data:`VERDICTS`.
     notes : tuple of str
     timings : dict
+        Seconds: ``discover_s`` the whole search; ``search_forward_s`` the forward search and one
+        ``search_<stage>_s`` per later stage tried (``search_exchange_s``, ``search_finer_shape_s``,
+        ``search_second_path_s``, ``search_simpler_shape_s``, ``search_pair_of_simple_effects_s``).
     ambiguous : str
         Non-empty when the search stopped at rivals the data cannot tell apart (which, and why).
     rivals : str
@@ -895,8 +898,9 @@ def discover(fit: EstimationResult, candidates: Sequence[Effect], *, level: floa
     ctx = _Search(fit.spec, band, vehicle_of(fit), level, options, timeout, workers, refine, holdout, progress)
     notes = [band.note] if band.note else []
     base_ok = fits_to_noise(fit, band)[0]
+    stage_s: dict = {}
     with time_budget(budget):
-        path, stopped = _search(ctx, fit, candidates, max_effects, base_ok, notes)
+        path, stopped = _search(ctx, fit, candidates, max_effects, base_ok, notes, stage_s)
     steps, chosen, current, last, ok, detail = list(path.steps), path.chosen, path.current, path.last, path.ok, \
         path.detail
     ambiguous, rivals = path.ambiguous, path.rivals
@@ -915,16 +919,20 @@ def discover(fit: EstimationResult, candidates: Sequence[Effect], *, level: floa
     notes += why
     return Discovery(fit, band, ctx.vehicle, tuple(steps), tuple(chosen), current,
                      last.refit if last is not None else None, bool(ok), detail,
-                     verdict, tuple(notes), {"discover_s": time.perf_counter() - t_start}, ambiguous, rivals,
+                     verdict, tuple(notes), {"discover_s": time.perf_counter() - t_start, **stage_s}, ambiguous, rivals,
                      not_an_explanation(last) if verdict == "partly explained" and ok else "", stopped)
 
 
 def _search(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Effect], max_effects: int, base_ok: bool,
-            notes: list) -> tuple:
+            notes: list, stage_s: dict | None = None) -> tuple:
     """The forward search, then the exchange, the finer shape, the second path, the simpler shape and the pair of
     simple effects where they apply (module notes 7-11). Returns ``(path, stopped)``: ``stopped`` names the stage during which the time budget ran out
-    (empty when it did not); the path is the last one completed."""
+    (empty when it did not); the path is the last one completed. ``stage_s`` (when given) receives each stage's
+    seconds, keyed ``search_forward_s``, ``search_exchange_s``, ... (:attr:`Discovery.timings`)."""
+    stage_s = {} if stage_s is None else stage_s
+    t0 = time.perf_counter()
     path = _forward(ctx, fit, candidates, max_effects, notes)
+    stage_s["search_forward_s"] = time.perf_counter() - t0
     if path.stopped:
         return path, f"step {path.stopped} of the search"
     stages = (("the exchange", lambda p: len(p.chosen) >= 2 and not p.ambiguous,
@@ -942,10 +950,13 @@ def _search(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Effect],
             continue
         if budget_spent():
             return path, f"{label} (not tried)"
+        key, t0 = "search_" + label.removeprefix("the ").replace(" ", "_") + "_s", time.perf_counter()
         try:
             path = run(path)
         except BudgetSpent:
             return path, f"{label} (not completed)"
+        finally:
+            stage_s[key] = time.perf_counter() - t0
         if path.stopped:        # a second path cut short: the paths completed before it are weighed
             return replace(path, stopped=0), f"{label} (cut short)"
     return path, ""
