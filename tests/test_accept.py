@@ -322,6 +322,46 @@ def test_the_exchange_swaps_an_effect_chosen_while_another_was_missing(monkeypat
     assert S._exchange(steps, [wind, bias], last, None, ctx) is None
 
 
+def test_after_the_finer_shape_the_exchange_swaps_the_last_effect_too(monkeypatch):
+    """Petrel-V with 40 kg of ballast and a jet stream: the 4-function wind at step 1, a 9-knot thrust error at step
+    2 beside it (the start mass second), and the finer shape ended wind_pl_9 + thrust_profile_9, explained; the
+    start mass beside the 9-knot wind explains at a BIC 55 lower. Once the finer shape is in, the exchange also
+    swaps the effect chosen last; it never takes a set a later stage appended (its one acceptance is no contender's)
+    for a step of the search."""
+    from rocketid.diagnostics import step as S
+    from rocketid.diagnostics.effects import CATALOGUE, wind_profile_effect
+    from rocketid.diagnostics.screen import Contender, Screen
+
+    wind, mass, base_drag, mis = (CATALOGUE[n] for n in ("wind", "start_mass", "base_drag", "misalignment"))
+    wind9 = wind_profile_effect([0.0, 1.0, 3.0, 6.0, 9.0, 11.0, 13.0, 16.0, 20.0], name="wind_pl_9")
+    profile = CATALOGUE["thrust_level"]            # stands for the 9-knot thrust error: its family's place
+    s1 = Screen(None, (Contender(wind, ""),), ())
+    s2 = Screen(None, (Contender(profile, ""), Contender(mass, ""), Contender(base_drag, "")), ())
+    a_wind = accept(refit("wind", 9.3), BAND)
+    a_prof, a_mass, a_drag = (accept(refit(n, c, base_chi2=9.3), BAND) for n, c in
+                              (("thrust_level", 3.36), ("start_mass", 3.55), ("base_drag", 5.0)))
+    found = accept(refit("thrust_level", 1.02), BAND)
+    steps = [S.Step(1, s1, (a_wind,), a_wind, "", (), ("wind",), fit=object()),
+             S.Step(2, s2, (a_prof, a_mass, a_drag), a_prof, "", (), ("wind", "thrust_level"), fit=object()),
+             S.Step(3, Screen(None, (Contender(mis, ""), Contender(mass, "")), ()), (found,), found, "finer shape", (),
+                    ("wind_pl_9", "thrust_level"), fit=object())]
+    tried = []
+
+    def fake_task(base_spec, fit, effects, added, *a, **k):
+        tried.append(tuple(e.name for e in effects))
+        return tuple(e.name for e in effects)
+
+    monkeypatch.setattr(S, "_task", fake_task)
+    monkeypatch.setattr(S, "refit_all", lambda tasks, workers=None: tuple(
+        refit(t[-1], 1.01 if t[-1] == "start_mass" else 1.3) for t in tasks))
+    ctx = S._Search(None, BAND, None, 0.05, None, 60.0, 1, True, None)
+    assert S._exchange(steps, [wind9, profile], found, None, ctx) is None and not tried    # the last: not without
+    effects, acc, why = S._exchange(steps, [wind9, profile], found, None, ctx, include_last=True)
+    assert [e.name for e in effects] == ["wind_pl_9", "start_mass"] and acc.accepted
+    assert tried == [("wind_pl_9", "start_mass"), ("wind_pl_9", "base_drag")], tried   # step 3 is not a step's
+    assert "start_mass in place of thrust_level" in why
+
+
 def test_a_refined_shape_is_put_back_in_its_family_shape_when_that_explains(monkeypatch):
     """Stage-30 with a jet-stream wind, a +1.5 % thrust error and an altitude bias ended explained with a 10-knot
     wind, a 5-knot thrust profile and the bias: the profile's knot count was chosen while the bias was still

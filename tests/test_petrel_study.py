@@ -222,6 +222,43 @@ def test_the_hold_out_holds_a_drag_knot_its_window_does_not_determine(petrel_spe
     assert conf.holdout_error(1) <= conf.holdout_error(0)
 
 
+@pytest.mark.parametrize("name, visible", [("vacuum-nozzle+cold-day", "back_pressure_fade"),
+                                           ("blowdown+cold-day", "thrust_profile_3")])
+def test_a_cold_day_beside_a_visible_effect_is_beyond_these_data(petrel_spec, name, visible):
+    """The measured reason of the fresh cold-day pairs' KNOWN_FAILURES: on Petrel-V the 10 K cold day is not in
+    these data (alone, the cold-day case reaches the noise with nothing added: the drag table takes it). Beside the
+    visible effect the diagnosis finds, the temperature offset refitted from the base fit comes out near zero
+    with a standard error of about 2 K -- the true -10 K more than three standard errors away -- and adds nothing
+    the noise can show: the visible effect alone explains the data at a BIC lower."""
+    from study_harness import SetCheck
+    case = BY_NAME[name]
+    check = SetCheck(ri.estimate(petrel_spec, truth.measurements(case.hidden, case.seed)))
+    shapes = check.shapes("back_pressure", "density", "thrust_level")
+    alone, with_cold = check.judge([shapes[visible]]), check.judge([shapes[visible], shapes["temperature"]])
+    assert alone.accepted, [c.name for c in alone.checks if not c.passed]
+    dT, se = with_cold.refit.estimate("dT_air")
+    assert abs(dT - case.hidden.cold_dT) > 3 * se and abs(dT) < 2 * se, (dT, se)
+    assert alone.refit.bic[1] < with_cold.refit.bic[1], (alone.refit.bic, with_cold.refit.bic)
+
+
+def test_beside_the_finer_wind_the_start_mass_explains_what_a_thrust_profile_took(petrel_spec):
+    """The premise of the exchange after the finer shape (``rocketid.diagnostics.step._refined_again``), on a fresh
+    pair that was a wrong explanation before it (bd25983): 40 kg of ballast and a jet stream ended ``wind_pl_9`` +
+    ``thrust_profile_9``, explained -- the thrust error on nine knots chosen beside the coarse wind. From the base
+    fit, ``wind_pl_9`` + ``start_mass`` passes every check at a BIC more than ``BIC_TIE`` lower, with the ballast's
+    mass; the constant thrust error beside the wind does not reach the noise."""
+    from rocketid.diagnostics.step import BIC_TIE
+    from study_harness import SetCheck
+    case = BY_NAME["heavy-start+jet-wind"]
+    check = SetCheck(ri.estimate(petrel_spec, truth.measurements(case.hidden, case.seed)))
+    sh = check.shapes("wind", "thrust_level")
+    profile, mass, level = (check.judge([sh["wind_pl_9"], sh[n]]) for n in ("thrust_profile_9", "start_mass",
+                                                                             "thrust_level"))
+    assert profile.accepted and mass.accepted and not level.accepted
+    assert mass.refit.bic[1] < profile.refit.bic[1] - BIC_TIE, (mass.refit.bic, profile.refit.bic)
+    assert abs(mass.refit.estimate("dm_start")[0] - case.hidden.dm0) < 3.0, mass.refit.estimate("dm_start")
+
+
 def test_a_refit_at_the_noise_from_a_distorted_start_is_tried_from_the_guesses(petrel_spec):
     """Blowdown and a jet-stream wind at once: the base fit is pushed to its bounds (the drag's first knot at
     2.0, the lift slope at 30), the 13-knot wind alone reaches chi2/dof 2.80 with oversized knots, and the
