@@ -1232,10 +1232,9 @@ def _paired(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Effect],
     """The pair of simple effects of module note 11: when the search ended explained at its first step by one
     flexible shape (:func:`_flexible`), a search of two steps started from the first step's best admissible refit
     of a simple effect of another family (:func:`_simple_start`), its second step among simple shapes only
-    (:func:`_simple_shapes`); its model replaces the flexible shape when it
-    ends explained, every size plausible, with a BIC lower by :data:`BIC_TIE` -- strong evidence, as an
-    explanation already reached is overturned -- and holds no effect of the flexible shape's family (a pair that
-    does confirms the family: Kestrel-S with a hot motor, the truth a thrust curve 3 % faster and higher, took a
+    (:func:`_simple_shapes`); its model replaces the flexible shape when it ends explained, every size plausible,
+    with a BIC lower by :data:`BIC_TIE` -- strong evidence, as an explanation already reached is overturned -- and
+    holds no effect of the flexible shape's family (a pair that does confirms the family: Kestrel-S with a hot motor, the truth a thrust curve 3 % faster and higher, took a
     3-knot thrust error at step 1; from the start mass the search ends ``start_mass`` + ``thrust_level``, 7.8
     lower in BIC, a wrong effect beside the right family, kept out by the margin alone; with Earth rotation too,
     9.1 lower). Otherwise ``path`` stands; a note says where the pair's search ended.
