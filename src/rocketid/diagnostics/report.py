@@ -627,18 +627,9 @@ def render_html(report, figures_folder: Path | None = None) -> tuple[str, list[P
         steps=_steps_section(report, figs),
         confirm=_confirm_section(report, figs), history=_history_section(report, figs),
         fit_summary=_e(str(fit.summary())),
-        footer=_e(f"Made by rocketid {_version()} on {_dt.datetime.now().strftime('%Y-%m-%d %H:%M')} "
-                  f"({environment_line()}); "
+        footer=_e(f"Made on {_dt.datetime.now().strftime('%Y-%m-%d %H:%M')} by {environment_line()}; "
                   f"timings: {tm}. Self-contained: no network needed."))
     return figs.render(page), figs.files
-
-
-def _version() -> str:
-    try:
-        from importlib.metadata import version
-        return version("rocketid")
-    except Exception:  # noqa: BLE001
-        return ""
 
 
 def write_report(report, out: str | Path) -> Path:
