@@ -29,7 +29,7 @@ import osprey as O
 import rocketid as ri
 from airlaunch_study import truth
 from airlaunch_study.run import STUDY
-from airlaunch_study.cases import ALL, BY_NAME, JET, MIS, Hidden
+from airlaunch_study.cases import ALL, BY_NAME, FRESH, JET, MIS, Hidden
 
 #: Cases measured not to meet the bar (``STUDY.acceptable``), with the measured reason.
 KNOWN_FAILURES: dict[str, str] = {}
@@ -155,6 +155,17 @@ def test_classification_rules():
     clean = BY_NAME["clean-500"]
     assert not STUDY.acceptable(clean, {"final": {**final}})
     assert STUDY.acceptable(clean, {"final": {**final, "effects": []}})
+
+
+def test_the_fresh_pairs_are_consistent():
+    """The fresh pairs: seeds of their own, two hidden effects each, both families needed and right."""
+    assert [c.seed for c in FRESH] == list(range(415, 423))
+    assert len({c.seed for c in ALL}) == len(ALL) and len(BY_NAME) == len(ALL)
+    for case in FRESH:
+        assert len(case.needed_each) == 2 and all(group <= case.right for group in case.needed_each), case.name
+        assert case.needed == case.needed_each[0] | case.needed_each[1], case.name
+        moved = [f for f in Hidden.__dataclass_fields__ if getattr(case.hidden, f) != getattr(Hidden(), f)]
+        assert len(moved) == 2, (case.name, moved)
 
 
 def test_a_model_at_the_noise_takes_only_an_explanation(osprey_spec, tmp_path, monkeypatch):
