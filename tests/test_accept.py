@@ -362,6 +362,46 @@ def test_after_the_finer_shape_the_exchange_swaps_the_last_effect_too(monkeypatc
     assert "start_mass in place of thrust_level" in why
 
 
+def test_the_exchange_tries_a_family_in_its_catalogue_shape_beside_its_best_shape(monkeypatch):
+    """Osprey-A 250 kg light in a tailwind jet: at step 1, the wind missing, the start-mass family's best shape was
+    a mass jettison (BIC 25 291 against the start mass's 27 733), a 3-knot thrust profile was chosen and the 8-knot
+    wind beside it reached the noise. Swapped in the jettison's shape alone, the family did not explain; the start
+    mass beside the same wind does, at a BIC 15 lower. The exchange tries a family's best shape at the step and
+    its catalogue shape when that was admissible there too; the count of alternatives is of families."""
+    from dataclasses import replace as _replace
+
+    from rocketid.diagnostics import step as S
+    from rocketid.diagnostics.effects import CATALOGUE
+    from rocketid.diagnostics.screen import Contender, Screen
+
+    profile, mass, bp, scale, wind, dens = (CATALOGUE[n] for n in ("thrust_level", "start_mass", "back_pressure",
+                                                                   "scale_v", "wind", "density"))
+    jettison = _replace(mass, name="mass_jettison")             # the start-mass family's located shape
+    wind8 = _replace(wind, name="wind_pl_8")
+    s1 = Screen(None, tuple(Contender(e, "") for e in (jettison, profile, mass, bp, scale, dens)), ())
+    acc1 = tuple(accept(refit(e.name, c), BAND) for e, c in
+                 ((jettison, 6.19), (profile, 6.32), (mass, 6.79), (bp, 6.795), (scale, 6.9), (dens, 7.0)))
+    steps = [S.Step(1, s1, acc1, acc1[1], "", (), ("thrust_level",), fit=object()),
+             S.Step(2, Screen(None, (Contender(wind8, ""),), ()), (), None, "", (), ("thrust_level", "wind_pl_8"),
+                    fit=object())]
+    found = accept(refit("wind_pl_8", 0.9913), BAND)
+    tried = []
+
+    def fake_task(base_spec, fit, effects, added, *a, **k):
+        tried.append(tuple(e.name for e in effects))
+        return tuple(e.name for e in effects)
+
+    monkeypatch.setattr(S, "_task", fake_task)
+    monkeypatch.setattr(S, "refit_all", lambda tasks, workers=None: tuple(
+        refit(t[0], 0.9911 if t[0] == "start_mass" else 1.3) for t in tasks))
+    ctx = S._Search(None, BAND, None, 0.05, None, 60.0, 1, True, None)
+    effects, acc, why = S._exchange(steps, [profile, wind8], found, None, ctx)
+    assert tried == [("mass_jettison", "wind_pl_8"), ("start_mass", "wind_pl_8"), ("back_pressure", "wind_pl_8"),
+                     ("scale_v", "wind_pl_8")], tried         # three families; density, the fourth, is not tried
+    assert [e.name for e in effects] == ["start_mass", "wind_pl_8"] and acc.accepted
+    assert "start_mass in place of thrust_level" in why
+
+
 def test_a_refined_shape_is_put_back_in_its_family_shape_when_that_explains(monkeypatch):
     """Stage-30 with a jet-stream wind, a +1.5 % thrust error and an altitude bias ended explained with a 10-knot
     wind, a 5-knot thrust profile and the bias: the profile's knot count was chosen while the bias was still
