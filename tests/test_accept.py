@@ -283,6 +283,16 @@ def test_identifiability_reports_a_coefficient_the_effect_inflates():
     assert identifiability(names, cov, ["W_1"], {"W_1": 30.0}) == ""
 
 
+def _recording_task(tried: list):
+    """A stand-in for ``step._task`` that records each set's effect names in ``tried`` and returns them (the fake
+    refits read them back)."""
+    def task(base_spec, fit, effects, added, *a, **k):
+        names = tuple(e.name for e in effects)
+        tried.append(names)
+        return names
+    return task
+
+
 def test_the_exchange_swaps_an_effect_chosen_while_another_was_missing(monkeypatch):
     """Kestrel-S with a misalignment and a drifting altitude bias: at step 1 a wind (no single effect
     reached the noise) had a lower BIC than the misalignment; the drift then brought wind + drift to the
@@ -301,10 +311,7 @@ def test_the_exchange_swaps_an_effect_chosen_while_another_was_missing(monkeypat
     last = accept(refit("bias_h", 0.990), BAND)
     tried = []
 
-    def fake_task(base_spec, fit, effects, added, *a, **k):
-        tried.append(tuple(e.name for e in effects))
-        return tuple(e.name for e in effects)
-
+    fake_task = _recording_task(tried)
     def fake_refits(tasks, workers=None):
         return tuple(refit(t[0], 0.985 if t[0] == "misalignment" else 0.95, white=WHITE if t[0] == "misalignment"
                            else {"x": 0.0, "h": 0.0, "v": 0.0}) for t in tasks)
@@ -347,10 +354,7 @@ def test_after_the_finer_shape_the_exchange_swaps_the_last_effect_too(monkeypatc
                     ("wind_pl_9", "thrust_level"), fit=object())]
     tried = []
 
-    def fake_task(base_spec, fit, effects, added, *a, **k):
-        tried.append(tuple(e.name for e in effects))
-        return tuple(e.name for e in effects)
-
+    fake_task = _recording_task(tried)
     monkeypatch.setattr(S, "_task", fake_task)
     monkeypatch.setattr(S, "refit_all", lambda tasks, workers=None: tuple(
         refit(t[-1], 1.01 if t[-1] == "start_mass" else 1.3) for t in tasks))
@@ -387,10 +391,7 @@ def test_the_exchange_tries_a_family_in_its_catalogue_shape_beside_its_best_shap
     found = accept(refit("wind_pl_8", 0.9913), BAND)
     tried = []
 
-    def fake_task(base_spec, fit, effects, added, *a, **k):
-        tried.append(tuple(e.name for e in effects))
-        return tuple(e.name for e in effects)
-
+    fake_task = _recording_task(tried)
     monkeypatch.setattr(S, "_task", fake_task)
     monkeypatch.setattr(S, "refit_all", lambda tasks, workers=None: tuple(
         refit(t[0], 0.9911 if t[0] == "start_mass" else 1.3) for t in tasks))
@@ -422,11 +423,7 @@ def test_a_refined_shape_is_put_back_in_its_family_shape_when_that_explains(monk
     assert last.accepted
     tried = []
 
-    def fake_task(base_spec, fit, effects, added, *a, **k):
-        names = tuple(e.name for e in effects)
-        tried.append(names)
-        return names
-
+    fake_task = _recording_task(tried)
     def fake_refits(tasks, workers=None):
         out = []
         for names in tasks:
