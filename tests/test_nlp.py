@@ -160,3 +160,16 @@ def test_the_cache_key_follows_the_generator(monkeypatch, tmp_path):
     before = codegen.generate(spec).path.name
     monkeypatch.setattr(codegen, "generator_fingerprint", lambda: "a-changed-generator")
     assert codegen.generate(spec).path.name != before
+
+
+def test_unique_keys_is_numpy_unique_on_both_paths(monkeypatch):
+    """The Hessian structure's duplicate entries are merged by marking a dense array over the key range, or by
+    :func:`numpy.unique` beyond :data:`~rocketid.nlp.DENSE_KEYS`: both give numpy's unique keys and inverse."""
+    from rocketid import nlp
+    rng = np.random.default_rng(4)
+    key = rng.integers(0, 5000, size=20000).astype(np.int64) * 7
+    want_u, want_i = np.unique(key, return_inverse=True)
+    for limit in (nlp.DENSE_KEYS, 100):          # dense, then the fallback (key range above the limit)
+        monkeypatch.setattr(nlp, "DENSE_KEYS", limit)
+        u, i = nlp._unique_keys(key)
+        assert np.array_equal(u, want_u) and np.array_equal(i, want_i) and u.dtype == np.int64

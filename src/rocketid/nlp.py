@@ -284,13 +284,35 @@ def _hess_triples(M: sps.csr_matrix, n_items: int, width: int, t_rows, t_cols):
     return tuple(np.concatenate(o) for o in out)
 
 
+DENSE_KEYS = 1 << 24
+"""Key ranges up to this size are made unique by marking a dense array (O(entries), no sort); larger ones by
+:func:`numpy.unique`."""
+
+
+def _unique_keys(key: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``numpy.unique(key, return_inverse=True)`` for non-negative integer keys. A model whose output is nonlinear
+    in the states of many samples (a time offset: every sample's output depends on it) expands to millions of
+    Hessian entries on a few tens of thousands of places (15 million on 22 795 for RA-66M's 19 800 samples with
+    ``time_offset_2``); sorting them took 5.5 s per NLP built, marking a dense array over the key range 0.07 s
+    (``benchmarks/README.md``)."""
+    top = int(key.max()) + 1
+    if top > DENSE_KEYS:
+        return np.unique(key, return_inverse=True)
+    mark = np.zeros(top, bool)
+    mark[key] = True
+    uniq = np.flatnonzero(mark)
+    where = np.zeros(top, np.int64)
+    where[uniq] = np.arange(uniq.size)
+    return uniq.astype(np.int64), where[key]
+
+
 def _assemble(triples, n_src_list, shape_rows_cols=None):
     """Unique (row, col) structure over several sources and one expansion matrix each."""
     rows = np.concatenate([t[0] for t in triples]) if triples else np.empty(0, np.int64)
     cols = np.concatenate([t[1] for t in triples]) if triples else np.empty(0, np.int64)
     if rows.size:
-        key = rows.astype(np.int64) * (cols.max() + 1 if cols.size else 1) + cols
-        uniq, inverse = np.unique(key, return_inverse=True)
+        key = rows.astype(np.int64, copy=False) * (cols.max() + 1 if cols.size else 1) + cols
+        uniq, inverse = _unique_keys(key)
     else:
         uniq, inverse = np.empty(0, np.int64), np.empty(0, np.int64)
     ncolmax = (cols.max() + 1) if cols.size else 1
