@@ -37,7 +37,9 @@ KNOWN_FAILURES: dict[str, str] = {
                                  "density never needed: right but partly",
     "cold-day+heavy-start": "bd25983 (fresh pair): start_mass, dm_start 41.38 +- 0.41 (40), chi2/dof 1.011, partly "
                             "explained -- fitted on 0-40.9 s it predicts the rest worse than the base model (mean "
-                            "squared error 230 against 28.8 sigma^2); the cold day is not in these data",
+                            "squared error 230 against 28.8 sigma^2: the coast's drag knot CD_5, beyond the window, held "
+                            "at its guess 0.4 for 0.31 in both window fits, where the base model's wrong lower knots "
+                            "happen to compensate); the cold day is not in these data",
     "vacuum-nozzle+cold-day": "bd25983 (fresh pair): back_pressure_fade, A_e 0.0594 +- 0.0002 (0.06), chi2/dof 0.989, "
                               "explained; the cold day is not in these data (test_a_cold_day_beside_a_visible_effect_"
                               "is_beyond_these_data: dT_air -0.2 +- 2.1 K beside the nozzle): right but partly",
