@@ -537,6 +537,68 @@ def test_a_flexible_shape_that_explains_at_step_1_is_weighed_against_a_pair_of_s
     assert all(S._paired(ctx, None, candidates, p, []) is p for p in (two, short, simple)) and not calls
 
 
+def test_a_refined_shape_at_step_1_is_weighed_against_its_catalogue_shape_beside_another_effect(monkeypatch):
+    """Osprey-A with a 0.35 deg misalignment from ignition in a column 12 K warmer: the misalignment from ignition
+    reached the noise at step 1 with the altitude not white, and the misalignment switched on at 24.3 s was called
+    explained -- its onset taking up the warm column. A refined shape (an event's too) that explains alone at step
+    1, whose family's catalogue shape reached the noise there and was no explanation, gets a search of two steps
+    from that catalogue shape; its model replaces the refined shape when it explains at a BIC lower by BIC_TIE."""
+    from rocketid.diagnostics import step as S
+    from rocketid.diagnostics.effects import CATALOGUE, Vehicle
+    from rocketid.diagnostics.screen import Contender, Screen
+
+    veh = Vehicle(thrust=5.4e5, mass=1.95e4, mass_flow=200.0, speed=2700.0, start_speed=236.0, duration=68.0,
+                  altitude=(11800.0, 54500.0), mach=(0.8, 9.0), sigma={"x": 2.0, "h": 2.0, "v": 0.2},
+                  sample_interval=0.05, knot_times=tuple(np.linspace(0.0, 68.0, 7)))
+    onset = next(v for v in CATALOGUE["misalignment"].refinements(veh) if v.scan is not None)
+    mis, temp = CATALOGUE["misalignment"], CATALOGUE["density"]
+    candidates = [mis, temp, CATALOGUE["thrust_level"]]
+    assert S._richer(onset, candidates) and not S._flexible(onset, candidates) and not S._richer(mis, candidates)
+    base = 10.03
+    not_white = {"x": 0.3, "h": 1e-18, "v": 0.2}
+    rows = [(mis, refit("misalignment", 1.006, value=0.006, size=0.0044, white=not_white, base_chi2=base)),
+            (temp, refit("density", 3.87, base_chi2=base)),
+            (onset, refit(onset.name, 0.9905, value=0.006, size=0.0044, base_chi2=base))]
+    accs = tuple(accept(r, BAND) for _, r in rows)
+    assert accs[-1].accepted and not accs[0].accepted and accs[0].check("noise").passed
+    step1 = S.Step(1, Screen(None, tuple(Contender(e, "") for e, _ in rows), ()), accs, accs[-1], "", (),
+                   (onset.name,), None)
+    assert S._own_simple_start(step1, onset) == 0 and S._simple_start(step1, onset) is not None
+    first = S._Path((step1,), [onset], SimpleNamespace(chi2_per_dof=0.9905), accs[-1], True, "")
+    calls = []
+
+    def ends_at(chi2, n_effects=2):
+        last = accept(refit("temperature", chi2, base_chi2=1.006), BAND)
+        alt = S._Path((step1,), [mis, temp][:n_effects], SimpleNamespace(chi2_per_dof=chi2), last, True, "")
+
+        def fake_forward(ctx, fit, cands, max_effects, notes, first=None, first_why=""):
+            calls.append((max_effects, first[2], first_why))
+            return alt
+        monkeypatch.setattr(S, "_forward", fake_forward)
+        return alt
+
+    ctx = SimpleNamespace(band=BAND, refine=True, say=lambda message: None)
+    pair = ends_at(0.9847)
+    assert S._bic(pair.last) < S._bic(first.last) - S.BIC_TIE
+    notes = []
+    assert S._paired(ctx, None, candidates, first, notes) is pair
+    assert calls == [(2, 0, calls[0][2])] and "its family's catalogue shape reached the noise" in calls[0][2]
+    assert "replaces the refined shape" in notes[-1]
+    # within BIC_TIE, or one effect: the refined shape stands
+    for alt in (ends_at(0.9905 - 0.0003), ends_at(0.9847, n_effects=1)):
+        notes = []
+        assert S._paired(ctx, None, candidates, first, notes) is first and f"{onset.name} stands" in notes[-1]
+    # not started when the catalogue shape was far from the noise, explained itself, or beyond a plausible size
+    calls.clear()
+    for r in (refit("misalignment", 1.6, white=not_white, base_chi2=base),
+              refit("misalignment", 1.006, value=0.006, size=0.0044, base_chi2=base),
+              refit("misalignment", 1.006, value=0.05, size=0.0044, white=not_white, base_chi2=base)):
+        s1 = replace(step1, acceptances=(accept(r, BAND),) + accs[1:])
+        assert S._own_simple_start(s1, onset) is None
+        assert S._paired(ctx, None, candidates, replace(first, steps=(s1,)), []).chosen == [onset]
+    assert not calls
+
+
 def test_when_the_ranking_cannot_be_made_every_candidate_is_refitted(monkeypatch):
     """A base fit that did not converge gives no sensitivities for the score test (Stage-30 with a misalignment
     from the start: locally infeasible at chi2/dof 1.4e6); the refits decide: every candidate is a contender."""

@@ -69,7 +69,9 @@ Forward selection with a backward check, capped at ``max_effects``:
    compares single effects: a pair of simple effects can bend the trajectory as one flexible shape does.
    Measured on Tern-2 with a cold day and a heavy payload: a 5-knot thrust error reached the noise at step 1
    (CD_0 at 2.45 for a true 0.40) and was called explained; the start mass with the temperature, far from the
-   noise alone, explain the data at a BIC 51 lower;
+   noise alone, explain the data at a BIC 51 lower. A refined shape of any kind (an event's too: a misalignment
+   from an onset time) whose family's catalogue shape reached the noise at step 1 but was no explanation (its
+   residuals not white) is also weighed against that catalogue shape beside one simple effect, by the same rule;
 12. finding: a search that ends without reaching the noise is replaced by the first step's
    refit that passes every check but its size (:func:`_finding`: a thrust 12 % off its
    stated value), its verdict "partly explained" with the size named -- the user checks
@@ -1204,15 +1206,37 @@ def _simplified(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Effe
     return _landed(ctx, path, steps, _apply_set(ctx, fit, steps, swap, notes, "simpler shape"))
 
 
-def _flexible(effect: Effect, candidates: Sequence[Effect]) -> bool:
-    """Whether ``effect`` is a flexible shape: a refined shape of its family (not an event's), with more
-    parameters than the family's catalogue shape (a thrust error on 5 knots, a base drag on 2 Mach knots)."""
+def _richer(effect: Effect, candidates: Sequence[Effect]) -> bool:
+    """Whether ``effect`` is a refined shape of its family with more parameters than the family's catalogue shape
+    (a thrust error on 5 knots, a misalignment from an onset time)."""
     from .effects import CATALOGUE
     family = _family(effect.name)
-    if family == effect.name or effect.scan is not None:
+    if family == effect.name:
         return False
     parent = next((c for c in candidates if c.name == family), None) or CATALOGUE.get(family)
     return parent is not None and len(effect.parameter_names) > len(parent.parameter_names)
+
+
+def _flexible(effect: Effect, candidates: Sequence[Effect]) -> bool:
+    """Whether ``effect`` is a flexible shape: a refined shape of its family (not an event's), with more
+    parameters than the family's catalogue shape (a thrust error on 5 knots, a base drag on 2 Mach knots)."""
+    return effect.scan is None and _richer(effect, candidates)
+
+
+def _own_simple_start(s1: Step, taken: Effect) -> int | None:
+    """The index, among the first step's refits, of the catalogue shape of ``taken``'s family when that refit
+    reached the noise band with a plausible size and was still no explanation (its residuals not white, or a
+    coefficient implausible): the family is in the data, and the refined shape's extra freedom may carry a second
+    effect. None otherwise."""
+    family = _family(taken.name)
+    accs, contenders = s1.acceptances, s1.screen.contenders
+    for j in range(min(len(accs), len(contenders))):
+        a = accs[j]
+        if contenders[j].effect.name == family:
+            ok = (a.admissible and a.refit.success and not a.accepted and a.check("noise").passed
+                  and a.check("size").passed)
+            return j if ok else None
+    return None
 
 
 def _simple_shapes(candidates: Sequence[Effect]) -> list[Effect]:
@@ -1257,11 +1281,32 @@ def _paired(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Effect],
     0.40), and was called explained; the start mass with the temperature, neither near the noise alone at step 1
     (2.93, 2.79), explain the data at a BIC 51 lower. With a nozzle's back-pressure and the same cold day, a
     power-off base drag on two Mach knots of -0.28 at the first (1.026) against the back-pressure with the
-    temperature, 34 lower."""
+    temperature, 34 lower.
+
+    A refined shape of any kind (an event's too) whose family's catalogue shape reached the noise band at step 1
+    with a plausible size, yet was no explanation (residuals not white, a coefficient implausible), gets a second
+    start: that catalogue shape, the second step among simple shapes (:func:`_paired_from_own`), with the same
+    replacement rule. The family is in the data, and the refined shape's extra parameter may carry a second
+    effect. Measured on Osprey-A with a thrust misalignment of 0.35 deg from ignition in a column 12 K warmer:
+    the misalignment from ignition reached chi2/dof 1.006 at step 1 with the altitude's residuals not white, and
+    the misalignment switched on at 24.3 s (chi2/dof 0.9905) was called explained -- the onset taking
+    up the warm column; the misalignment from ignition with the temperature offset explains the data at a BIC 23
+    lower, 0.354 deg and +13.7 +- 1.6 K."""
     s1 = path.steps[0] if path.steps else None
     if (len(path.chosen) != 1 or s1 is None or s1.number != 1 or s1.chosen is None or path.last is None
-            or not path.last.accepted or not _flexible(path.chosen[0], candidates)):
+            or not path.last.accepted or not _richer(path.chosen[0], candidates)):
         return path
+    if _flexible(path.chosen[0], candidates):
+        paired = _paired_from_another(ctx, fit, candidates, path, notes, s1)
+        if paired is not path:          # replaced, or stopped by the time budget
+            return paired
+    return _paired_from_own(ctx, fit, candidates, path, notes, s1)
+
+
+def _paired_from_another(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Effect], path: _Path,
+                         notes: list, s1: Step) -> _Path:
+    """:func:`_paired` from the first step's best admissible simple effect of another family than the flexible
+    shape's (:func:`_simple_start`)."""
     j = _simple_start(s1, path.chosen[0])
     if j is None:
         return path
@@ -1293,6 +1338,38 @@ def _paired(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Effect],
         return alt
     notes.append(f"pair of simple effects: {ended}; not an explanation with a BIC lower by {BIC_TIE:g}: "
                  f"{flexible} stands")
+    return path
+
+
+def _paired_from_own(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Effect], path: _Path,
+                     notes: list, s1: Step) -> _Path:
+    """:func:`_paired` from the refined shape's own family in its catalogue shape, when that reached the noise at
+    the first step and was no explanation (:func:`_own_simple_start`); the second step among simple shapes."""
+    j = _own_simple_start(s1, path.chosen[0])
+    if j is None:
+        return path
+    refined, name = path.chosen[0].name, s1.acceptances[j].refit.name
+    ctx.say(f"pair of simple effects: {refined} explains the data alone; starting again from {name}, its family's "
+            "catalogue shape")
+    mine: list = []
+    alt = _forward(ctx, fit, _simple_shapes(candidates), 2, mine, first=(s1.screen, s1.acceptances, j), first_why=(
+        f"taken in place of the refined shape {refined}: its family's catalogue shape reached the noise at the first "
+        f"step (chi2/dof {s1.acceptances[j].refit.chi2_per_dof:.4g}) and was no explanation alone"))
+    if alt.stopped:
+        notes.append(f"pair of simple effects: started from {name}, stopped by the time budget during its step "
+                     f"{alt.stopped}; {refined} stands")
+        return replace(path, stopped=alt.stopped)
+    ended = (f"started from {name} ({refined}'s family in its catalogue shape), the search of two steps ends with "
+             f"{', '.join(e.name for e in alt.chosen)} at chi2/dof {alt.current.chi2_per_dof:.4g}, BIC "
+             f"{_bic(alt.last):.6g} against {refined}'s {_bic(path.last):.6g}")
+    if (alt.ok and alt.last is not None and alt.last.accepted and not alt.ambiguous and len(alt.chosen) == 2
+            and _bic(alt.last) < _bic(path.last) - BIC_TIE):
+        notes += mine
+        notes.append(f"pair of simple effects: {ended}, explained, every size plausible, lower by more than "
+                     f"{BIC_TIE:g}: that model replaces the refined shape")
+        return alt
+    notes.append(f"pair of simple effects: {ended}; not an explanation with a BIC lower by {BIC_TIE:g}: "
+                 f"{refined} stands")
     return path
 
 
