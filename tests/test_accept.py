@@ -451,6 +451,18 @@ def test_a_refined_shape_is_put_back_in_its_family_shape_when_that_explains(monk
     assert S._simpler(chosen, far, None, candidates, ctx) is None and not tried
 
 
+def _pair_search_ends(monkeypatch, calls: list, alt):
+    """Make the pair's search (``step._forward``) end at ``alt``, recording ``(max_effects, start, why)`` in
+    ``calls``; returns ``alt``."""
+    from rocketid.diagnostics import step as S
+
+    def fake_forward(ctx, fit, cands, max_effects, notes, first=None, first_why=""):
+        calls.append((max_effects, first[2], first_why))
+        return alt
+    monkeypatch.setattr(S, "_forward", fake_forward)
+    return alt
+
+
 def test_a_flexible_shape_that_explains_at_step_1_is_weighed_against_a_pair_of_simple_effects(monkeypatch):
     """Tern-2 on a day 15 K cold with 20 kg more at launch: a 5-knot thrust error reached the noise at step 1 and was
     called explained; the start mass with the temperature, neither near the noise alone, explain the data at a BIC
@@ -489,14 +501,9 @@ def test_a_flexible_shape_that_explains_at_step_1_is_weighed_against_a_pair_of_s
 
     def ends_at(chi2, n_effects=2, ok=True, ambiguous=""):
         last = accept(refit("temperature", chi2, base_chi2=2.93), BAND)
-        alt = S._Path((step1,), [CATALOGUE["start_mass"], shapes["temperature"]][:n_effects],
-                      SimpleNamespace(chi2_per_dof=chi2), last, ok, "", ambiguous)
-
-        def fake_forward(ctx, fit, cands, max_effects, notes, first=None, first_why=""):
-            calls.append((max_effects, first[2], first_why))
-            return alt
-        monkeypatch.setattr(S, "_forward", fake_forward)
-        return alt
+        return _pair_search_ends(monkeypatch, calls, S._Path(
+            (step1,), [CATALOGUE["start_mass"], shapes["temperature"]][:n_effects],
+            SimpleNamespace(chi2_per_dof=chi2), last, ok, "", ambiguous))
 
     ctx = SimpleNamespace(band=BAND, refine=True, say=lambda message: None)
     pair = ends_at(1.004)
@@ -569,13 +576,8 @@ def test_a_refined_shape_at_step_1_is_weighed_against_its_catalogue_shape_beside
 
     def ends_at(chi2, n_effects=2):
         last = accept(refit("temperature", chi2, base_chi2=1.006), BAND)
-        alt = S._Path((step1,), [mis, temp][:n_effects], SimpleNamespace(chi2_per_dof=chi2), last, True, "")
-
-        def fake_forward(ctx, fit, cands, max_effects, notes, first=None, first_why=""):
-            calls.append((max_effects, first[2], first_why))
-            return alt
-        monkeypatch.setattr(S, "_forward", fake_forward)
-        return alt
+        return _pair_search_ends(monkeypatch, calls, S._Path((step1,), [mis, temp][:n_effects],
+                                                             SimpleNamespace(chi2_per_dof=chi2), last, True, ""))
 
     ctx = SimpleNamespace(band=BAND, refine=True, say=lambda message: None)
     pair = ends_at(0.9847)

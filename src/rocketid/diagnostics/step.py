@@ -1285,7 +1285,7 @@ def _paired(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Effect],
 
     A refined shape of any kind (an event's too) whose family's catalogue shape reached the noise band at step 1
     with a plausible size, yet was no explanation (residuals not white, a coefficient implausible), gets a second
-    start: that catalogue shape, the second step among simple shapes (:func:`_paired_from_own`), with the same
+    start: that catalogue shape, the second step among simple shapes (:func:`_paired_from`), with the same
     replacement rule. The family is in the data, and the refined shape's extra parameter may carry a second
     effect. Measured on Osprey-A with a thrust misalignment of 0.35 deg from ignition in a column 12 K warmer:
     the misalignment from ignition reached chi2/dof 1.006 at step 1 with the altitude's residuals not white, and
@@ -1297,79 +1297,53 @@ def _paired(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Effect],
             or not path.last.accepted or not _richer(path.chosen[0], candidates)):
         return path
     if _flexible(path.chosen[0], candidates):
-        paired = _paired_from_another(ctx, fit, candidates, path, notes, s1)
+        paired = _paired_from(ctx, fit, candidates, path, notes, s1, own=False)
         if paired is not path:          # replaced, or stopped by the time budget
             return paired
-    return _paired_from_own(ctx, fit, candidates, path, notes, s1)
+    return _paired_from(ctx, fit, candidates, path, notes, s1, own=True)
 
 
-def _paired_from_another(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Effect], path: _Path,
-                         notes: list, s1: Step) -> _Path:
+def _paired_from(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Effect], path: _Path, notes: list,
+                 s1: Step, own: bool) -> _Path:
     """:func:`_paired` from the first step's best admissible simple effect of another family than the flexible
-    shape's (:func:`_simple_start`)."""
-    j = _simple_start(s1, path.chosen[0])
+    shape's (``own`` false: :func:`_simple_start`), or from the refined shape's own family in its catalogue shape
+    (``own`` true: :func:`_own_simple_start`); the second step among simple shapes."""
+    j = (_own_simple_start if own else _simple_start)(s1, path.chosen[0])
     if j is None:
         return path
-    flexible, name = path.chosen[0].name, s1.acceptances[j].refit.name
-    ctx.say(f"pair of simple effects: {flexible} explains the data alone; starting again from {name}")
+    shape, name = path.chosen[0].name, s1.acceptances[j].refit.name
+    kind = "refined" if own else "flexible"
+    chi2 = s1.acceptances[j].refit.chi2_per_dof
+    ctx.say(f"pair of simple effects: {shape} explains the data alone; starting again from {name}"
+            + (", its family's catalogue shape" if own else ""))
+    why = (f"its family's catalogue shape reached the noise at the first step (chi2/dof {chi2:.4g}) and was no "
+           "explanation alone" if own else
+           f"the first step's best admissible refit of a simple effect of another family ({name}, chi2/dof {chi2:.4g})")
     mine: list = []
-    alt = _forward(ctx, fit, _simple_shapes(candidates), 2, mine, first=(s1.screen, s1.acceptances, j), first_why=(
-        f"taken in place of the flexible shape {flexible}: the first step's best admissible refit of a simple effect "
-        f"of another family ({name}, chi2/dof {s1.acceptances[j].refit.chi2_per_dof:.4g})"))
+    alt = _forward(ctx, fit, _simple_shapes(candidates), 2, mine, first=(s1.screen, s1.acceptances, j),
+                   first_why=f"taken in place of the {kind} shape {shape}: {why}")
     if alt.stopped:
         notes.append(f"pair of simple effects: started from {name}, stopped by the time budget during its step "
-                     f"{alt.stopped}; {flexible} stands")
+                     f"{alt.stopped}; {shape} stands")
         return replace(path, stopped=alt.stopped)
-    ended = (f"started from {name}, the search of two steps ends with "
-             f"{', '.join(e.name for e in alt.chosen)} at chi2/dof {alt.current.chi2_per_dof:.4g}, BIC "
-             f"{_bic(alt.last):.6g} against {flexible}'s {_bic(path.last):.6g}")
-    family = _family(flexible)
-    if any(_family(e.name) == family for e in alt.chosen):
+    ended = (f"started from {name}" + (f" ({shape}'s family in its catalogue shape)" if own else "")
+             + f", the search of two steps ends with {', '.join(e.name for e in alt.chosen)} at chi2/dof "
+             f"{alt.current.chi2_per_dof:.4g}, BIC {_bic(alt.last):.6g} against {shape}'s {_bic(path.last):.6g}")
+    family = _family(shape)
+    if not own and any(_family(e.name) == family for e in alt.chosen):
         # the pair holds the flexible shape's own family: the data want that family, and its shape against a
         # simpler one beside another effect is the refinement's question, answered at step 1
-        notes.append(f"pair of simple effects: {ended}; it holds {family}, the flexible shape's family: {flexible} "
+        notes.append(f"pair of simple effects: {ended}; it holds {family}, the flexible shape's family: {shape} "
                      "stands")
         return path
     if (alt.ok and alt.last is not None and alt.last.accepted and not alt.ambiguous and len(alt.chosen) == 2
             and _bic(alt.last) < _bic(path.last) - BIC_TIE):
         notes += mine
         notes.append(f"pair of simple effects: {ended}, explained, every size plausible, lower by more than "
-                     f"{BIC_TIE:g}: that model replaces the flexible shape")
+                     f"{BIC_TIE:g}: that model replaces the {kind} shape")
         return alt
     notes.append(f"pair of simple effects: {ended}; not an explanation with a BIC lower by {BIC_TIE:g}: "
-                 f"{flexible} stands")
-    return path
-
-
-def _paired_from_own(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Effect], path: _Path,
-                     notes: list, s1: Step) -> _Path:
-    """:func:`_paired` from the refined shape's own family in its catalogue shape, when that reached the noise at
-    the first step and was no explanation (:func:`_own_simple_start`); the second step among simple shapes."""
-    j = _own_simple_start(s1, path.chosen[0])
-    if j is None:
-        return path
-    refined, name = path.chosen[0].name, s1.acceptances[j].refit.name
-    ctx.say(f"pair of simple effects: {refined} explains the data alone; starting again from {name}, its family's "
-            "catalogue shape")
-    mine: list = []
-    alt = _forward(ctx, fit, _simple_shapes(candidates), 2, mine, first=(s1.screen, s1.acceptances, j), first_why=(
-        f"taken in place of the refined shape {refined}: its family's catalogue shape reached the noise at the first "
-        f"step (chi2/dof {s1.acceptances[j].refit.chi2_per_dof:.4g}) and was no explanation alone"))
-    if alt.stopped:
-        notes.append(f"pair of simple effects: started from {name}, stopped by the time budget during its step "
-                     f"{alt.stopped}; {refined} stands")
-        return replace(path, stopped=alt.stopped)
-    ended = (f"started from {name} ({refined}'s family in its catalogue shape), the search of two steps ends with "
-             f"{', '.join(e.name for e in alt.chosen)} at chi2/dof {alt.current.chi2_per_dof:.4g}, BIC "
-             f"{_bic(alt.last):.6g} against {refined}'s {_bic(path.last):.6g}")
-    if (alt.ok and alt.last is not None and alt.last.accepted and not alt.ambiguous and len(alt.chosen) == 2
-            and _bic(alt.last) < _bic(path.last) - BIC_TIE):
-        notes += mine
-        notes.append(f"pair of simple effects: {ended}, explained, every size plausible, lower by more than "
-                     f"{BIC_TIE:g}: that model replaces the refined shape")
-        return alt
-    notes.append(f"pair of simple effects: {ended}; not an explanation with a BIC lower by {BIC_TIE:g}: "
-                 f"{refined} stands")
+                 f"{shape} stands")
     return path
 
 
