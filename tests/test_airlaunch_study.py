@@ -32,7 +32,17 @@ from airlaunch_study.run import STUDY
 from airlaunch_study.cases import ALL, BY_NAME, FRESH, JET, MIS, Hidden
 
 #: Cases measured not to meet the bar (``STUDY.acceptable``), with the measured reason.
-KNOWN_FAILURES: dict[str, str] = {}
+KNOWN_FAILURES: dict[str, str] = {
+    "cold-column+drag-hump": "2c7cc74 (fresh pair): temperature, dT_air -7.5 +- 1.0 K (-8), explained at chi2/dof 1.003; "
+                             "the hump at Mach 1.05 sits on the drag table's knot at Mach 1.0 (+0.106 there, +0.018 "
+                             "at 1.25), which takes it up: CD_1 1.11 for 0.98 + 0.106 -- the model's own table draws "
+                             "it, nothing of the drag family is missing: right but partly",
+    "westward-rotation+v-scale": "d9b20fa (fresh pair): scale_v (k_v -0.003987 for -0.004) at step 1 (chi2/dof 4.31), "
+                                 "then earth_rotation with k_rot -0.935 (the catalogue's 28.5 N eastward site: the "
+                                 "Coriolis term reversed, the launch westward) and a misalignment from 21 s reach the "
+                                 "noise within BIC 10: the tie named, partly explained; with the site stated "
+                                 "(earth_rotation_effect(35, 270)) k_rot is 1.004 +- 0.009 at chi2/dof 1.042",
+}
 # (2026-11-26: "hot-motor" and "hot-motor+misalignment" failed on ffc28ec -- the 3 % faster burn reaches its
 # tail-off 2 s early and no catalogue shape followed it; burn_rate, the motor on a faster clock, explains both.)
 
@@ -191,6 +201,23 @@ def test_a_hot_motor_before_its_tail_off_is_not_a_lighter_vehicle(osprey_spec, t
     assert report.final.effects == ("burn_rate",) and report.final.verdict == "explained", report.final
     value, std = report.final.parameters["eps_burn"]
     assert abs(value - 0.03) < 3 * std + 1e-3, (value, std)
+
+
+@pytest.mark.slow
+def test_a_westward_launch_stated_as_such_is_earth_rotation(osprey_spec):
+    """The fresh pair westward-rotation+v-scale (KNOWN_FAILURES): the truth rotates its Cartesian frame at 35 N
+    with the launch due west. The catalogue's rotation (28.5 N, east) refits to k_rot -0.935 -- the Coriolis term
+    reversed -- and ties with a late misalignment; stated as the site it is, the rotation is Earth's own."""
+    from rocketid.diagnostics import earth_rotation_effect
+    from rocketid.diagnostics.refit import confirm
+    case = BY_NAME["westward-rotation+v-scale"]
+    base = ri.estimate(osprey_spec, truth.measurements(case.hidden, case.seed))
+    stated = confirm(base, ["scale_v", earth_rotation_effect(35.0, 270.0)])
+    k, sk = stated.effect_estimates["k_rot"][:2]
+    assert stated.confirmed and abs(k - 1.0) < 3 * sk + 0.01, (k, sk)
+    assert abs(stated.effect_estimates["k_v"][0] + 0.004) < 1e-4
+    default = confirm(base, ["scale_v", "earth_rotation"])
+    assert default.effect_estimates["k_rot"][0] < -0.8           # the stated site's rotation, reversed
 
 
 @pytest.mark.slow
