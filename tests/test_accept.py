@@ -393,14 +393,26 @@ def test_the_exchange_tries_a_family_in_its_catalogue_shape_beside_its_best_shap
 
     fake_task = _recording_task(tried)
     monkeypatch.setattr(S, "_task", fake_task)
-    monkeypatch.setattr(S, "refit_all", lambda tasks, workers=None: tuple(
-        refit(t[0], 0.9911 if t[0] == "start_mass" else 1.3) for t in tasks))
+    def swap_at(chi2):          # the start mass's set at chi2 (same parameter count: BIC 2 J apart)
+        monkeypatch.setattr(S, "refit_all", lambda tasks, workers=None: tuple(
+            refit(t[0], chi2 if t[0] == "start_mass" else 1.3) for t in tasks))
+
+    swap_at(0.9905)                                   # a BIC 16 lower, as measured (15.3)
     ctx = S._Search(None, BAND, None, 0.05, None, 60.0, 1, True, None)
     effects, acc, why = S._exchange(steps, [profile, wind8], found, None, ctx)
     assert tried == [("mass_jettison", "wind_pl_8"), ("start_mass", "wind_pl_8"), ("back_pressure", "wind_pl_8"),
                      ("scale_v", "wind_pl_8")], tried         # three families; density, the fourth, is not tried
     assert [e.name for e in effects] == ["start_mass", "wind_pl_8"] and acc.accepted
     assert "start_mass in place of thrust_level" in why
+    # the found set is an explanation: a swap lower by less than BIC_TIE is a tie, and the found set stands
+    # (Kestrel-S 25 kg heavy in a headwind: a thrust error in the start mass's place, 5 lower)
+    swap_at(0.9911)
+    assert 0 < S._bic(found) - refit("start_mass", 0.9911).bic[1] < S.BIC_TIE
+    assert S._exchange(steps, [profile, wind8], found, None, ctx) is None
+    # a found set short of an explanation takes any lower BIC that explains
+    short = accept(refit("wind_pl_8", 0.9913, white={"x": 0.0, "h": 0.0, "v": 0.0}), BAND)
+    assert not short.accepted
+    assert [e.name for e in S._exchange(steps, [profile, wind8], short, None, ctx)[0]] == ["start_mass", "wind_pl_8"]
 
 
 def test_a_refined_shape_is_put_back_in_its_family_shape_when_that_explains(monkeypatch):

@@ -33,7 +33,11 @@ Forward selection with a backward check, capped at ``max_effects``:
    Osprey-A 250 kg light in a tailwind jet: at step 1 (the wind missing) the start-mass family's
    best shape was a mass jettison, and beside the 8-knot wind the family was tried in that shape
    alone -- the 3-knot thrust profile stayed, explained (a wrong effect); the start mass beside
-   the same wind reaches the noise at a BIC 15 lower, ``dm_start`` -247 +- 6 kg;
+   the same wind reaches the noise at a BIC 15 lower, ``dm_start`` -247 +- 6 kg. A found set that
+   is already an explanation is replaced only by a set lower by :data:`BIC_TIE`: Kestrel-S 25 kg
+   heavy in a headwind, found as the wind, the start mass and a misalignment at chi2/dof 1.010, took
+   a thrust error in the start mass's place at a BIC 5 lower (x, h and v see thrust and mass only
+   through their ratio) -- a tie, decided by nothing, and a wrong effect;
 8. finer shape: a search that ends short of an explanation with a smooth shape (a wind on knots, a density
    profile, a thrust error in time) chosen at a step before the last: its knot count was chosen by a BIC
    that the effects still missing distorted; the next :data:`FINER_RUNGS` rungs of its ladder are refitted with
@@ -740,7 +744,10 @@ def _exchange(steps: Sequence[Step], chosen: Sequence[Effect], last: Acceptance 
             families += 1
             if families >= EXCHANGE_ALTERNATIVES:
                 break
-    best = _best_set(tries, base, ctx, best_bic)
+    # an explanation already reached is overturned only on strong evidence (BIC_TIE): within it the swap and the
+    # found set are a tie the data do not decide, and the set found stands
+    margin = BIC_TIE if last.accepted else 0.0
+    best = _best_set(tries, base, ctx, best_bic - margin)
     if best is None:
         return None
     bic, who, eff, effects, acc = best
