@@ -265,4 +265,6 @@ def exact_outputs(hidden: Hidden, times) -> dict:
 def measurements(hidden: Hidden, seed: int, times=None) -> "ri.Measurements":
     """The case's data: exact outputs plus N(0, sigma) noise (seeded), the vehicle's sigmas."""
     times = O.sample_times() if times is None else np.asarray(times, float)
+    # time tags early (tau < 0): a tag near the end stands for a moment past the flight's record, which ends at TF
+    times = times[times - hidden.tau <= O.TF + 1e-12]
     return with_noise(exact_outputs(hidden, times), times, O.SIGMA, seed)
