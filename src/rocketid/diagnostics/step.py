@@ -1298,7 +1298,7 @@ def _paired(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Effect],
     the misalignment from ignition reached chi2/dof 1.006 at step 1 with the altitude's residuals not white, and
     the misalignment switched on at 24.3 s (chi2/dof 0.9905) was called explained -- the onset taking
     up the warm column; the misalignment from ignition with the temperature offset explains the data at a BIC 23
-    lower, 0.354 deg and +13.7 +- 1.6 K."""
+    lower, 0.354 deg and +13.8 +- 1.6 K."""
     s1 = path.steps[0] if path.steps else None
     if (len(path.chosen) != 1 or s1 is None or s1.number != 1 or s1.chosen is None or path.last is None
             or not path.last.accepted or not _richer(path.chosen[0], candidates)):
