@@ -290,7 +290,8 @@ DENSE_KEYS = 1 << 24
 
 
 def _unique_keys(key: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``numpy.unique(key, return_inverse=True)`` for non-negative integer keys. A model whose output is nonlinear
+    """``numpy.unique(key, return_inverse=True)`` for non-negative integer keys (the same values; the inverse as
+    32-bit integers on the dense path). A model whose output is nonlinear
     in the states of many samples (a time offset: every sample's output depends on it) expands to millions of
     Hessian entries on a few tens of thousands of places (15 million on 22 795 for RA-66M's 19 800 samples with
     ``time_offset_2``); sorting them took 5.5 s per NLP built, marking a dense array over the key range 0.07 s
@@ -301,8 +302,8 @@ def _unique_keys(key: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     mark = np.zeros(top, bool)
     mark[key] = True
     uniq = np.flatnonzero(mark)
-    where = np.zeros(top, np.int64)
-    where[uniq] = np.arange(uniq.size)
+    where = np.zeros(top, np.int32)             # a place per key: at most 2^24 of them
+    where[uniq] = np.arange(uniq.size, dtype=np.int32)
     return uniq.astype(np.int64), where[key]
 
 
