@@ -72,6 +72,19 @@ class Case:
                                                 # chi2/dof ~1 by construction; since 588676e from the data alone)
 
 
+def pair(name: str, hidden, seed: int, truth: str, first: frozenset, second: frozenset, sizes: tuple = (),
+         also: frozenset = frozenset()) -> Case:
+    """A case of two hidden effects, each found by one family of its set: both sets right and needed (``also``:
+    families right beside them, not needed -- a blowdown's mass flow)."""
+    return Case(name, hidden, seed, truth, right=first | second | also, needed=first | second,
+                needed_each=(first, second), sizes=sizes)
+
+
+def one(name: str) -> frozenset:
+    """The set of one family, ``name``."""
+    return frozenset({name})
+
+
 #: Located and refined shapes added to the catalogue after the studies were written, with their family
 #: (dated: throttle_step 2026-11-25, throttle_window 2026-11-26, drag_bump 2026-11-26, mass_jettison 2026-11-25,
 #: temperature 2026-11-26).

@@ -57,6 +57,7 @@ for _extra in (_TESTS, _TESTS / "vehicles"):
 import petrel as V  # noqa: E402
 from petrel_study import truth  # noqa: E402
 from petrel_study.truth import Hidden  # noqa: E402
+from study_harness import one  # noqa: E402
 
 #: The channels a CSV holds, in column order (the model's outputs).
 CHANNELS = ("x", "h", "v")
@@ -70,10 +71,6 @@ MIS = math.radians(0.2)
 JET = (4.0, 25.0, 11_000.0, 2_000.0)
 #: Flight C's jet in campaign "nozzle+C-wind": another day, 3 -> 6 m/s, 20 m/s at 12 km, sigma 2.5 km.
 JET_2 = (3.0, 20.0, 12_000.0, 2_500.0)
-
-
-def _one(name: str) -> frozenset:
-    return frozenset({name})
 
 
 @dataclass(frozen=True)
@@ -140,7 +137,7 @@ def _days(seeds, own=None) -> tuple:
     return tuple(out)
 
 
-NOZZLE = dict(shared=(("A_e", 0.06),), shared_right=_one("back_pressure"), shared_needed=_one("back_pressure"),
+NOZZLE = dict(shared=(("A_e", 0.06),), shared_right=one("back_pressure"), shared_needed=one("back_pressure"),
               shared_nature="vehicle", shared_sizes=(("A_e", 0.06),))
 
 CAMPAIGNS = (
@@ -148,23 +145,23 @@ CAMPAIGNS = (
     Campaign("nozzle", "nozzle exit 0.06 m^2 on a sea-level thrust table, every flight", _days((644, 645, 646)),
              shared_change=(("v", 80.0, 150.0),), **NOZZLE),
     Campaign("misalignment", "thrust 0.2 deg off the body axis, every flight", _days((647, 648, 649)),
-             shared=(("delta", MIS),), shared_right=_one("misalignment"), shared_needed=_one("misalignment"),
+             shared=(("delta", MIS),), shared_right=one("misalignment"), shared_needed=one("misalignment"),
              shared_nature="vehicle", shared_sizes=(("delta_thrust", MIS),), shared_change=(("x", 25.0, 60.0),)),
     Campaign("adapter-mass", "40 kg payload adapter nobody declared, every flight", _days((650, 651, 652)),
-             shared=(("dm0", 40.0),), shared_right=_one("start_mass"), shared_needed=_one("start_mass"),
+             shared=(("dm0", 40.0),), shared_right=one("start_mass"), shared_needed=one("start_mass"),
              shared_nature="flight", shared_sizes=(("dm_start", 40.0),), shared_change=(("v", 20.0, 45.0),)),
     Campaign("own-days", "no vehicle effect; B's GNSS height 25 m high, C flew through a jet stream",
              _days((653, 654, 655), {
-                 "B": ((("bias_h", 25.0),), "h + 25 m", _one("bias_h"), (_one("bias_h"),), (("b_h", 25.0),)),
-                 "C": ((("jet_wind", JET),), "jet 4 -> 8 m/s + 25 m/s at 11 km", _one("wind"), (_one("wind"),), ()),
+                 "B": ((("bias_h", 25.0),), "h + 25 m", one("bias_h"), (one("bias_h"),), (("b_h", 25.0),)),
+                 "C": ((("jet_wind", JET),), "jet 4 -> 8 m/s + 25 m/s at 11 km", one("wind"), (one("wind"),), ()),
              })),
     Campaign("nozzle+C-wind", "nozzle exit 0.06 m^2 every flight; C flew through a jet stream",
              _days((656, 657, 658), {
-                 "C": ((("jet_wind", JET_2),), "jet 3 -> 6 m/s + 20 m/s at 12 km", _one("wind"), (_one("wind"),), ()),
+                 "C": ((("jet_wind", JET_2),), "jet 3 -> 6 m/s + 20 m/s at 12 km", one("wind"), (one("wind"),), ()),
              }), shared_change=(("v", 80.0, 150.0),), **NOZZLE),
     Campaign("blowdown+A-height", "blowdown -6 % at cutoff every flight; A's GNSS height 20 m high",
              _days((659, 660, 661), {
-                 "A": ((("bias_h", 20.0),), "h + 20 m", _one("bias_h"), (_one("bias_h"),), (("b_h", 20.0),)),
+                 "A": ((("bias_h", 20.0),), "h + 20 m", one("bias_h"), (one("bias_h"),), (("b_h", 20.0),)),
              }), shared=(("blowdown", 0.06),), shared_right=THRUST, shared_needed=THRUST_NEEDED,
              shared_nature="vehicle", shared_change=(("v", 40.0, 100.0),)),
     Campaign("clean-2", "three clean flights, other seeds", _days((662, 663, 664))),

@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import math
 
-from study_harness import Case
+from study_harness import Case, one, pair
 
 from .truth import Hidden
 
@@ -41,90 +41,78 @@ MIS = math.radians(0.2)
 JET = (4.0, 25.0, 11_000.0, 2_000.0)
 
 
-def _one(name):
-    return frozenset({name})
-
-
 CASES = (
     Case("blowdown", Hidden(blowdown=0.06), 501,
          "thrust and mass flow falling linearly in propellant used, -6 % at cutoff",
          right=BLOW, needed=BLOW_NEEDED),
     Case("vacuum-nozzle", Hidden(A_e=0.06), 502,
          "sea-level thrust table, nozzle exit 0.06 m^2: P + A_e (p_sl - p(h)), pad at 1400 m",
-         right=_one("back_pressure"), needed=_one("back_pressure"), sizes=(("A_e", 0.06),)),
+         right=one("back_pressure"), needed=one("back_pressure"), sizes=(("A_e", 0.06),)),
     Case("cold-day", Hidden(cold_dT=-10.0), 503,
          "column 10 K colder, hydrostatic (density +3.1 % at the pad, -15 % at 30 km), speed of sound standard",
-         right=_one("density"), needed=_one("density")),
+         right=one("density"), needed=one("density")),
     Case("jet-wind", Hidden(jet_wind=JET), 504,
          "tailwind 4 -> 8 m/s (log, first km above the pad) + 25 m/s Gaussian jet at 11 km (sigma 2 km)",
-         right=_one("wind"), needed=_one("wind")),
+         right=one("wind"), needed=one("wind")),
     Case("heavy-start", Hidden(dm0=40.0), 505,
          "40 kg ballast aboard above the declared 2400 kg",
-         right=_one("start_mass"), needed=_one("start_mass"), sizes=(("dm_start", 40.0),)),
+         right=one("start_mass"), needed=one("start_mass"), sizes=(("dm_start", 40.0),)),
     Case("misalignment", Hidden(delta=MIS), 506,
          "thrust misalignment 0.2 deg from t = 0",
-         right=_one("misalignment"), needed=_one("misalignment"), sizes=(("delta_thrust", MIS),)),
+         right=one("misalignment"), needed=one("misalignment"), sizes=(("delta_thrust", MIS),)),
     Case("ellipsoid-height", Hidden(bias_h=25.0), 507,
          "GNSS height above the ellipsoid: h + 25 m",
-         right=_one("bias_h"), needed=_one("bias_h"), sizes=(("b_h", 25.0),)),
+         right=one("bias_h"), needed=one("bias_h"), sizes=(("b_h", 25.0),)),
     Case("doppler-scale", Hidden(scale_v=0.003), 508,
          "speed reads 0.3 % high",
-         right=_one("scale_v"), needed=_one("scale_v"), sizes=(("k_v", 0.003),)),
+         right=one("scale_v"), needed=one("scale_v"), sizes=(("k_v", 0.003),)),
     Case("v-latency", Hidden(v_latency=0.12), 509,
          "speed channel alone 120 ms late (x, h on time): out of catalogue",
          out_of_catalogue=True),
     Case("blowdown+jet-wind", Hidden(blowdown=0.06, jet_wind=JET), 510,
          "blowdown -6 % at cutoff + tailwind 4 -> 8 m/s with a 25 m/s jet at 11 km",
-         right=BLOW | {"wind"}, needed=BLOW_NEEDED | {"wind"}, needed_each=(BLOW_NEEDED, _one("wind"))),
+         right=BLOW | {"wind"}, needed=BLOW_NEEDED | {"wind"}, needed_each=(BLOW_NEEDED, one("wind"))),
     Case("cold-day+ellipsoid-height", Hidden(cold_dT=-10.0, bias_h=25.0), 511,
          "column 10 K colder + GNSS height 25 m above sea level",
          right=frozenset({"density", "bias_h"}), needed=frozenset({"density", "bias_h"}),
-         needed_each=(_one("density"), _one("bias_h")), sizes=(("b_h", 25.0),)),
+         needed_each=(one("density"), one("bias_h")), sizes=(("b_h", 25.0),)),
     Case("misalignment+heavy-start", Hidden(delta=MIS, dm0=40.0), 512,
          "thrust misalignment 0.2 deg + 40 kg ballast",
          right=frozenset({"misalignment", "start_mass"}), needed=frozenset({"misalignment", "start_mass"}),
-         needed_each=(_one("misalignment"), _one("start_mass")), sizes=(("delta_thrust", MIS), ("dm_start", 40.0))),
+         needed_each=(one("misalignment"), one("start_mass")), sizes=(("delta_thrust", MIS), ("dm_start", 40.0))),
     Case("vacuum-nozzle+doppler-scale", Hidden(A_e=0.06, scale_v=0.003), 513,
          "nozzle exit 0.06 m^2 on a sea-level table + speed 0.3 % high",
          right=frozenset({"back_pressure", "scale_v"}), needed=frozenset({"back_pressure", "scale_v"}),
-         needed_each=(_one("back_pressure"), _one("scale_v")), sizes=(("A_e", 0.06), ("k_v", 0.003))),
+         needed_each=(one("back_pressure"), one("scale_v")), sizes=(("A_e", 0.06), ("k_v", 0.003))),
 ) + tuple(Case(f"clean-{seed}", Hidden(), seed, f"clean (seed {seed})") for seed in range(520, 528))
 
-
-
-def _pair(name: str, hidden: Hidden, seed: int, truth: str, first: frozenset, second: frozenset,
-          sizes: tuple = (), also: frozenset = frozenset()) -> Case:
-    """A case of two hidden effects, each found by one family of its set: both sets right and needed (``also``:
-    families right beside them, not needed -- a blowdown's mass flow)."""
-    return Case(name, hidden, seed, truth, right=first | second | also, needed=first | second,
-                needed_each=(first, second), sizes=sizes)
 
 
 #: Eight more pairs, made on 2026-11-28 as a probe of the pair of simple effects (a flexible shape of a third
 #: family can stand in for two simple effects: Tern-2's cold day with a heavy payload), seeds 531-538.
 FRESH = (
-    _pair("cold-day+heavy-start", Hidden(cold_dT=-10.0, dm0=40.0), 531,
-          "column 10 K colder + 40 kg ballast", _one("density"), _one("start_mass"), sizes=(("dm_start", 40.0),)),
-    _pair("vacuum-nozzle+cold-day", Hidden(A_e=0.06, cold_dT=-10.0), 532,
-          "nozzle exit 0.06 m^2 on a sea-level table + column 10 K colder", _one("back_pressure"), _one("density"),
+    pair("cold-day+heavy-start", Hidden(cold_dT=-10.0, dm0=40.0), 531,
+          "column 10 K colder + 40 kg ballast", one("density"), one("start_mass"), sizes=(("dm_start", 40.0),)),
+    pair("vacuum-nozzle+cold-day", Hidden(A_e=0.06, cold_dT=-10.0), 532,
+          "nozzle exit 0.06 m^2 on a sea-level table + column 10 K colder", one("back_pressure"), one("density"),
           sizes=(("A_e", 0.06),)),
-    _pair("blowdown+heavy-start", Hidden(blowdown=0.06, dm0=40.0), 533,
-          "blowdown -6 % at cutoff + 40 kg ballast", BLOW_NEEDED, _one("start_mass"), sizes=(("dm_start", 40.0),),
+    pair("blowdown+heavy-start", Hidden(blowdown=0.06, dm0=40.0), 533,
+          "blowdown -6 % at cutoff + 40 kg ballast", BLOW_NEEDED, one("start_mass"), sizes=(("dm_start", 40.0),),
           also=BLOW),
-    _pair("jet-wind+ellipsoid-height", Hidden(jet_wind=JET, bias_h=25.0), 534,
-          "tailwind 4 -> 8 m/s with a 25 m/s jet at 11 km + GNSS height 25 m above sea level", _one("wind"),
-          _one("bias_h"), sizes=(("b_h", 25.0),)),
-    _pair("misalignment+doppler-scale", Hidden(delta=MIS, scale_v=0.003), 535,
-          "thrust misalignment 0.2 deg + speed 0.3 % high", _one("misalignment"), _one("scale_v"),
+    pair("jet-wind+ellipsoid-height", Hidden(jet_wind=JET, bias_h=25.0), 534,
+          "tailwind 4 -> 8 m/s with a 25 m/s jet at 11 km + GNSS height 25 m above sea level", one("wind"),
+          one("bias_h"), sizes=(("b_h", 25.0),)),
+    pair("misalignment+doppler-scale", Hidden(delta=MIS, scale_v=0.003), 535,
+          "thrust misalignment 0.2 deg + speed 0.3 % high", one("misalignment"), one("scale_v"),
           sizes=(("delta_thrust", MIS), ("k_v", 0.003))),
-    _pair("blowdown+cold-day", Hidden(blowdown=0.06, cold_dT=-10.0), 536,
-          "blowdown -6 % at cutoff + column 10 K colder", BLOW_NEEDED, _one("density"), also=BLOW),
-    _pair("heavy-start+jet-wind", Hidden(dm0=40.0, jet_wind=JET), 537,
-          "40 kg ballast + tailwind 4 -> 8 m/s with a 25 m/s jet at 11 km", _one("start_mass"), _one("wind"),
+    pair("blowdown+cold-day", Hidden(blowdown=0.06, cold_dT=-10.0), 536,
+          "blowdown -6 % at cutoff + column 10 K colder", BLOW_NEEDED, one("density"), also=BLOW),
+    pair("heavy-start+jet-wind", Hidden(dm0=40.0, jet_wind=JET), 537,
+          "40 kg ballast + tailwind 4 -> 8 m/s with a 25 m/s jet at 11 km", one("start_mass"), one("wind"),
           sizes=(("dm_start", 40.0),)),
-    _pair("vacuum-nozzle+misalignment", Hidden(A_e=0.06, delta=MIS), 538,
-          "nozzle exit 0.06 m^2 on a sea-level table + thrust misalignment 0.2 deg", _one("back_pressure"),
-          _one("misalignment"), sizes=(("A_e", 0.06), ("delta_thrust", MIS))),
+    pair("vacuum-nozzle+misalignment", Hidden(A_e=0.06, delta=MIS), 538,
+          "nozzle exit 0.06 m^2 on a sea-level table + thrust misalignment 0.2 deg", one("back_pressure"),
+          one("misalignment"), sizes=(("A_e", 0.06), ("delta_thrust", MIS))),
 )
 
 ALL = CASES + FRESH

@@ -66,7 +66,7 @@ Mach 3.86, the coast to 45.6 km and Mach 1.62 by 60 s at zero attack angle):
 
 from __future__ import annotations
 
-from study_harness import Case
+from study_harness import Case, pair
 
 from .truth import Hidden
 
@@ -86,13 +86,6 @@ TAU = 0.02
 DRAG_STEP = (0.08, 2.0, 0.1)
 BASE_DRAG = 0.2
 WALLOPS = (37.84, 120.0)
-
-
-def _pair(name: str, hidden: Hidden, seed: int, truth: str, first: frozenset, second: frozenset,
-          sizes: tuple = ()) -> Case:
-    """A case of two hidden effects, each found by one family of its set: both sets right and needed."""
-    return Case(name, hidden, seed, truth, right=first | second, needed=first | second,
-                needed_each=(first, second), sizes=sizes)
 
 
 CASES = (
@@ -138,10 +131,10 @@ CASES = (
          "a winter launch: cold grain (k 0.97) + atmosphere 15 K colder",
          right=MOTOR | {"density"}, needed=MOTOR_NEEDED | {"density"},
          needed_each=(MOTOR_NEEDED, frozenset({"density"})), sizes=(("eps_burn", K_COLD - 1.0),)),
-    _pair("headwind+h-bias", Hidden(wind=WIND, bias_h=BIAS_H), 613,
+    pair("headwind+h-bias", Hidden(wind=WIND, bias_h=BIAS_H), 613,
           "headwind (5 m/s at 10 m, 20 m/s at 11 km) + radar altitude 10 m high",
           frozenset({"wind"}), frozenset({"bias_h"}), sizes=(("b_h", BIAS_H),)),
-    _pair("heavy-payload+time-offset", Hidden(dm0=DM0, tau=TAU), 614,
+    pair("heavy-payload+time-offset", Hidden(dm0=DM0, tau=TAU), 614,
           "launch mass 20 kg above the declared + radar time tags 20 ms late",
           frozenset({"start_mass"}), frozenset({"time_offset"}), sizes=(("dm_start", DM0), ("tau", TAU))),
 ) + tuple(Case(f"clean-{seed}", Hidden(), seed, f"clean (seed {seed})") for seed in range(700, 706))
@@ -150,10 +143,10 @@ CASES = (
 #: drag rise, which the base model does not show alone (its case above ends "nothing found" at the noise), is
 #: allowed but not needed (docs/effects.md, "Fresh pairs on Tern-2").
 FRESH = (
-    _pair("heavy-payload+headwind", Hidden(dm0=DM0, wind=WIND), 801,
+    pair("heavy-payload+headwind", Hidden(dm0=DM0, wind=WIND), 801,
           "launch mass 20 kg above the declared + headwind (5 m/s at 10 m, 20 m/s at 11 km)",
           frozenset({"start_mass"}), frozenset({"wind"}), sizes=(("dm_start", DM0),)),
-    _pair("back-pressure+h-bias", Hidden(A_e=A_EXIT, bias_h=BIAS_H), 802,
+    pair("back-pressure+h-bias", Hidden(A_e=A_EXIT, bias_h=BIAS_H), 802,
           "sea-level thrust table with A_e 0.0707 m^2 + radar altitude 10 m high",
           NOZZLE, frozenset({"bias_h"}), sizes=(("A_e", A_EXIT), ("b_h", BIAS_H))),
     Case("cold-motor+v-scale", Hidden(motor_clock=K_COLD, scale_v=K_V), 803,
@@ -164,16 +157,16 @@ FRESH = (
          "CD 8 % higher above Mach 2 + radar time tags 20 ms late",
          right=DRAG | {"time_offset"}, needed=frozenset({"time_offset"}), needed_each=(frozenset({"time_offset"}),),
          sizes=(("tau", TAU),)),
-    _pair("cold-day+heavy-payload", Hidden(dT=DT_COLD, dm0=DM0), 805,
+    pair("cold-day+heavy-payload", Hidden(dT=DT_COLD, dm0=DM0), 805,
           "atmosphere 15 K colder + launch mass 20 kg above the declared",
           frozenset({"density"}), frozenset({"start_mass"}), sizes=(("dm_start", DM0),)),
-    _pair("earth-rotation+h-bias", Hidden(rotation=WALLOPS, bias_h=BIAS_H), 806,
+    pair("earth-rotation+h-bias", Hidden(rotation=WALLOPS, bias_h=BIAS_H), 806,
           "Earth rotation (37.84 N, azimuth 120 deg) + radar altitude 10 m high",
           frozenset({"earth_rotation"}), frozenset({"bias_h"}), sizes=(("b_h", BIAS_H),)),
-    _pair("base-drag+headwind", Hidden(base_drag=BASE_DRAG, wind=WIND), 807,
+    pair("base-drag+headwind", Hidden(base_drag=BASE_DRAG, wind=WIND), 807,
           "power-off base drag 0.2/M from burn-out + headwind (5 m/s at 10 m, 20 m/s at 11 km)",
           frozenset({"base_drag"}), frozenset({"wind"})),
-    _pair("back-pressure+cold-day", Hidden(A_e=A_EXIT, dT=DT_COLD), 808,
+    pair("back-pressure+cold-day", Hidden(A_e=A_EXIT, dT=DT_COLD), 808,
           "sea-level thrust table with A_e 0.0707 m^2 + atmosphere 15 K colder",
           NOZZLE, frozenset({"density"}), sizes=(("A_e", A_EXIT),)),
 )
