@@ -30,7 +30,7 @@ import wren as V  # noqa: E402
 import rocketid as ri  # noqa: E402
 from wren_study import truth  # noqa: E402
 from wren_study.cases import (ALL, BALLAST, BY_NAME, DT_HOT, GEOID, HEADWIND, HOT_TANK, COLD_TANK,  # noqa: E402
-                              LATENCY, MEASURED_2J, RAIL_TRUE_DEG, THIN_WEB, VENTED, VISIBLE_2J, Hidden)
+                              FRESH, LATENCY, MEASURED_2J, RAIL_TRUE_DEG, THIN_WEB, VENTED, VISIBLE_2J, Hidden)
 from wren_study.run import STUDY  # noqa: E402
 
 #: Cases measured not to meet the bar (``STUDY.acceptable``), with the measured reason. None run yet.
@@ -384,7 +384,7 @@ def test_the_truth_is_written_apart_from_rocketid():
 def test_the_cases_are_consistent():
     """Names and seeds unique, every needed family a right one, pairs with one set per effect, four clean seeds,
     every effect visible by its measured 2J."""
-    assert len(BY_NAME) == len(ALL) == 17 and len({c.seed for c in ALL}) == len(ALL)
+    assert len(BY_NAME) == len(ALL) == 25 and len({c.seed for c in ALL}) == len(ALL)
     for case in ALL:
         assert case.needed <= case.right, case.name
         assert all(group <= case.right for group in case.needed_each), case.name
@@ -396,6 +396,16 @@ def test_the_cases_are_consistent():
     assert not any(c.out_of_catalogue for c in ALL) and BY_NAME["rail-angle"].needed == {"start_angle"}
     assert all(not c.right for c in ALL if c.out_of_catalogue)
     assert set(STUDY.coefficients) == {f"CD_{j}" for j in range(len(V.CD_KNOTS))}
+
+
+def test_the_fresh_pairs_are_consistent():
+    """The fresh pairs: seeds of their own, two hidden effects each (the truth's fields moved), both needed sets
+    right, every one visible."""
+    assert [c.seed for c in FRESH] == list(range(330, 338))
+    for case in FRESH:
+        assert len(case.needed_each) == 2 and case.needed == case.needed_each[0] | case.needed_each[1], case.name
+        moved = [f for f in Hidden.__dataclass_fields__ if getattr(case.hidden, f) != getattr(Hidden(), f)]
+        assert len(moved) == 2 and case.visible and MEASURED_2J[case.name] >= VISIBLE_2J, (case.name, moved)
 
 
 def test_the_harness_runs_the_regime(monkeypatch, tmp_path):

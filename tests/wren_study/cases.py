@@ -66,7 +66,13 @@ the liquid runs out at 9.2-10.5 s, zero thrust at 15.5 s; rail exit at 0.59 s an
   (``transonic_drag``, ``drag_mach``) are not: every Mach number is flown both powered and coasting, and
   a Mach shape would tell the team its table is too coarse, the wrong conclusion;
 - two pairs: a summer launch (hot tank + hot day), and the GPS's two errors (geoid + latency); four clean
-  seeds (nothing to find).
+  seeds (nothing to find);
+- ``FRESH``: eight more pairs (seeds 330-337), made on 2026-11-28 as a probe on data nobody had fitted, with
+  signs, sizes and mates the first cases do not have: a cool tank (16 C) with 2 kg of ballast, a tailwind with
+  the geoid the other way (+18 m), a steep rail (86.5 deg) on a cold day (-10 K), time tags 0.15 s early on a
+  warm day (+10 K), a web 13 mm short with the altitude 15 m low, the base drag with 0.1 s of latency, 1 kg
+  vented with a light tailwind, a warm tank (23 C) on a shallow rail (84 deg). Their answers, by the same
+  rules as above, were written before any diagnosis ran.
 
 Every case has the regime's data: GPS at 10 Hz from T+2 s to 44 s (apogee), 2 % of the fixes lost, noise
 2.5 m, 7.5 m, 0.25 m/s (never stated); the diagnosis runs with ``--sigma estimate`` on the whole horizon
@@ -76,8 +82,9 @@ Every case has the regime's data: GPS at 10 Hz from T+2 s to 44 s (apogee), 2 % 
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
-from study_harness import Case
+from study_harness import Case, one, pair
 
 from .truth import Hidden
 
@@ -151,8 +158,43 @@ CASES = (
 MEASURED_2J = {"hot-tank": 9.543e5, "cold-tank": 6.257e5, "burn-through": 5310.0, "pad-hold": 7.977e4,
                "headwind": 8.373e7, "rail-angle": 8.138e6, "geoid": 3424.0, "gps-latency": 9.827e4,
                "nose-ballast": 5.989e4, "hot-day": 650.7, "base-drag": 4.324e4, "hot-tank+hot-day": 9.818e5,
-               "geoid+gps-latency": 1.135e5, "clean-320": 0.1865}
+               "geoid+gps-latency": 1.135e5, "clean-320": 0.1865,
+               # the fresh pairs (measured 2026-11-28 by the same fit, before any diagnosis ran on them)
+               "cool-tank+ballast": 6.367e5, "tailwind+geoid-up": 5.49e7, "steep-rail+cold-day": 8.51e6,
+               "early-tags+warm-day": 7.669e4, "short-web+geoid": 1513.0, "base-drag+latency": 2.707e4,
+               "vent+tailwind": 2.119e7, "warm-tank+shallow-rail": 3.274e6}
 VISIBLE_2J = 25.0
 
-ALL = CASES
+
+#: Eight more pairs, made on 2026-11-28 as a probe on data nobody had fitted (module notes), seeds 330-337.
+FRESH = (
+    pair("cool-tank+ballast", Hidden(tank_temperature=289.15, dm_payload=2.0), 330,
+         "N2O at 16 C (about -5 % thrust, the liquid out later) + 2 kg of ballast after the weigh-in", MOTOR_NEEDED,
+         one("start_mass"), sizes=(("dm_start", 2.0),), also=frozenset({"mass_flow", "start_speed"})),
+    pair("tailwind+geoid-up", Hidden(wind=(1.5, 15.0), bias_h=18.0), 331,
+         "tailwind 1.5 m/s at 10 m, 15 m/s at the 9 km jet core + GPS altitude 18 m high", one("wind"), one("bias_h"),
+         sizes=(("b_h", 18.0),)),
+    pair("steep-rail+cold-day", Hidden(elevation_deg=86.5, dT=-10.0), 332,
+         "rail at 86.5 deg, declared 85 + air 10 K colder than the standard", one("start_angle"), one("density"),
+         sizes=(("dgamma_start", math.radians(1.5)), ("dT_air", -10.0))),
+    pair("early-tags+warm-day", Hidden(tau=-0.15, dT=10.0), 333,
+         "GPS time tags 0.15 s early + air 10 K warmer than the standard", one("time_offset"), one("density"),
+         sizes=(("tau", -0.15), ("dT_air", 10.0))),
+    pair("short-web+geoid", Hidden(grain_radius=0.047, bias_h=-15.0), 334,
+         "paraffin web 13 mm short (the port at the liner late in the burn) + GPS altitude 15 m low",
+         one("thrust_profile"), one("bias_h"), sizes=(("b_h", -15.0),),
+         also=frozenset({"thrust_level", "mass_flow"})),
+    pair("base-drag+latency", Hidden(base_drag=True, tau=0.1), 335,
+         "power-off base drag in the tail-off + GPS time tags 0.1 s late", one("base_drag"), one("time_offset"),
+         sizes=(("tau", 0.1),)),
+    pair("vent+tailwind", Hidden(vented=1.0, wind=(1.0, 10.0)), 336,
+         "1 kg of N2O vented on the pad + tailwind 1 m/s at 10 m, 10 m/s at the jet core",
+         frozenset({"start_mass", "thrust_profile"}), one("wind"), also=frozenset({"thrust_level", "mass_flow"})),
+    pair("warm-tank+shallow-rail", Hidden(tank_temperature=296.15, elevation_deg=84.0), 337,
+         "N2O at 23 C (about +4 % thrust, the liquid out earlier) + rail at 84 deg, declared 85", MOTOR_NEEDED,
+         one("start_angle"), sizes=(("dgamma_start", math.radians(-1.0)),), also=frozenset({"mass_flow"})),
+)
+FRESH = tuple(replace(c, visible=True) for c in FRESH)     # every one measured visible (MEASURED_2J)
+
+ALL = CASES + FRESH
 BY_NAME = {c.name: c for c in ALL}
