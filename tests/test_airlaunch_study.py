@@ -218,6 +218,14 @@ def test_a_westward_launch_stated_as_such_is_earth_rotation(osprey_spec):
     assert abs(stated.effect_estimates["k_v"][0] + 0.004) < 1e-4
     default = confirm(base, ["scale_v", "earth_rotation"])
     assert default.effect_estimates["k_rot"][0] < -0.8           # the stated site's rotation, reversed
+    # the reading names the azimuths at 28.5 N whose Coriolis term (cos(lat) sin(az)) is the truth's, 35 N west
+    from rocketid.diagnostics import CATALOGUE
+    sine = math.cos(math.radians(35.0)) * math.sin(math.radians(270.0)) / math.cos(math.radians(28.5))
+    west = sorted(((math.degrees(math.asin(sine)) % 360.0), (180.0 - math.degrees(math.asin(sine))) % 360.0))
+    said = CATALOGUE["earth_rotation"].reading({"k_rot": default.effect_estimates["k_rot"][:2]})
+    assert said.startswith("the Coriolis term reversed") and "state the launch site" in said, said
+    lo, hi = (float(a) for a in said.split("flight toward ")[1].split(" deg")[0].split(" or "))
+    assert abs(lo - west[0]) < 3.0 and abs(hi - west[1]) < 3.0, (said, west)
 
 
 @pytest.mark.slow

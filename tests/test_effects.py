@@ -357,6 +357,48 @@ def test_the_site_shape_is_the_catalogues_rotation_at_its_site(ra66m_spec):
                                    rtol=1e-10, atol=1e-9)
 
 
+def _coriolis_up(latitude_deg: float, azimuth_deg: float) -> float:
+    """The upward part of ``-2 Omega x V`` (Omega = 1) for a unit horizontal velocity toward ``azimuth_deg`` at
+    ``latitude_deg``, from the cross product in the site's east-north-up frame."""
+    phi, a = np.radians(latitude_deg), np.radians(azimuth_deg)
+    omega = np.array([0.0, np.cos(phi), np.sin(phi)])
+    velocity = np.array([np.sin(a), np.cos(a), 0.0])
+    return float(-2.0 * np.cross(omega, velocity)[2])
+
+
+@pytest.mark.parametrize("true_site, k_expected", [((28.5, 250.0), None), ((28.5, 120.0), None), ((28.5, 90.0), 1.0)])
+def test_the_rotation_reading_names_the_azimuth_flown(true_site, k_expected):
+    """``earth_rotation``'s reading of ``k_rot`` at the catalogue's site (28.5 N, east): the rate factor whose
+    Coriolis term is a flight toward another azimuth (from the cross product, not the effect's formula) is read as
+    that azimuth or its mirror about east-west, reversed when westward, and 1 as the stated site."""
+    from rocketid.diagnostics import CATALOGUE
+    k = _coriolis_up(*true_site) / _coriolis_up(28.5, 90.0)
+    assert k_expected is None or abs(k - k_expected) < 1e-12
+    said = CATALOGUE["earth_rotation"].reading({"k_rot": (k, 0.01)})
+    if k_expected == 1.0:
+        assert said.startswith("Earth's rotation at the stated site (28.5 N, toward 90 deg)"), said
+        return
+    az = true_site[1]
+    pair = sorted((az % 360.0, (180.0 - az) % 360.0))
+    assert f"toward {pair[0]:.0f} or {pair[1]:.0f} deg at the stated latitude 28.5 N" in said, said
+    assert said.startswith("the Coriolis term reversed") == (k < 0) and "state the launch site" in said, said
+
+
+def test_a_tie_note_carries_the_rivals_readings():
+    """A tie's note names each rival with its sizes and, for an effect with a reading, what they say: the
+    rotation's reversed Coriolis term as an azimuth, beside a misalignment with none."""
+    from types import SimpleNamespace
+    from rocketid.diagnostics import CATALOGUE
+    from rocketid.diagnostics.step import _with_sizes
+    rot = SimpleNamespace(name="earth_rotation", parameter_names=("CD_0", "k_rot"), p=np.array([0.4, -0.9355]),
+                          std=np.array([0.01, 0.0088]), effect_parameters=("k_rot",))
+    text = _with_sizes(rot, CATALOGUE["earth_rotation"])
+    assert text.startswith("earth_rotation (k_rot -0.935: the Coriolis term reversed: the term of a flight") and "249 or 291" in text, text
+    mis = SimpleNamespace(name="misalignment", parameter_names=("delta_thrust",), p=np.array([0.006]),
+                          std=np.array([1e-4]), effect_parameters=("delta_thrust",))
+    assert _with_sizes(mis, CATALOGUE["misalignment"]) == "misalignment (delta_thrust 0.006)"
+
+
 def test_a_wind_turns_the_thrust_of_a_vehicle_without_lift(ra66m_spec):
     """A vehicle declared without lift flies at its attack angle to the air: the wind turns its thrust by the
     airflow's angle to the path (``atan2(W sin theta, v - W cos theta)``) and leaves the lift coefficient at

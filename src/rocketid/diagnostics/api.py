@@ -694,6 +694,9 @@ def _final(disc, ranking, level, window) -> FinalModel | None:
     names = ", ".join(disc.effect_names)
     band = disc.band
     amb = f" {disc.ambiguous[0].upper()}{disc.ambiguous[1:]}." if disc.ambiguous else ""
+    # what each added effect's estimates say in the field's terms (a launch site from an Earth rotation's)
+    readings = "".join(f" That is {e.reading(params)}." for e in disc.effects
+                       if e.reading is not None and all(n in params for n in e.parameter_names))
     if disc.verdict == "nothing missing":
         text = (f"{fit.spec.name} reaches the noise (chi2/dof {fit.chi2_per_dof:.4g}, band <= {band.upper:.4g}); "
                 "no candidate effect is both significant and needed.")
@@ -714,10 +717,7 @@ def _final(disc, ranking, level, window) -> FinalModel | None:
             return f" (realistic {sizes[n]:.3g})" if n in sizes else ""
         est = "; ".join(f"{n} = {v:.4g} +- {s:.2g}{size_note(n)}" for n, (v, s) in params.items()
                         if n not in base_names)
-        text = f"the model with {names} reaches the noise (chi2/dof {fit.chi2_per_dof:.4g}): {est}."
-        for e in disc.effects:
-            if e.reading is not None and all(n in params for n in e.parameter_names):
-                text += f" That is {e.reading(params)}."
+        text = f"the model with {names} reaches the noise (chi2/dof {fit.chi2_per_dof:.4g}): {est}." + readings
         if r is not None and r.identifiability:
             text += f" Caution: {r.identifiability}."
         if any(e.kind == "mass" or e.name == "thrust_level" or e.name.startswith("thrust_profile") for e in disc.effects):
@@ -739,14 +739,14 @@ def _final(disc, ranking, level, window) -> FinalModel | None:
         if disc.fits_to_noise:
             why = disc.not_an_explanation
             text = (f"the model with {names} reaches the noise (chi2/dof {fit.chi2_per_dof:.4g}, band <= "
-                    f"{band.upper:.4g}) but is not an explanation{': ' + why if why else ''}.{amb}")
+                    f"{band.upper:.4g}) but is not an explanation{': ' + why if why else ''}.{readings}{amb}")
             if disc.refit is not None and _oversized(disc.refit, band):
                 text += (" The data find it at that size: check the vehicle's stated numbers, or, if they are that "
                          "uncertain, state it (--size NAME=VALUE, diagnose(sizes={...})) and the same fit is judged "
                          "against it.")
         else:
             text = (f"the model with {names} does not reach the noise ({disc.noise_detail}); the residual is "
-                    f"located in: {_where(fit, level, window)}.{amb}" + ("" if disc.stopped else f" Try {_suggest(ranking)}."))
+                    f"located in: {_where(fit, level, window)}.{readings}{amb}" + ("" if disc.stopped else f" Try {_suggest(ranking)}."))
     elif disc.stopped:
         text = (f"no effect was added before the search was cut short (chi2/dof {fit.chi2_per_dof:.4g}, band <= "
                 f"{band.upper:.4g}); not every candidate was tried, so this does not say the catalogue cannot explain "

@@ -63,7 +63,7 @@ __all__ = ["Effect", "Vehicle", "back_pressure_effect", "thrust_profile_effect",
            "density_profile_effect", "drag_mach_effect", "piecewise_linear", "CATALOGUE", "KINDS", "custom_effect", "with_effects", "apply_effect", "resolve_effects",
            "is_present", "check_effect_parameters", "effect_parameter_problems", "wind_effect", "density_effect", "earth_rotation_effect",
            "liftoff_fade", "EARTH_RATE", "LIFTOFF_FADE_TIME", "misalignment_onset_effect", "mass_jettison_effect", "throttle_step_effect", "onset_step",
-           "ONSET_STARTS", "temperature_effect", "burn_rate_effect", "earth_rotation_site_effect", "base_drag_mach_effect", "TEMPERATURE_REALISTIC_K"]
+           "ONSET_STARTS", "temperature_effect", "burn_rate_effect", "earth_rotation_site_effect", "rotation_reading", "base_drag_mach_effect", "TEMPERATURE_REALISTIC_K"]
 
 #: The kinds of effect (``"custom"`` for the user's own).
 KINDS = ("propulsion", "mass", "aero", "environment", "kinematics", "sensor", "custom")
@@ -1653,6 +1653,13 @@ def earth_rotation_effect(latitude_deg: float = 28.5, azimuth_deg: float = 90.0,
     jet-stream wind and altitude bias at once took ``k_rot`` = -4.18 in the second step of a search that
     never reached the noise.) The catalogue's entry is at 28.5 N toward the east and, for a
     vehicle whose site is not stated, is refined by :func:`earth_rotation_site_effect` (the site estimated).
+
+    Its reading (:attr:`Effect.reading`, :func:`rotation_reading`) says what ``k_rot`` means for the
+    launch: Earth's rotation at the stated site when it is 1 within its error, else the azimuths at the
+    stated latitude whose in-plane Coriolis term the estimate is -- a negative ``k_rot`` is the term
+    reversed, a flight toward the west of north-south when the stated one flies east (an air launch due
+    west at 35 N, taken as the catalogue's 28.5 N eastward site, refits ``k_rot`` -0.935: azimuth 249 or
+    291 deg at 28.5 N), and the user should state the site and refit.
     """
     phi = math.radians(latitude_deg)
     az = math.radians(azimuth_deg)
@@ -1665,7 +1672,54 @@ def earth_rotation_effect(latitude_deg: float = 28.5, azimuth_deg: float = 90.0,
     desc = (f"Earth rotation at latitude {latitude_deg:g} deg, azimuth {azimuth_deg:g} deg: Coriolis "
             "(2 Omega v cos(lat) sin(az) in v dtheta/dt, phased in by the lift-off fade) and centrifugal "
             "(Omega^2 r cos(lat) ...) accelerations, Omega = k_rot * 7.292e-5 rad/s")
-    return Effect(name, "Earth rotation", "kinematics", apply, desc, {"k_rot": 1.0}, least={"k_rot": 0.2})
+    return Effect(name, "Earth rotation", "kinematics", apply, desc, {"k_rot": 1.0}, least={"k_rot": 0.2},
+                  reading=lambda est: rotation_reading(est["k_rot"], latitude_deg, azimuth_deg))
+
+
+#: A rate factor within this of 1 (beyond three standard errors) is read as Earth's rotation at the stated site.
+ROTATION_AS_STATED = 0.1
+
+
+def rotation_reading(k_rot: tuple, latitude_deg: float, azimuth_deg: float) -> str:
+    """What an estimate ``k_rot = (value, standard error)`` of :func:`earth_rotation_effect` at a stated
+    site says about the launch, in words.
+
+    In the vertical plane the Coriolis term is ``2 Omega v cos(phi) sin(A)``: a rate factor ``k`` at the
+    stated latitude ``phi`` is the term of a flight toward ``A`` with ``sin(A) = k sin(A_stated)`` (two
+    azimuths, ``A`` and ``180 - A``; the centrifugal terms are some hundred times smaller at launch speeds
+    and do not decide it). ``k`` near 1 is the stated site; a negative ``k`` is the term reversed (the flight
+    went to the other side of north-south); ``|k sin(A_stated)| > 1`` is more than any azimuth gives there
+    (a site nearer the equator, or the terms taking up something else).
+
+    Examples
+    --------
+    >>> rotation_reading((-0.9355, 0.0088), 28.5, 90.0)[:93]
+    'the Coriolis term reversed: the term of a flight toward 249 or 291 deg at the stated latitude'
+    """
+    k, s = float(k_rot[0]), float(k_rot[1]) if math.isfinite(k_rot[1]) else 0.0
+    lat = f"{abs(latitude_deg):g} {'N' if latitude_deg >= 0 else 'S'}"
+    if abs(k - 1.0) <= 3.0 * s + ROTATION_AS_STATED:
+        return f"Earth's rotation at the stated site ({lat}, toward {azimuth_deg % 360.0:g} deg)"
+    state = ("state the launch site (earth_rotation_effect(latitude_deg, azimuth_deg), a candidate of the model "
+             "file) and refit")
+    coriolis = math.sin(math.radians(azimuth_deg))
+    if abs(coriolis) < 0.05:
+        return (f"k_rot {k:.3g} times Earth's rate at the stated site ({lat}, toward {azimuth_deg % 360.0:g} deg, "
+                f"whose in-plane Coriolis term is nil): not Earth's rotation there; if the site is right, the terms "
+                "took up something else")
+    sine = k * coriolis
+    if abs(sine) > 1.0:
+        where = (f"more than any azimuth gives at the stated latitude {lat} (|sin(A)| would be {abs(sine):.2f}): a "
+                 "site nearer the equator, or the terms took up something else")
+    else:
+        a1 = math.degrees(math.asin(sine)) % 360.0
+        a2 = (180.0 - a1) % 360.0
+        lo, hi = sorted((a1, a2))
+        where = (f"the term of a flight toward {lo:.0f} or {hi:.0f} deg at the stated latitude {lat}, not toward the "
+                 f"stated {azimuth_deg % 360.0:g} deg (the plane shows only cos(latitude) sin(azimuth))")
+    head = ("the Coriolis term reversed" if k < 0 else
+            f"the Coriolis term at k_rot {k:.3g} times the stated site's")
+    return f"{head}: {where}; {state}"
 
 
 SITE_REALISTIC = {"k_rot": 1.0, "dlat_rot": 30.0, "daz_rot": 90.0}

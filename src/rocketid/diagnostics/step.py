@@ -315,7 +315,7 @@ def _tie_break(accs, i, fit, chosen_effects, contenders_effects, holdout, level,
             and a.refit.bic[1] <= lo + BIC_TIE]
     if len(tied) < 2:
         return i, ""
-    names = ", ".join(_with_sizes(accs[j].refit) for j in tied)
+    names = ", ".join(_with_sizes(accs[j].refit, contenders_effects[j]) for j in tied)
     if holdout is None:
         return None, f"{names} reach the noise with BIC within {BIC_TIE:g} of each other: the data cannot tell them apart"
     score, blind = {}, set()
@@ -386,12 +386,19 @@ def _snug(pick: Acceptance, band) -> bool:
         _holm(pick.refit.whiteness) >= 0.05
 
 
-def _with_sizes(r: Refit) -> str:
-    """``name (parameter value, ...)`` of a refit's effect parameters (at most four): what each rival says."""
+def _with_sizes(r: Refit, effect: Effect | None = None) -> str:
+    """``name (parameter value, ...)`` of a refit's effect parameters (at most four): what each rival says,
+    with ``effect``'s reading of them when it has one (an Earth rotation's ``k_rot`` as the launch's azimuth)."""
     vals = dict(zip(r.parameter_names, (float(v) for v in r.p)))
     shown = [f"{n} {vals[n]:.3g}" for n in r.effect_parameters[:4] if n in vals]
     more = ", ..." if len(r.effect_parameters) > 4 else ""
-    return f"{r.name} ({', '.join(shown)}{more})" if shown else r.name
+    if not shown:
+        return r.name
+    said = ""
+    if effect is not None and effect.reading is not None and all(n in vals for n in effect.parameter_names):
+        est = {n: (vals[n], float(sd)) for n, sd in zip(r.parameter_names, r.std)}
+        said = f": {effect.reading(est)}"
+    return f"{r.name} ({', '.join(shown)}{more}{said})"
 
 
 def _holm(white: Mapping[str, float]) -> float:
