@@ -812,6 +812,64 @@ def test_a_second_path_starts_from_an_oversized_first_step_and_stands_only_when_
     assert "the first search's model stands" in notes[-1]
 
 
+def test_a_tie_after_a_first_step_is_searched_again_and_yields_only_to_a_clearly_lower_explanation(monkeypatch):
+    """Wren-H with its rail 1.5 deg steep on a day 10 K cold (data made apart from the catalogue): a 5-knot wind
+    took step 1 (the start angle, at its true 1.50 deg, next), and step 2 tied four effects; the search stopped
+    on the tie. A second path is run from the first step's other starts, and its explanation replaces the tie
+    only with a BIC lower by BIC_TIE than the tied models' lowest; a tie at the first step is not searched
+    again."""
+    from rocketid.diagnostics import step as S
+    from rocketid.diagnostics.effects import CATALOGUE, wind_profile_effect
+    from rocketid.diagnostics.screen import Contender, Screen
+
+    wind5 = wind_profile_effect([0.0, 1.0, 3.0, 6.0, 9.0], name="wind_pl_5")
+    effects = [wind5, CATALOGUE["start_angle"]]
+    s1 = [accept(refit("wind_pl_5", 1.2206, base_chi2=6976.0), BAND),
+          accept(refit("start_angle", 1.2706, base_chi2=6976.0), BAND)]
+    assert all(a.admissible and not a.accepted for a in s1)
+    step1 = S.Step(1, Screen(None, tuple(Contender(e, "") for e in effects), ()), tuple(s1), s1[0], "", (),
+                   ("wind_pl_5",), None)
+    tied = [accept(refit("start_mass", 1.0105, base_chi2=1.2206), BAND),
+            accept(refit("thrust_level", 1.0138, base_chi2=1.2206), BAND)]
+    assert all(a.accepted for a in tied)
+    step2 = S.Step(2, Screen(None, (Contender(CATALOGUE["start_mass"], ""), Contender(CATALOGUE["thrust_level"], "")),
+                             ()), tuple(tied), None, "a tie", (), ("wind_pl_5",), None)
+    first = S._Path((step1, step2), [wind5], SimpleNamespace(chi2_per_dof=1.2206), s1[0], False, "",
+                    "start_mass (...), thrust_level (...) reach the noise with BIC within 10 of each other")
+    assert S._tied_later(first) and S._tie_bic(first) == tied[0].refit.bic[1]
+    assert S._provisional(first, BAND) == [1]                         # the start angle, another family
+    at_step_1 = S._Path((replace(step1, chosen=None),), [], SimpleNamespace(chi2_per_dof=6976.0), None, False, "",
+                        "a tie at the first step")
+    assert not S._tied_later(at_step_1)
+
+    def ends_explained(chi2):
+        last = accept(refit("temperature", chi2, base_chi2=1.2706), BAND)
+        assert last.accepted
+        alt = S._Path((step1,), [CATALOGUE["start_angle"], CATALOGUE["density"]], SimpleNamespace(chi2_per_dof=chi2),
+                      last, True, "")
+        monkeypatch.setattr(S, "_forward", lambda *a, **k: alt)
+        return alt
+
+    ctx = SimpleNamespace(band=BAND, say=lambda message: None)
+    clearly = ends_explained(1.0032)
+    assert S._bic(clearly.last) < S._tie_bic(first) - S.BIC_TIE
+    notes = []
+    assert S._second_path(ctx, None, effects, 3, first, notes) is clearly
+    assert "replaces it" in notes[-1]
+    # an explanation within BIC_TIE of the tied models is one more of them: the tie stands, and a note says so
+    per_unit = (S._tie_bic(first) - S._bic(clearly.last)) / (1.0105 - 1.0032)
+    close = ends_explained(1.0105 - 5.0 / per_unit)
+    assert S._tie_bic(first) - S.BIC_TIE < S._bic(close.last) < S._tie_bic(first)
+    notes = []
+    assert S._second_path(ctx, None, effects, 3, first, notes) is first
+    assert any("the tie stands" in n for n in notes) and "the first search's model stands" in notes[-1]
+    # a second path that does not explain the data does not replace a tie, however low its BIC
+    lower = S._Path((step1,), [CATALOGUE["start_angle"]], SimpleNamespace(chi2_per_dof=1.25),
+                    accept(refit("density", 1.25, base_chi2=1.2706), BAND), False, "")
+    monkeypatch.setattr(S, "_forward", lambda *a, **k: lower)
+    assert S._second_path(ctx, None, effects, 3, first, []) is first
+
+
 def test_when_no_search_explains_the_lowest_bic_at_plausible_values_is_reported(monkeypatch):
     """Wren-H's burn-through: the first search ended base_drag_mach_5 + drag_mach_7 at chi2/dof 1.71 with a drag
     knot at 1.47 for 0.6; the second path from burn_rate ended burn_rate + back_pressure_vacuum + base_drag_mach_2 at

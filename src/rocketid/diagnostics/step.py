@@ -59,7 +59,13 @@ Forward selection with a backward check, capped at ``max_effects``:
    (the runner-up; :func:`_second_path`), each only within reach of where the first search ended (its
    excess over the noise band at most :data:`SECOND_PATH_REACH` times the first's); a second path's model
    replaces the first search's when it ends explained, every size plausible -- or, when no search explains
-   the data, when it ends with a lower BIC with every size and coefficient plausible (partly explained);
+   the data, when it ends with a lower BIC with every size and coefficient plausible (partly explained). A
+   first search that took a step and then met a tie it could not break is run again too: a second path that
+   ends explained, with no tie of its own and a BIC lower by :data:`BIC_TIE` than the lowest of the tied models,
+   replaces it; otherwise the tie stands (:func:`_tied_later`). Measured on Wren-H with its rail 1.5 deg steep
+   on a day 10 K cold: a 5-knot wind took step 1 (BIC 1571, the start angle 1608 at its true 1.50 deg) and
+   step 2 tied four effects at BIC 1322-1328; the start angle with the temperature reach chi2/dof 1.003 at BIC
+   1289, dT -10.4 +- 0.6 K;
 10. simpler shape: a search that ends explained with a refined shape (module note 4) is refitted with that
    shape put back in its family's catalogue shape (a thrust profile as a constant thrust error), the other
    effects kept; the simpler set replaces it when it passes every check of an explanation with a lower BIC
@@ -969,7 +975,7 @@ def _search(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Effect],
                lambda p: _exchanged(ctx, fit, p, notes)),
               ("the finer shape", lambda p: len(p.chosen) >= 2 and not p.ambiguous and ctx.refine,
                lambda p: _refined_again(ctx, fit, candidates, p, notes)),
-              ("the second path", lambda p: not p.ok and not base_ok and not p.ambiguous,
+              ("the second path", lambda p: not p.ok and not base_ok and (not p.ambiguous or _tied_later(p)),
                lambda p: _second_path(ctx, fit, candidates, max_effects, p, notes)),
               ("the simpler shape", lambda p: p.ok and not p.ambiguous and ctx.refine,
                lambda p: _simplified(ctx, fit, candidates, p, notes)),
@@ -1429,6 +1435,7 @@ def _second_path(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Eff
     angle and a thrust profile at 16.3, "partly explained"; from the oversized wind it ends explained."""
     s1 = path.steps[0] if path.steps else None
     starts, better = _provisional(path, ctx.band), None
+    tied = _tie_bic(path) if _tied_later(path) else None
     for j in _provisional(path, None):
         if j not in starts:
             r = s1.acceptances[j].refit
@@ -1450,14 +1457,21 @@ def _second_path(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Eff
                          f"{alt.stopped}, at chi2/dof {alt.current.chi2_per_dof:.4g} with "
                          f"{', '.join(e.name for e in alt.chosen) or 'nothing added'}")
             alt = replace(alt, stopped=0)
-        if alt.ok and alt.last is not None and alt.last.accepted and not alt.ambiguous:
+        if alt.ok and alt.last is not None and alt.last.accepted and not alt.ambiguous and tied is not None \
+                and not _bic(alt.last) < tied - BIC_TIE:
+            notes.append(f"second path: started from {name} ({how}), the search ends explained with "
+                         f"{', '.join(e.name for e in alt.chosen)} at chi2/dof {alt.current.chi2_per_dof:.4g}, BIC "
+                         f"{_bic(alt.last):.6g}, not lower by {BIC_TIE:g} than the first search's tied models "
+                         f"({tied:.6g}): the tie stands")
+        elif alt.ok and alt.last is not None and alt.last.accepted and not alt.ambiguous:
             notes += mine
             notes.append(f"second path: the first search ended at chi2/dof {path.current.chi2_per_dof:.4g} with "
                          f"{', '.join(e.name for e in path.chosen) or 'nothing added'}; started from {name} ({how}), "
                          f"the search ends with {', '.join(e.name for e in alt.chosen)} at "
                          f"{alt.current.chi2_per_dof:.4g}, every size plausible: that model replaces it")
             return alt
-        lower = _partial_better(alt, path) and (better is None or _bic(alt.last) < _bic(better[0].last))
+        # a first search that ended on a tie keeps it unless a second path explains the data (above)
+        lower = tied is None and _partial_better(alt, path) and (better is None or _bic(alt.last) < _bic(better[0].last))
         notes.append(f"second path: started from {name} ({how}), the search ends with "
                      f"{', '.join(e.name for e in alt.chosen) or 'nothing added'} at chi2/dof "
                      f"{alt.current.chi2_per_dof:.4g}, not an explanation" + (
@@ -1477,6 +1491,20 @@ def _second_path(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Eff
     notes.append(f"second path: no search explains the data; the one started from {name} ends with the lowest BIC at "
                  "plausible values: its model is reported, partly explained")
     return replace(alt, stopped=cut) if cut else alt
+
+
+def _tied_later(path: _Path) -> bool:
+    """Whether ``path`` took a step and then stopped on a tie it could not break (a step after the first with
+    no choice, its refits tied): the tie is among the effects added to a first choice that a second path may
+    not make (module note 9). A tie at the first step is the data's own answer and is not searched again."""
+    return bool(path.ambiguous and path.chosen and path.steps and path.steps[-1].chosen is None
+                and path.steps[-1].number > 1)
+
+
+def _tie_bic(path: _Path) -> float:
+    """The lowest BIC of the accepted refits of ``path``'s last step (the tied models; inf when none)."""
+    accs = path.steps[-1].acceptances if path.steps else ()
+    return min((float(a.refit.bic[1]) for a in accs if a.accepted and a.refit.success), default=math.inf)
 
 
 def _bic(acceptance: Acceptance | None) -> float:
