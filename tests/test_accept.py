@@ -870,6 +870,58 @@ def test_a_tie_after_a_first_step_is_searched_again_and_yields_only_to_a_clearly
     assert S._second_path(ctx, None, effects, 3, first, []) is first
 
 
+def test_a_tie_is_declared_only_after_the_refined_shapes_are_tried(monkeypatch):
+    """Wren-H with its GPS time tags 0.15 s early on a day 10 K warm: after the time offset, a base drag and a
+    back-pressure tied at tiny sizes (BIC 1361-1362) and the search stopped there; the density's catalogue shape
+    had reached chi2/dof 1.043 with unidentifiable sizes, its temperature shape 1.033 at BIC 1344. A step's tie
+    is declared only once the refined shapes have been tried: one that explains the data with a BIC lower by
+    BIC_TIE than every tied refit is the step's choice (a note says the tie was broken); otherwise the tie stands,
+    the refined refits recorded in the step."""
+    from rocketid.diagnostics import step as S
+    from rocketid.diagnostics.effects import CATALOGUE, temperature_effect
+    from rocketid.diagnostics.screen import Contender, Screen
+
+    names = ("base_drag", "back_pressure", "density")
+    scr = Screen(None, tuple(Contender(CATALOGUE[n], "") for n in names), ())
+    accs = [accept(refit("base_drag", 1.0100, base_chi2=1.05), BAND),
+            accept(refit("back_pressure", 1.0103, base_chi2=1.05), BAND),
+            accept(refit("density", 1.0080, value=6.0, size=0.05, base_chi2=1.05), BAND)]
+    assert accs[0].accepted and accs[1].accepted and not accs[2].accepted
+    monkeypatch.setattr(S, "screen", lambda *a, **k: scr)
+    monkeypatch.setattr(S, "_refit_contenders", lambda ctx, current, chosen, sc: (sc, list(accs), 0, "lowest BIC", 3))
+    monkeypatch.setattr(S, "_tie_break", lambda accs, i, *a, **k: (None, "base_drag, back_pressure tie"))
+    warm = temperature_effect()
+
+    def refine_to(chi2):
+        def fake(ctx, current, chosen, sc, ac, i, why, n_tests):
+            assert i == 0                                   # from the tied step's lowest BIC
+            found = accept(refit(warm.name, chi2, value=8.3, size=10.0, base_chi2=1.05), BAND)
+            sc = replace(sc, contenders=sc.contenders + (Contender(warm, "a refined shape"),))
+            ac = ac + [found]
+            better = found.accepted and found.refit.bic[1] < ac[0].refit.bic[1] - S.BIC_TIE
+            return (sc, ac, warm, found, why + "; refined") if better else (sc, ac, sc.contenders[0].effect, ac[0], why)
+        monkeypatch.setattr(S, "_refine_choice", fake)
+
+    # (the data's scale: tied at chi2/dof 1.0100 and 1.0103 of 19 791 degrees of freedom)
+    ctx = SimpleNamespace(holdout=None, level=0.05, options=None, timeout=60.0, band=BAND, say=lambda m: None,
+                          vehicle=None, refine=True)
+    at = SimpleNamespace(chi2_per_dof=1.05)
+    refine_to(1.0050)
+    notes, steps = [], []
+    scr2, accs2, effect, pick, why, ambiguous, rivals = S._next_choice(ctx, at, [], [], 2, notes, steps)
+    assert effect is warm and pick.accepted and not ambiguous and steps == []
+    assert any("the tie is broken" in n for n in notes), notes
+    # a refined shape within BIC_TIE of the tied refits (or none better) leaves the tie, its refit recorded
+    refine_to(1.0098)
+    notes, steps = [], []
+    scr2, accs2, effect, pick, why, ambiguous, rivals = S._next_choice(ctx, at, [], [], 2, notes, steps)
+    assert effect is None and ambiguous == "base_drag, back_pressure tie"
+    assert len(steps) == 1 and len(steps[0].acceptances) == 4 and steps[0].chosen is None
+    # without refinement (refine=False) the tie is declared at once
+    ctx.refine = False
+    assert S._next_choice(ctx, at, [], [], 2, [], [])[2] is None
+
+
 def test_when_no_search_explains_the_lowest_bic_at_plausible_values_is_reported(monkeypatch):
     """Wren-H's burn-through: the first search ended base_drag_mach_5 + drag_mach_7 at chi2/dof 1.71 with a drag
     knot at 1.47 for 0.6; the second path from burn_rate ended burn_rate + back_pressure_vacuum + base_drag_mach_2 at
