@@ -868,6 +868,25 @@ def test_a_tie_after_a_first_step_is_searched_again_and_yields_only_to_a_clearly
                     accept(refit("density", 1.25, base_chi2=1.2706), BAND), False, "")
     monkeypatch.setattr(S, "_forward", lambda *a, **k: lower)
     assert S._second_path(ctx, None, effects, 3, first, []) is first
+    # ... unless it ends on a tie of its own whose models are lower by BIC_TIE: its first step was the better one
+    # (from the start angle, the temperature, a base drag and a start mass tie at BIC 1289-1302)
+
+    def ends_tied(chi2):
+        own = [accept(refit("temperature", chi2, base_chi2=1.2706), BAND),
+               accept(refit("base_drag", chi2 + 0.0002, base_chi2=1.2706), BAND)]
+        again = S.Step(2, step2.screen, tuple(own), None, "a tie", (), ("start_angle",), None)
+        alt = S._Path((replace(step1, chosen=s1[1]), again), [CATALOGUE["start_angle"]],
+                      SimpleNamespace(chi2_per_dof=1.2706), s1[1], False, "", "temperature (...), base_drag (...) tie")
+        monkeypatch.setattr(S, "_forward", lambda *a, **k: alt)
+        return alt
+
+    tied_lower = ends_tied(1.0050)
+    assert S._tie_bic(tied_lower) < S._tie_bic(first) - S.BIC_TIE
+    notes = []
+    assert S._second_path(ctx, None, effects, 3, first, notes) is tied_lower
+    assert "on a tie of its own" in notes[-2] and notes[-1].endswith("with the tie it ended on")
+    ends_tied(1.0105 - 5.0 / per_unit)                                  # its tie within BIC_TIE of the first's
+    assert S._second_path(ctx, None, effects, 3, first, []) is first
 
 
 def test_a_tie_is_declared_only_after_the_refined_shapes_are_tried(monkeypatch):

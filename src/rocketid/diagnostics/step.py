@@ -67,10 +67,13 @@ Forward selection with a backward check, capped at ``max_effects``:
    the data, when it ends with a lower BIC with every size and coefficient plausible (partly explained). A
    first search that took a step and then met a tie it could not break is run again too: a second path that
    ends explained, with no tie of its own and a BIC lower by :data:`BIC_TIE` than the lowest of the tied models,
-   replaces it; otherwise the tie stands (:func:`_tied_later`). Measured on Wren-H with its rail 1.5 deg steep
-   on a day 10 K cold: a 5-knot wind took step 1 (BIC 1571, the start angle 1608 at its true 1.50 deg) and
-   step 2 tied four effects at BIC 1322-1328; the start angle with the temperature reach chi2/dof 1.003 at BIC
-   1289, dT -10.4 +- 0.6 K;
+   replaces it; so does one that ends on a tie of its own whose lowest BIC is lower by :data:`BIC_TIE` (its
+   first step the better one, partly explained with its tie named); otherwise the tie stands
+   (:func:`_tied_later`). Measured on Wren-H with its rail 1.5 deg steep on a day 10 K cold: a 5-knot wind took
+   step 1 (BIC 1571, the start angle 1608 at its true 1.50 deg) and step 2 tied a start mass, a thrust error,
+   a nozzle term and a base drag at BIC 1322-1328; from the start angle, step 2 ties the temperature (dT -10.4
+   +- 0.6 K, BIC 1289), a base drag (1295) and a start mass (1302): the start angle is reported, the cold day
+   named in a tie;
 10. simpler shape: a search that ends explained with a refined shape (module note 4) is refitted with that
    shape put back in its family's catalogue shape (a thrust profile as a constant thrust error), the other
    effects kept; the simpler set replaces it when it passes every check of an explanation with a lower BIC
@@ -1488,15 +1491,23 @@ def _second_path(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Eff
                          f"the search ends with {', '.join(e.name for e in alt.chosen)} at "
                          f"{alt.current.chi2_per_dof:.4g}, every size plausible: that model replaces it")
             return alt
-        # a first search that ended on a tie keeps it unless a second path explains the data (above)
-        lower = tied is None and _partial_better(alt, path) and (better is None or _bic(alt.last) < _bic(better[0].last))
+        # a first search that ended on a tie keeps it unless a second path explains the data (above) or ends on a
+        # tie of its own whose models are lower by BIC_TIE: its first step was the better one
+        if tied is None:
+            key = _bic(alt.last)
+            lower = _partial_better(alt, path) and (better is None or key < better[3])
+            said = (f", with a lower BIC than the first search's ({_bic(path.last):.6g} -> {key:.6g}) and every size "
+                    "and coefficient plausible")
+        else:
+            key = _tie_bic(alt) if _tied_later(alt) else math.inf
+            lower = key < tied - BIC_TIE and (better is None or key < better[3])
+            said = (f", on a tie of its own ({alt.ambiguous}) whose lowest BIC is lower by {BIC_TIE:g} than the first "
+                    f"search's tied models ({tied:.6g} -> {key:.6g})")
         notes.append(f"second path: started from {name} ({how}), the search ends with "
                      f"{', '.join(e.name for e in alt.chosen) or 'nothing added'} at chi2/dof "
-                     f"{alt.current.chi2_per_dof:.4g}, not an explanation" + (
-                         f", with a lower BIC than the first search's ({_bic(path.last):.6g} -> {_bic(alt.last):.6g}) "
-                         "and every size and coefficient plausible" if lower else ""))
+                     f"{alt.current.chi2_per_dof:.4g}, not an explanation" + (said if lower else ""))
         if lower:
-            better = (alt, name, mine)
+            better = (alt, name, mine, key)
         if cut:
             break
     if better is None:
@@ -1504,10 +1515,11 @@ def _second_path(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Eff
             notes.append("second path: none explains the data or ends lower at plausible values: the first search's "
                          "model stands")
         return replace(path, stopped=cut) if cut else path
-    alt, name, mine = better
+    alt, name, mine, _ = better
     notes += mine
     notes.append(f"second path: no search explains the data; the one started from {name} ends with the lowest BIC at "
-                 "plausible values: its model is reported, partly explained")
+                 "plausible values: its model is reported, partly explained" + (
+                     ", with the tie it ended on" if tied is not None else ""))
     return replace(alt, stopped=cut) if cut else alt
 
 
