@@ -366,6 +366,40 @@ def test_after_the_finer_shape_the_exchange_swaps_the_last_effect_too(monkeypatc
     assert "start_mass in place of thrust_level" in why
 
 
+def test_an_explanation_yields_to_a_finer_shape_that_explains_with_one_effect_fewer(monkeypatch):
+    """A fresh Wren-H pair (a base drag in the tail-off, GPS time tags 0.1 s late): a 2-knot base drag, the time
+    offset and a 5.8 % thrust bump were called explained at chi2/dof 1.150, BIC 1501.8; the 5-knot base drag with
+    the time offset explains too, at 1.168 and BIC 1523.3. The finer shape's test of a three-effect explanation
+    (the finer shape without the last effect) takes such a set whatever its BIC: the search stops at the noise,
+    and would have stopped there with the finer shape first. A set that does not explain is not taken."""
+    from rocketid.diagnostics import step as S
+    from rocketid.diagnostics.effects import CATALOGUE, Vehicle
+
+    veh = Vehicle(thrust=6.0e5, mass=3.0e4, mass_flow=230.0, speed=1500.0, start_speed=5.0, duration=66.0,
+                  altitude=(0.0, 30000.0), mach=(0.0, 4.5), sigma={"x": 1.0, "h": 1.0, "v": 1.0},
+                  sample_interval=0.1, knot_times=tuple(np.linspace(0.0, 66.0, 7)))
+    found = [CATALOGUE["wind"], CATALOGUE["time_offset"], CATALOGUE["misalignment"]]
+    last = accept(refit("misalignment", 1.0100), BAND)
+    assert last.accepted
+    tried = []
+    monkeypatch.setattr(S, "_task", _recording_task(tried))
+
+    def two_at(chi2):
+        monkeypatch.setattr(S, "refit_all", lambda tasks, workers=None: tuple(
+            refit(t[0], chi2 if t == ("wind_pl_10", "time_offset") else 1.3) for t in tasks))
+
+    ctx = S._Search(None, BAND, veh, 0.05, None, 60.0, 1, True, None)
+    two_at(1.0120)
+    assert S._bic(accept(refit("wind_pl_10", 1.0120), BAND)) > S._bic(last) + S.BIC_TIE     # a higher BIC
+    effects, acc, why = S._finer(found, last, None, found, ctx)
+    assert tried == [("wind_pl_6", "time_offset"), ("wind_pl_10", "time_offset"), ("wind", "time_offset_2")], tried
+    assert [e.name for e in effects] == ["wind_pl_10", "time_offset"] and acc.accepted
+    assert "with one effect fewer" in why and "without misalignment" in why, why
+    # outside the noise band (not an explanation): the found set stands
+    two_at(1.2)
+    assert S._finer(found, last, None, found, ctx) is None
+
+
 def test_the_exchange_tries_a_family_in_its_catalogue_shape_beside_its_best_shape(monkeypatch):
     """Osprey-A 250 kg light in a tailwind jet: at step 1, the wind missing, the start-mass family's best shape was
     a mass jettison (BIC 25 291 against the start mass's 27 733), a 3-knot thrust profile was chosen and the 8-knot
