@@ -968,7 +968,8 @@ def test_a_tie_is_declared_only_after_the_refined_shapes_are_tried(monkeypatch):
     refine_to(1.0098)
     notes, steps = [], []
     scr2, accs2, effect, pick, why, ambiguous, rivals = S._next_choice(ctx, at, [], [], 2, notes, steps)
-    assert effect is None and ambiguous == "base_drag, back_pressure tie"
+    assert effect is None and ambiguous.startswith("base_drag, back_pressure tie; temperature (p_temperature 8.3)")
+    assert ambiguous.endswith("a refined shape of the step, explains the data within 10 of them too"), ambiguous
     assert len(steps) == 1 and len(steps[0].acceptances) == 4 and steps[0].chosen is None
     # without refinement (refine=False) the tie is declared at once
     ctx.refine = False

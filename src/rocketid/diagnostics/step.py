@@ -998,7 +998,8 @@ def _search(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Effect],
                lambda p: _exchanged(ctx, fit, p, notes)),
               ("the finer shape", lambda p: len(p.chosen) >= 2 and not p.ambiguous and ctx.refine,
                lambda p: _refined_again(ctx, fit, candidates, p, notes)),
-              ("the second path", lambda p: not p.ok and not base_ok and (not p.ambiguous or _tied_later(p)),
+              ("the second path",
+               lambda p: not p.ok and not base_ok and (not p.ambiguous or _tied_later(p)),
                lambda p: _second_path(ctx, fit, candidates, max_effects, p, notes)),
               ("the simpler shape", lambda p: p.ok and not p.ambiguous and ctx.refine,
                lambda p: _simplified(ctx, fit, candidates, p, notes)),
@@ -1165,6 +1166,14 @@ def _next_choice(ctx: "_Search", current: EstimationResult, chosen: list, candid
             notes.append(f"step {number}: {tie}; {effect.name}, a refined shape, explains the data with a BIC lower "
                          f"by {BIC_TIE:g} than every one of them ({pick.refit.bic[1]:.6g}): the tie is broken")
             i, tie, why = scr.contenders.index(next(c for c in scr.contenders if c.effect is effect)), "", why_r
+        else:
+            # refined shapes that explain the data within the margin of the tied refits are in the tie too
+            top = accs[lowest].refit.bic[1] + BIC_TIE
+            also = [_with_sizes(accs[j].refit, scr.contenders[j].effect) for j in range(first, len(accs))
+                    if accs[j].accepted and accs[j].refit.bic[1] <= top]
+            if also:
+                what = "refined shapes of the step, explain" if len(also) > 1 else "a refined shape of the step, explains"
+                tie = f"{tie}; {', '.join(also)}, {what} the data within {BIC_TIE:g} of them too"
     why, stop, amb, riv = _settle(number, tie, i, scr, accs, keep, why, notes, steps)
     ambiguous, rivals = amb or ambiguous, riv or rivals
     if stop:
