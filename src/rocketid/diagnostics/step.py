@@ -1178,8 +1178,9 @@ def _next_choice(ctx: "_Search", current: EstimationResult, chosen: list, candid
     ambiguous, rivals = amb or ambiguous, riv or rivals
     if stop:
         return scr, accs, None, None, why, ambiguous, rivals
-    snug = _snug(accs[lowest if len(scr.contenders) > first else i], band)     # the choice before refining
-    if len(scr.contenders) > first:             # refined already, to break the tie
+    refined = len(scr.contenders) > first       # the refined shapes were tried already, to break a tie
+    snug = _snug(accs[lowest if refined else i], band)      # the choice before refining
+    if refined:
         effect, pick = scr.contenders[i].effect, accs[i]
     else:
         scr, accs, effect, pick, why = _refine_choice(ctx, current, chosen, scr, accs, i, why, n_tests)
@@ -1502,13 +1503,13 @@ def _second_path(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Eff
                          f"{alt.stopped}, at chi2/dof {alt.current.chi2_per_dof:.4g} with "
                          f"{', '.join(e.name for e in alt.chosen) or 'nothing added'}")
             alt = replace(alt, stopped=0)
-        if alt.ok and alt.last is not None and alt.last.accepted and not alt.ambiguous and tied is not None \
-                and not _bic(alt.last) < tied - BIC_TIE:
+        explains = alt.ok and alt.last is not None and alt.last.accepted and not alt.ambiguous
+        if explains and tied is not None and not _bic(alt.last) < tied - BIC_TIE:
             notes.append(f"second path: started from {name} ({how}), the search ends explained with "
                          f"{', '.join(e.name for e in alt.chosen)} at chi2/dof {alt.current.chi2_per_dof:.4g}, BIC "
                          f"{_bic(alt.last):.6g}, not lower by {BIC_TIE:g} than the first search's tied models "
                          f"({tied:.6g}): the tie stands")
-        elif alt.ok and alt.last is not None and alt.last.accepted and not alt.ambiguous:
+        elif explains:
             notes += mine
             notes.append(f"second path: the first search ended at chi2/dof {path.current.chi2_per_dof:.4g} with "
                          f"{', '.join(e.name for e in path.chosen) or 'nothing added'}; started from {name} ({how}), "
