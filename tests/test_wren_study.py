@@ -76,9 +76,9 @@ KNOWN_FAILURES: dict[str, str] = {
                            "with a base drag of -0.011 and a start mass 0.09 kg heavy (temperature -10.4 +- 0.6 K for "
                            "-10 at BIC 1289, 1295, 1302): a 10 K colder day moves these GPS data no more than those; on "
                            "83c4694 (first run) wind_pl_5, partly explained",
-    "vent+tailwind": "83c4694 (fresh pair): the diagnosis did not end within the harness's 3600 s (load 4-5: the test "
-                     "suite and two other diagnoses beside it; the vented oxidiser's pad-hold case took 1024 s alone); "
-                     "not run again",
+    "vent+tailwind": "29cfd03 (fresh pair): wind_pl_5 + burn_rate + mass_flow, chi2/dof 3.79, partly explained: the "
+                     "wind found, the vented oxidiser (lighter lift-off, earlier knee) not, as in pad-hold; on 83c4694 "
+                     "the diagnosis did not end within the harness's 3600 s at load 4-5",
     "warm-tank+shallow-rail": "c615eb9 (fresh pair): start_angle (-0.999 deg for -1.0) + burn_rate (eps_burn 0.056) + "
                               "base_drag_mach_5 at chi2/dof 1.059, called explained -- a WRONG effect: the warm "
                               "tank's motor is not a faster clock (the hot and cold tanks' physics), and a power-off "
