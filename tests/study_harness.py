@@ -73,11 +73,11 @@ class Case:
 
 
 def pair(name: str, hidden, seed: int, truth: str, first: frozenset, second: frozenset, sizes: tuple = (),
-         also: frozenset = frozenset()) -> Case:
+         also: frozenset = frozenset(), visible: bool | None = None) -> Case:
     """A case of two hidden effects, each found by one family of its set: both sets right and needed (``also``:
-    families right beside them, not needed -- a blowdown's mass flow)."""
+    families right beside them, not needed -- a blowdown's mass flow; ``visible`` as :class:`Case`'s)."""
     return Case(name, hidden, seed, truth, right=first | second | also, needed=first | second,
-                needed_each=(first, second), sizes=sizes)
+                needed_each=(first, second), sizes=sizes, visible=visible)
 
 
 def one(name: str) -> frozenset:

@@ -1165,7 +1165,7 @@ def _next_choice(ctx: "_Search", current: EstimationResult, chosen: list, candid
         if effect is not scr.contenders[lowest].effect:
             notes.append(f"step {number}: {tie}; {effect.name}, a refined shape, explains the data with a BIC lower "
                          f"by {BIC_TIE:g} than every one of them ({pick.refit.bic[1]:.6g}): the tie is broken")
-            i, tie, why = scr.contenders.index(next(c for c in scr.contenders if c.effect is effect)), "", why_r
+            i, tie, why = next(j for j, c in enumerate(scr.contenders) if c.effect is effect), "", why_r
         else:
             # refined shapes that explain the data within the margin of the tied refits are in the tie too
             top = accs[lowest].refit.bic[1] + BIC_TIE
