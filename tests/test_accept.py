@@ -111,6 +111,50 @@ def test_every_effect_of_the_model_keeps_a_plausible_size():
     assert accept(replace(r, p=np.array([0.3, -0.09, 0.03])), BAND).check("size").passed
 
 
+def _base_drag_refit(values, stds, chi2=1.059):
+    """A refit with ``base_drag_mach_5`` (knots evenly over Mach 0.2-1.1), its knots' estimates as given."""
+    from rocketid.diagnostics.effects import base_drag_mach_effect
+    e = base_drag_mach_effect(np.linspace(0.2, 1.1, 5))
+    names = e.parameter_names
+    return replace(refit(e.name, chi2), effects=(e.name,), added=(e.name,), parameter_names=("CD", *names),
+                   p=np.array([0.3, *values]), std=np.array([0.01, *stds]), effect_parameters=names,
+                   sizes={n: 0.1 for n in names}, positive=tuple(dict(g) for g in e.positive))
+
+
+def test_a_power_off_base_drag_below_zero_over_the_mach_range_is_the_wrong_sign():
+    """Wren-H with a warm nitrous tank and a shallow rail was called explained by ``start_angle`` + ``burn_rate``
+    + ``base_drag_mach_5`` with every knot negative (-0.25 ... -0.03: less drag once the jet stops filling the
+    base). The knots are judged together: the true base drag of Wren-H's base-drag case, fitted on the same
+    5 knots, ends at -0.043 +- 0.004 at its highest knot and is the right sign (its average over the Mach range
+    is 0.11). Numbers as measured on those cases (docs/effects.md, fresh pairs and Wren-H tables)."""
+    warm = accept(_base_drag_refit([-0.2504, -0.1647, -0.07168, -0.03034, -0.1326],
+                                   [0.094, 0.021, 0.0061, 0.0053, 0.0053]), BAND)
+    size = warm.check("size")
+    assert not size.passed and "the wrong sign" in size.detail and "dCD_base_0..dCD_base_4" in size.detail
+    assert not warm.admissible and not warm.accepted and not warm.oversized
+    true = accept(_base_drag_refit([0.08771, 0.1143, 0.1506, 0.1573, -0.0434],
+                                   [0.064, 0.012, 0.0062, 0.0037, 0.0044], chi2=1.017), BAND)
+    assert true.accepted, true.reason()
+    # the standard errors' bound decides close calls: a mean below zero by less than two of it is no finding
+    close = _base_drag_refit([-0.04, 0.02, 0.0, 0.0, 0.0], [0.05, 0.01, 0.01, 0.01, 0.01])
+    assert accept(close, BAND).check("size").passed
+    # the catalogue's one-number shape: Wren-H on a 10 K colder day, dCD_base -0.0069 +- 0.0021 (measured)
+    single = replace(refit("base_drag", 1.063, value=-0.006876, size=0.1),
+                     positive=({"p_base_drag": 1.0},), std=np.array([0.01, 0.0021]))
+    assert not accept(single, BAND).check("size").passed
+    assert accept(replace(single, p=np.array([0.3, 0.013])), BAND).check("size").passed
+
+
+def test_an_effect_states_its_positive_means_with_weights_summing_to_one():
+    from rocketid.diagnostics.effects import CATALOGUE, Effect, base_drag_mach_effect
+    from rocketid.errors import ModelError
+    w = base_drag_mach_effect([0.5, 1.0, 2.0]).positive[0]
+    assert dict(w) == pytest.approx({"dCD_base_0": 1 / 6, "dCD_base_1": 1 / 2, "dCD_base_2": 1 / 3})  # trapezoid
+    assert dict(CATALOGUE["base_drag"].positive[0]) == {"dCD_base": 1.0}
+    with pytest.raises(ModelError, match="summing to one"):
+        Effect("e", "e", "aero", lambda m: (), positive=({"a": 0.5},))
+
+
 def test_an_effect_held_at_a_bound_is_not_plausible():
     a = accept(refit("back_pressure", 4.63, value=0.0, size=0.6, at_bound=("p_back_pressure",), base_chi2=4.63), BAND)
     assert not a.check("size").passed and "held at a bound" in a.check("size").detail

@@ -36,7 +36,11 @@ answer comes from taking the best helper for the explanation. An effect is
    rotation), not held at a bound, and no change between neighbouring parameters of a
    profile beyond :data:`SIZE_FACTOR` times its realistic size
    (:attr:`~rocketid.diagnostics.effects.Effect.changes`: a wind's shear between knots; a
-   profile that alternates +-100 m/s from knot to knot fits anything and is no wind).
+   profile that alternates +-100 m/s from knot to knot fits anything and is no wind), and no
+   mean that its physics makes positive below zero by more than :data:`SIGN_SIGMAS` standard
+   errors (:attr:`~rocketid.diagnostics.effects.Effect.positive`: a power-off base drag averaged
+   over the Mach range flown; a warm nitrous tank on Wren-H was called explained by a base drag of
+   -0.25 to -0.03 -- less drag once the jet stops -- beside a burn-rate error).
 
 A refit that passes 1, 2 and 6 is **admissible**: it is a step toward the
 explanation (the stepwise search adds it and looks for the rest: while another
@@ -58,7 +62,7 @@ from ..solve import EstimationResult
 from .refit import Refit
 
 __all__ = ["Check", "Acceptance", "NoiseBand", "noise_band", "accept", "whiteness_ok", "fits_to_noise",
-           "WHITE_LEVEL", "SIZE_FACTOR", "FINDING_FACTOR", "BAND_LEVEL"]
+           "WHITE_LEVEL", "SIZE_FACTOR", "FINDING_FACTOR", "BAND_LEVEL", "SIGN_SIGMAS"]
 
 WHITE_LEVEL = 0.001
 """Holm-corrected Ljung-Box p (over the channels) below which residuals are not white."""
@@ -72,6 +76,12 @@ is a finding when nothing plausible explains them (:attr:`Acceptance.oversized`)
 much (a thrust 12 % off, 6 times the realistic 2 %). Beyond it the shape stands in for something else -- the
 studies' refits that reached the noise at 12-300 times their sizes were density profiles of -176 % and winds
 of 2800 m/s."""
+
+SIGN_SIGMAS = 2.0
+"""A mean that an effect's physics makes positive (:attr:`~rocketid.diagnostics.effects.Effect.positive`) is the
+wrong sign below ``-SIGN_SIGMAS`` times its standard error bound. (Measured on Wren-H: a true base drag's Mach
+average 0.11 +- 0.02; the warm tank's wrong one -0.11 +- 0.02; a 10 K colder day's base drag that stood in for
+the density -0.0069 +- 0.0021.)"""
 
 BAND_LEVEL = 0.001
 """Upper tail of chi2(dof)/dof that bounds the noise band."""
@@ -276,7 +286,7 @@ class Acceptance:
             return False
         if any(abs(r.estimate(k)[0]) < m for k, m in r.least.items()):
             return False
-        if any(v > SIZE_FACTOR for v in r.change_ratio().values()):
+        if any(v > SIZE_FACTOR for v in r.change_ratio().values()) or r.wrong_signs():
             return False
         ratios = r.size_ratio().values()
         return any(v > SIZE_FACTOR for v in ratios) and all(v <= FINDING_FACTOR for v in ratios)
@@ -292,6 +302,15 @@ class Acceptance:
     def to_dict(self) -> dict:
         return {"accepted": self.accepted, "admissible": self.admissible,
                 "checks": {c.name: c.to_dict() for c in self.checks}}
+
+
+def _mean_words(weights: Mapping[str, float]) -> str:
+    """A weighted mean in words: the parameter itself, or ``mean(a, b, ...)`` (weighted)."""
+    if len(weights) == 1:
+        return next(iter(weights))
+    names = list(weights)
+    even = np.allclose(list(weights.values()), 1.0 / len(weights))
+    return f"{'the mean' if even else 'the weighted mean'} of {names[0]}..{names[-1]}"
 
 
 def accept(refit: Refit, band: NoiseBand, *, level: float = 0.05, n_tests: int = 1) -> Acceptance:
@@ -355,13 +374,16 @@ def accept(refit: Refit, band: NoiseBand, *, level: float = 0.05, n_tests: int =
     steep = {ab: r for ab, r in (refit.change_ratio() if refit.success else {}).items() if r > SIZE_FACTOR}
     small = {k: m for k, m in refit.least.items() if refit.success and abs(refit.estimate(k)[0]) < m}
     bound = list(refit.at_bound)
-    if big or bound or small or steep:
+    wrong = refit.wrong_signs() if refit.success else []
+    if big or bound or small or steep or wrong:
         bits = [f"{k} = {refit.estimate(k)[0]:.4g} is {r:.1f} times its realistic size {refit.sizes[k]:.3g}"
                 for k, r in big.items()]
         bits += [f"{b} - {a} = {refit.estimate(b)[0] - refit.estimate(a)[0]:+.4g} is {r:.1f} times the realistic change "
                  f"{refit.changes[(a, b)]:.3g} between them" for (a, b), r in steep.items()]
         bits += [f"{k} = {refit.estimate(k)[0]:.3g} is below {m:g}, the least its physics allows" for k, m in small.items()]
         bits += [f"{k} is held at a bound" for k in bound]
+        bits += [f"{_mean_words(g)} = {m:.3g} +- {se:.2g} is below zero: the wrong sign for its physics"
+                 for g, m, se in wrong]
         checks.append(Check("size", False, "; ".join(bits)))
     else:
         worst = max(ratios.items(), key=lambda kv: kv[1]) if ratios else None

@@ -123,6 +123,15 @@ class Effect:
         profile's change between neighbouring knots (a wind's shear across the altitude between them).
         A change beyond :data:`~rocketid.diagnostics.accept.SIZE_FACTOR` times it is implausible, as a
         parameter's size is. Empty for most effects.
+    positive : tuple of mapping of str to float
+        Weighted means of its parameters that its physics makes positive, each ``{parameter: weight}``
+        (weights summing to one): a power-off base drag averaged over the Mach range flown -- once the jet
+        stops filling the base, the base pressure falls and the drag rises. A mean below zero by more than
+        :data:`~rocketid.diagnostics.accept.SIGN_SIGMAS` times its standard error (bounded by
+        ``sum |w_i| std_i``, whatever the estimates' correlation) is the wrong sign: implausible, as a size
+        beyond five realistic sizes is. The parameters are judged together, not one by one: a profile's
+        single knot may fall below zero while the profile does not (a true base drag, fitted on 5 Mach
+        knots, ended -0.043 +- 0.004 at its highest knot). Empty for most effects.
     rung : bool
         As a refined shape: a more flexible version of its family's shape, climbed in order of flexibility
         (True, most); False for another form of the same physics, as flexible as the catalogue's (the
@@ -143,6 +152,7 @@ class Effect:
     reading: Callable | None = field(default=None, compare=False, repr=False)
     changes: Mapping[tuple, float] = field(default_factory=dict, compare=False)
     rung: bool = field(default=True, compare=False)
+    positive: tuple = field(default=(), compare=False)
 
     def __post_init__(self):
         if not isinstance(self.name, str) or not self.name.isidentifier():
@@ -155,6 +165,12 @@ class Effect:
         object.__setattr__(self, "least", MappingProxyType({str(k): float(v) for k, v in self.least.items()}))
         object.__setattr__(self, "starts", tuple(MappingProxyType({str(k): float(v) for k, v in st.items()})
                                                  for st in self.starts))
+        positive = tuple(MappingProxyType({str(k): float(v) for k, v in group.items()}) for group in self.positive)
+        for group in positive:
+            if not group or not math.isclose(sum(group.values()), 1.0, rel_tol=1e-9):
+                raise ModelError(f"effect {self.name!r}: each group of positive gives weights summing to one, "
+                                 f"got {dict(group)}")
+        object.__setattr__(self, "positive", positive)
 
     @property
     def parameter_names(self) -> tuple[str, ...]:
@@ -474,8 +490,22 @@ def base_drag_mach_effect(knots: Sequence[float]) -> Effect:
         return ps
 
     return Effect(name, f"power-off base drag in Mach ({len(kn)} knots)", "aero", apply,
-                  f"cd + c(M) (1 - f_noz), c piecewise linear in Mach through {', '.join(f'{k:.3g}' for k in kn)}",
-                  {n: 0.1 for n in names})
+                  f"cd + c(M) (1 - f_noz), c piecewise linear in Mach through {', '.join(f'{k:.3g}' for k in kn)}; "
+                  "its average over these Mach numbers positive", {n: 0.1 for n in names},
+                  positive=(dict(zip(names, _trapezoid_weights(kn))),))
+
+
+def _trapezoid_weights(knots: Sequence[float]) -> tuple:
+    """Weights of a piecewise-linear function's values at ``knots`` in its average over them (the trapezoid
+    rule, exact for such a function); one knot: weight 1."""
+    kn = np.asarray(knots, float)
+    if kn.size == 1:
+        return (1.0,)
+    w = np.zeros(kn.size)
+    d = np.diff(kn)
+    w[:-1] += d / 2
+    w[1:] += d / 2
+    return tuple(float(x) for x in w / w.sum())
 
 
 def _refine_base_drag(vehicle: "Vehicle | None") -> list[Effect]:
@@ -2183,9 +2213,10 @@ def _build_catalogue() -> dict[str, Effect]:
                "mass m(t) + dm_start, kg: the vehicle heavier (or lighter) than stated by a constant amount",
                {"dm_start": 200.0}, relative=lambda veh: {"dm_start": 0.01 * veh.mass}, refine=_refine_start_mass),
         Effect("base_drag", "power-off base drag", "aero", _base_drag,
-               "cd + dCD_base (1 - f_noz): the drag coefficient higher (or lower) once the motor stops and its jet "
-               "no longer fills the base, faded in over the tail-off as the back-pressure fades out (f_noz); for a "
-               "motor that stops inside the horizon", {"dCD_base": 0.1}, refine=_refine_base_drag),
+               "cd + dCD_base (1 - f_noz): the drag coefficient higher once the motor stops and its jet "
+               "no longer fills the base (dCD_base >= 0: a decrease is the wrong sign), faded in over the tail-off "
+               "as the back-pressure fades out (f_noz); for a motor that stops inside the horizon",
+               {"dCD_base": 0.1}, refine=_refine_base_drag, positive=({"dCD_base": 1.0},)),
         Effect("transonic_drag", "transonic drag rise", "aero", _transonic_drag,
                f"cd + dCD_transonic exp(-((M - {TRANSONIC_MACH:g})/{TRANSONIC_WIDTH:g})^2/2)", {"dCD_transonic": 0.2},
                refine=_refine_drag),

@@ -706,6 +706,7 @@ def _acceptance(fit: EstimationResult, new: EstimationResult, effects: Sequence[
         r = summarize_refit(new, fit.objective, fit.n_estimated, effects, tuple(e.name for e in effects), sizes,
                             level=level, base_parameters=base_spec.parameter_names,
                             least={k: v for e in effects for k, v in e.least.items()},
+                            positive=[g for e in effects for g in e.positive],
                             base_values=dict(zip(fit.spec.parameter_names, (float(v) for v in fit.p))),
                             base_chi2_per_dof=fit.chi2_per_dof)
         dof = max(1, new.n_data - new.n_estimated)
@@ -775,6 +776,9 @@ class Refit:
     changes : dict
         ``{(a, b): size}``: the realistic size of the change ``b - a`` between two added parameters
         (:attr:`~rocketid.diagnostics.effects.Effect.changes`: a wind's shear between knots).
+    positive : tuple of dict
+        Weighted means of the effects' parameters that their physics makes positive
+        (:attr:`~rocketid.diagnostics.effects.Effect.positive`: a power-off base drag over the Mach range).
     solution : NLPSolution or None
         IPOPT's primal-dual solution of the refit's NLP (None when it failed): the chosen model is fitted
         again in the main process from exactly this point (:func:`~rocketid.solve.estimate`'s
@@ -809,6 +813,7 @@ class Refit:
     base_chi2_per_dof: float = float("nan")
     location_steps: dict = field(default_factory=dict)
     changes: dict = field(default_factory=dict)
+    positive: tuple = ()
     solution: Any = None
 
     @property
@@ -862,6 +867,21 @@ class Refit:
     def change_ratio(self) -> dict:
         """``{(a, b): |estimate b - estimate a| / realistic size}`` of the changes with a stated size."""
         return {(a, b): abs(self.estimate(b)[0] - self.estimate(a)[0]) / s for (a, b), s in self.changes.items() if s}
+
+    def wrong_signs(self) -> list[tuple[dict, float, float]]:
+        """``(weights, mean, standard error)`` of each mean of :attr:`positive` below zero by more than
+        :data:`~rocketid.diagnostics.accept.SIGN_SIGMAS` standard errors: the wrong sign. The standard error
+        is bounded by ``sum |w_i| std_i`` (the estimates' covariance is not kept; the bound holds whatever
+        it is, so a mean is called the wrong sign only when it is so even at their worst correlation)."""
+        from .accept import SIGN_SIGMAS
+        out = []
+        for group in self.positive:
+            est = [(w, *self.estimate(n)) for n, w in group.items()]
+            mean = sum(w * v for w, v, _ in est)
+            se = sum(abs(w) * sd for w, _, sd in est)
+            if np.isfinite(mean) and mean < 0 and not (np.isfinite(se) and mean >= -SIGN_SIGMAS * se):
+                out.append((dict(group), float(mean), float(se)))
+        return out
 
     def to_dict(self) -> dict:
         return {"effects": list(self.effects), "added": list(self.added), "converged": bool(self.success),
@@ -986,13 +1006,15 @@ def summarize_refit(new: EstimationResult, base_objective: float, base_n_estimat
                     base_parameters: Sequence[str] = (), seconds: float = 0.0, notes: Sequence[str] = (),
                     least: Mapping[str, float] | None = None, base_values: Mapping[str, float] | None = None,
                     base_chi2_per_dof: float = float("nan"), model_parameters: Sequence[str] | None = None,
-                    changes: Mapping[tuple, float] | None = None) -> Refit:
+                    changes: Mapping[tuple, float] | None = None, positive: Sequence[Mapping] = ()) -> Refit:
     """The :class:`Refit` of a fitted model with ``effects``: whiteness per channel, standard
     errors, the base coefficients' plausibility, the added parameters' identifiability.
 
     ``model_parameters`` are the user's model's own (default ``base_parameters``): every other
     parameter -- the effects judged and those of earlier steps -- is an effect parameter for the
-    plausibility check (:func:`effect_sizes`), never a drag or lift coefficient."""
+    plausibility check (:func:`effect_sizes`), never a drag or lift coefficient. ``positive``: the means
+    that the effects' physics makes positive (:attr:`Refit.positive`; those whose parameters the model
+    holds are kept)."""
     from .plausibility import check_plausibility
 
     names = tuple(new.spec.parameter_names)
@@ -1046,7 +1068,8 @@ def summarize_refit(new: EstimationResult, base_objective: float, base_n_estimat
                                  ((n, float(e.scan.times[1] - e.scan.times[0])) for n in e.locations)
                                  if n in names},
                  solution=new.solution if new.success else None,
-                 changes={(a, b): float(v) for (a, b), v in (changes or {}).items() if a in all_effects and b in all_effects})
+                 changes={(a, b): float(v) for (a, b), v in (changes or {}).items() if a in all_effects and b in all_effects},
+                 positive=tuple(dict(g) for g in positive if g and set(g) <= all_effects))
 
 
 #: IPOPT's return status when its maximum CPU or wall time was exceeded.
@@ -1100,6 +1123,10 @@ class RefitTask:
     base_chi2_per_dof : float
     changes : dict
         Realistic sizes of changes between the added parameters (:attr:`Effect.changes`).
+    positive : tuple of dict
+        The means of the model's effect parameters that their physics makes positive
+        (:attr:`Effect.positive`, every effect of the model's: an earlier step's base drag can turn negative
+        when the next effect is added).
     """
 
     base_spec: Any
@@ -1119,6 +1146,7 @@ class RefitTask:
     base_values: dict = field(default_factory=dict)
     base_chi2_per_dof: float = float("nan")
     changes: dict = field(default_factory=dict)
+    positive: tuple = ()
 
 
 def refit_spec(task: RefitTask, start: Mapping | None = None, *, model=None):
@@ -1189,7 +1217,8 @@ def summarize_task(task: RefitTask, new: EstimationResult, *, seconds: float = 0
                            notes=notes, least={k: v for e in task.effects if e.name in task.added
                                                for k, v in e.least.items()},
                            base_values=task.base_values, base_chi2_per_dof=task.base_chi2_per_dof,
-                           model_parameters=task.base_spec.parameter_names, changes=task.changes)
+                           model_parameters=task.base_spec.parameter_names, changes=task.changes,
+                           positive=task.positive)
 
 
 def _distorted(task: RefitTask, new: EstimationResult) -> str:
@@ -1349,7 +1378,7 @@ def task_key(task: RefitTask) -> str:
         return sorted((repr(k), repr(float(v)) if isinstance(v, (int, float, np.floating)) else repr(v))
                       for k, v in dict(d).items())
     h.update(repr((task.added, items(task.start), items(task.sizes), items(task.options), items(task.base_values),
-                   items(task.changes), task.base_parameters, float(task.base_objective), int(task.base_n_estimated),
+                   items(task.changes), [items(g) for g in task.positive], task.base_parameters, float(task.base_objective), int(task.base_n_estimated),
                    float(task.timeout), float(task.level), float(task.band_upper),
                    float(task.base_chi2_per_dof))).encode())
     return h.hexdigest()[:32]

@@ -297,7 +297,8 @@ def _task(base_spec, fit: EstimationResult, effects: Sequence[Effect], added: Se
                      base_parameters=tuple(base.spec.parameter_names), options=dict(options or {}),
                      base_values={n: float(v) for n, v in zip(base.spec.parameter_names, base.p)},
                      base_chi2_per_dof=float(base.chi2_per_dof),
-                     timeout=float(timeout), level=float(level), band_upper=float(band_upper), changes=changes)
+                     timeout=float(timeout), level=float(level), band_upper=float(band_upper), changes=changes,
+                     positive=tuple(dict(g) for e in effects for g in e.positive))
 
 
 def _choose(accs: Sequence[Acceptance]) -> tuple[int | None, str]:
