@@ -72,19 +72,14 @@ KNOWN_FAILURES: dict[str, str] = {
                        "judged 35 times a 2 % thrust error at its burn-out knot; a size of 2 % of the largest thrust "
                        "in force where each knot sits was tried and left: it made thrust_profile_9 tie base_drag_mach_5 "
                        "on the base-drag case (BIC 1342.3 against 1342.2)",
-    "steep-rail+cold-day": "3012272 (fresh pair): start_angle (1.500 deg for 1.5), partly explained: the cold day ties "
-                           "with a base drag of -0.011 and a start mass 0.09 kg heavy (temperature -10.4 +- 0.6 K for "
-                           "-10 at BIC 1289, 1295, 1302): a 10 K colder day moves these GPS data no more than those; on "
-                           "83c4694 (first run) wind_pl_5, partly explained",
     "vent+tailwind": "29cfd03 (fresh pair): wind_pl_5 + burn_rate + mass_flow, chi2/dof 3.79, partly explained: the "
                      "wind found, the vented oxidiser (lighter lift-off, earlier knee) not, as in pad-hold; on 83c4694 "
                      "the diagnosis did not end within the harness's 3600 s at load 4-5",
-    "warm-tank+shallow-rail": "c615eb9 (fresh pair): start_angle (-0.999 deg for -1.0) + burn_rate (eps_burn 0.056) + "
-                              "base_drag_mach_5 at chi2/dof 1.059, called explained -- a WRONG effect: the warm "
-                              "tank's motor is not a faster clock (the hot and cold tanks' physics), and a power-off "
-                              "increment of -0.25 to -0.03 (less drag once the jet stops) took up the rest; not "
-                              "mended (a sign for the power-off increment would also hold the true base drag's "
-                              "highest Mach knot, -0.043 +- 0.004 on the base-drag case, at its bound)",
+    "warm-tank+shallow-rail": "e940a4a (fresh pair): start_angle (-0.990 deg for -1.0) + burn_rate + start_mass, chi2/dof "
+                              "1.709, partly explained: the warm tank's motor is not a faster clock (the hot and cold "
+                              "tanks' physics, no catalogue shape); on c615eb9 start_angle + burn_rate + base_drag_mach_5 "
+                              "at 1.059 was called explained -- a WRONG effect, a power-off increment of -0.25 to -0.03 "
+                              "(less drag once the jet stops), since e940a4a the wrong sign",
 }
 
 
