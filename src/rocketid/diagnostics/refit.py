@@ -307,19 +307,23 @@ def _holding(prep, mask: np.ndarray, p0: np.ndarray):
 
 
 def _fit_window(spec, window: Measurements, mesh, guess, options, reference: np.ndarray, held: Sequence[str] = (),
-                loose: Sequence[str] = ()):
+                loose: Sequence[str] = (), states: np.ndarray | None = None):
     """Fit ``spec`` to the hold-out window from its nominal guesses (over which ``guess``), holding at their
     guesses the parameters the window's data do not reach (zero sensitivity at ``reference``, e.g. a drag
     knot at a Mach number the vehicle reaches only later) and ``loose``, those a first window fit left
     undetermined (:func:`_loose_coefficients`). ``held``: parameters held at their guesses in a first fit
-    whose values start the fit (the locations of located shapes, :func:`_times_held_first`)."""
+    whose values start the fit (the locations of located shapes, :func:`_times_held_first`). ``states``: the
+    node states of the fit at ``reference`` on ``mesh`` (the full data's fit), where the sensitivities start
+    their Newton solve instead of from a simulation."""
     spec = spec.with_guess(guess) if guess else spec
     prep = prepare(spec, window, mesh=mesh)
     p0 = spec.parameter_vector()
     blind: list[str] = []
     mask = np.zeros(len(p0), bool)
+    n_nodes = prep.transcription.mesh.node_times.size
+    gamma = None if states is None or states.shape != (n_nodes, len(spec.state_symbols)) else states.ravel()
     try:
-        sens = sensitivity_at(prep, reference)
+        sens = sensitivity_at(prep, reference, gamma=gamma)
         S = sens.S / sens.sigma[:, None] * spec.nominal[None, :]
         cn = np.sqrt(np.einsum("ij,ij->j", S, S))
         mask = cn <= BLIND * cn.max()
@@ -637,7 +641,9 @@ def _holdout(fit: EstimationResult, new: EstimationResult, window: tuple[float, 
     notes, fits = [], None
     try:
         win = data.window(a, b)
-        fb, blind_b = _fit_window(fit.spec, win, mesh, None, options, fit.p)
+        sb = fit.state_trajectories if fit.success else None
+        sn = new.state_trajectories if new.success else None
+        fb, blind_b = _fit_window(fit.spec, win, mesh, None, options, fit.p, states=sb)
         # from the model's own guesses, as the base model -- the model as declared (the base model's guesses, the
         # effect's neutral ones), not ``new.spec``, which after the search carries the full fit's estimates: a
         # parameter the window's data do not reach is held at its guess, and a guess taken from the full-data
@@ -647,16 +653,16 @@ def _holdout(fit: EstimationResult, new: EstimationResult, window: tuple[float, 
         # window's data alone say how large it is
         spec = declared if declared is not None else new.spec
         fn, blind_n = _fit_window(spec, win, mesh, dict(times or {}) or None, options, new.p,
-                                  held=tuple(times or ()))
+                                  held=tuple(times or ()), states=sn)
         # the base model's coefficients (not the start's states, which the window's own start determines)
         starts = {str(st.initial_parameter) for st in fit.spec.states if st.free}
         shared = [n for n in fit.spec.parameter_names if n in set(new.spec.parameter_names) and n not in starts]
         unsettled = _loose_coefficients((fb, fn), shared)
         if unsettled:
             # held in both window fits, as those the window does not reach (at the model's own guesses)
-            fb, blind_b = _fit_window(fit.spec, win, mesh, None, options, fit.p, loose=unsettled)
+            fb, blind_b = _fit_window(fit.spec, win, mesh, None, options, fit.p, loose=unsettled, states=sb)
             fn, blind_n = _fit_window(spec, win, mesh, dict(times or {}) or None, options, new.p,
-                                      held=tuple(times or ()), loose=unsettled)
+                                      held=tuple(times or ()), loose=unsettled, states=sn)
             blind_b, blind_n = ([n for n in b if n not in unsettled] for b in (blind_b, blind_n))
         fits = (fb, fn)
         pb, pn = _predict(fb, rest, timeout), _predict(fn, rest, timeout)
