@@ -113,35 +113,6 @@ def test_warm_start_from_its_own_solution_with_a_new_guess(ra66_spec, ra66_noisy
     assert np.all(np.abs(warm.p - ra66_noisy_fit.p) <= 1e-3 * ra66_sigma)
 
 
-def test_a_refit_starts_from_the_fit_s_states_when_they_are_its_trajectory(ra66_spec, ra66_noisy, ra66_noisy_fit,
-                                                                          monkeypatch):
-    """``states=``: RA-66 with a thrust error added at its neutral value, started from the fit without it, has
-    that fit's node states as its trajectory -- the simulation at the guess is skipped and the optimum is the
-    one the simulated start reaches; with the thrust error started away from zero, or a state missing, the
-    states are not a trajectory of the model and the start is simulated as without them."""
-    import rocketid.start as start_module
-    from rocketid.diagnostics import with_effects
-    from rocketid.solve import START_STATES_TOL
-    fit = ra66_noisy_fit
-    states = {str(s): fit.state_trajectories[:, j] for j, s in enumerate(fit.spec.state_symbols)}
-    assert float(np.max(np.abs(fit.nlp.constraints(fit.x)))) < START_STATES_TOL   # a converged fit's own states
-    mesh = fit.prepared.transcription.mesh
-    spec = with_effects(ra66_spec, ["thrust_level"]).with_guess(dict(zip(fit.spec.parameter_names, fit.p)))
-    simulated = ri.estimate(spec, ra66_noisy, mesh=mesh)
-    calls = []
-    real = start_module.start_states
-    monkeypatch.setattr(start_module, "start_states", lambda *a, **k: calls.append(1) or real(*a, **k))
-    started = ri.estimate(spec, ra66_noisy, mesh=mesh, states=states)
-    assert calls == [] and started.success
-    assert started.objective == pytest.approx(simulated.objective, rel=1e-9)
-    np.testing.assert_allclose(started.p, simulated.p, rtol=1e-6, atol=1e-9)
-    off = spec.with_guess({"eps_thrust": 0.05})
-    ri.estimate(off, ra66_noisy, mesh=mesh, states=states)
-    assert calls == [1]
-    ri.estimate(spec, ra66_noisy, mesh=mesh, states={k: v for k, v in list(states.items())[1:]})
-    assert calls == [1, 1]
-
-
 def test_result_accessors(ra66_spec, ra66_noisy_fit):
     fit = ra66_noisy_fit
     CL, CD3, x = ra66_spec.symbol("CL"), ra66_spec.symbol("CD3"), ra66_spec.symbol("x")

@@ -652,8 +652,7 @@ def estimate(spec: ModelSpec, data: Measurements, *, guess: Mapping | Sequence[f
              mesh: Mesh | None = None, options: Mapping[str, Any] | None = None,
              warm_start: "EstimationResult | NLPSolution | None" = None, prepared: Prepared | None = None,
              sigma: str | Mapping[str, float | str] | None = None,
-             window: Sequence[float] | None = None,
-             states: Mapping[str, np.ndarray] | None = None) -> EstimationResult:
+             window: Sequence[float] | None = None) -> EstimationResult:
     """Estimate all parameters of ``spec`` from ``data`` (the NLP (7.5)).
 
     Parameters
@@ -683,14 +682,6 @@ def estimate(spec: ModelSpec, data: Measurements, *, guess: Mapping | Sequence[f
         (:func:`rocketid.start.apply_window`); a window that starts after the model's
         ``t0`` estimates the initial states the data determine (parameters ``<state>_0``,
         guessed from the data). The result's ``spec`` is the windowed model.
-    states : mapping of str to array, optional
-        Node states to start from, keyed by state name, each over the mesh's node times (an
-        earlier fit's :attr:`EstimationResult.state_trajectories` on the same mesh). They replace
-        the simulation at the guess when they are a trajectory of the model at the guess -- every
-        equation of the NLP holds there within :data:`START_STATES_TOL` -- as a fit's are for the
-        model with an effect added at its neutral value (a refit started from the fit without it).
-        Otherwise (another mesh, another state, parameters the trajectory does not follow) they are
-        not used, and the start is simulated as without them.
 
     Returns
     -------
@@ -737,41 +728,14 @@ def estimate(spec: ModelSpec, data: Measurements, *, guess: Mapping | Sequence[f
         if guess is not None:
             x0 = nlp.layout.with_reduced(x0, p0)  # (7.5): the reduced parameters are p
     else:
-        x0 = _on_trajectory(prepared, nlp, states, p0) if states is not None else None
-        if x0 is None:
-            from .start import start_states
-            start = start_states(spec, prepared.measurements, prepared.transcription.mesh.node_times, p0)
-            notes.extend(start.notes)
-            x0 = nlp.initial_x(start.states, p0)
+        from .start import start_states
+        start = start_states(spec, prepared.measurements, prepared.transcription.mesh.node_times, p0)
+        notes.extend(start.notes)
+        x0 = nlp.initial_x(start.states, p0)
     fit = fit_nlp(prepared, nlp, x0, options=options, warm=warm, setup_s=prepared.setup_s, notes=notes)
     if estimated:
         fit = relax_sigma(fit, estimated, options=options)
     return fit
-
-
-START_STATES_TOL = 1e-6
-"""Largest equation residual of the NLP at which given node states are a trajectory of the model at the guess
-(:func:`estimate`'s ``states``): a converged fit's own states leave 1e-9 and less; an effect that is not at its
-neutral value leaves its size."""
-
-
-def _on_trajectory(prepared: Prepared, nlp, states: Mapping[str, np.ndarray], p0: np.ndarray) -> np.ndarray | None:
-    """``x`` started from ``states`` at ``p0`` when the NLP's equations hold there (:data:`START_STATES_TOL`),
-    else None."""
-    names = prepared.spec.state_symbols
-    n_nodes = prepared.transcription.mesh.node_times.size
-    try:
-        cols = [np.asarray(states[str(s)], float) for s in names]
-    except KeyError:
-        return None
-    if any(c.shape != (n_nodes,) for c in cols):
-        return None
-    S = np.column_stack(cols) if cols else np.zeros((n_nodes, 0))
-    if not np.all(np.isfinite(S)):
-        return None
-    x0 = nlp.initial_x(S, p0)
-    c = nlp.constraints(x0)
-    return x0 if c.size == 0 or float(np.max(np.abs(c))) <= START_STATES_TOL else None
 
 
 def check_not_per_sample(data: Measurements, estimated: Sequence[str], where: str = "sigma") -> None:

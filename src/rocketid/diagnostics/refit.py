@@ -1133,12 +1133,6 @@ class RefitTask:
         The means of the model's effect parameters that their physics makes positive
         (:attr:`Effect.positive`, every effect of the model's: an earlier step's base drag can turn negative
         when the next effect is added).
-    states : dict or None
-        The node states of the fit before the refit, by state name (on the task's mesh): the refit starts from
-        them instead of a simulation when they are a trajectory of its model at its start
-        (:func:`~rocketid.solve.estimate`'s ``states``: an effect added at its neutral value). Half of a refit's
-        time was that simulation (Stage-30, a warm ``thrust_level`` refit: 0.58 s against 0.26 s, the same
-        optimum).
     """
 
     base_spec: Any
@@ -1159,7 +1153,6 @@ class RefitTask:
     base_chi2_per_dof: float = float("nan")
     changes: dict = field(default_factory=dict)
     positive: tuple = ()
-    states: dict | None = field(default=None, compare=False, repr=False)
 
 
 def refit_spec(task: RefitTask, start: Mapping | None = None, *, model=None):
@@ -1200,7 +1193,7 @@ def run_refit(task: RefitTask) -> tuple[Refit, EstimationResult | None]:
             mask = np.array([n in set(held) for n in spec.parameter_names])
             spec = _times_held_first(spec, _holding(prep, mask, spec.parameter_vector()), options())
         new = estimate(spec, task.data, mesh=task.mesh, options=options(),
-                       prepared=None if prep is None else replace(prep, spec=spec), states=task.states)
+                       prepared=None if prep is None else replace(prep, spec=spec))
         odd = _distorted(task, new)
         if (odd or not (new.success and new.chi2_per_dof <= task.band_upper)) and time.perf_counter() < deadline:
             # warm start from a fit the missing effect distorted: also from the model's own guesses (the

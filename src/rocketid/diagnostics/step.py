@@ -298,17 +298,7 @@ def _task(base_spec, fit: EstimationResult, effects: Sequence[Effect], added: Se
                      base_values={n: float(v) for n, v in zip(base.spec.parameter_names, base.p)},
                      base_chi2_per_dof=float(base.chi2_per_dof),
                      timeout=float(timeout), level=float(level), band_upper=float(band_upper), changes=changes,
-                     positive=tuple(dict(g) for e in effects for g in e.positive),
-                     states=_node_states(fit))
-
-
-def _node_states(fit: EstimationResult) -> dict | None:
-    """``{state name: node values}`` of a converged fit, where its refits start (:class:`RefitTask`'s
-    ``states``); None for a fit that did not converge (its last iterate is not a trajectory)."""
-    if not fit.success:
-        return None
-    S = fit.state_trajectories
-    return {str(s): S[:, j].copy() for j, s in enumerate(fit.spec.state_symbols)}
+                     positive=tuple(dict(g) for e in effects for g in e.positive))
 
 
 def _choose(accs: Sequence[Acceptance]) -> tuple[int | None, str]:
