@@ -193,6 +193,17 @@ def test_sensitivity_of_a_fit_equals_sensitivity_at_its_estimate(ra66_noisy_fit)
     assert np.allclose(a.S, b.S, rtol=1e-7, atol=1e-9 * np.abs(b.S).max())
 
 
+def test_newton_from_the_fit_s_states_reaches_the_sensitivities_a_simulated_start_does(ra66_noisy_fit, ra66_noisy):
+    """The hold-out check's window fits form the sensitivities at the full fit's estimate on the window's data,
+    their Newton solve started from the full fit's node states (no simulation): the same as from the
+    simulation at that estimate."""
+    fit = ra66_noisy_fit
+    window = ri.prepare(fit.spec, ra66_noisy.window(0.0, 45.0), mesh=fit.prepared.transcription.mesh)
+    simulated = sensitivity_at(window, fit.p)
+    started = sensitivity_at(window, fit.p, gamma=fit.state_trajectories.ravel())
+    assert np.allclose(started.S, simulated.S, rtol=1e-8, atol=1e-8 * np.abs(simulated.S).max())
+
+
 def test_a_feasible_gamma_is_used_as_given(ra66_clean_prepared, at_p0):
     again = sensitivity_at(ra66_clean_prepared, at_p0.p, gamma=at_p0.gamma, solve=False)
     assert np.array_equal(again.S, at_p0.S)
