@@ -305,7 +305,7 @@ class Acceptance:
 
 
 def _mean_words(weights: Mapping[str, float]) -> str:
-    """A weighted mean in words: the parameter itself, or ``mean(a, b, ...)`` (weighted)."""
+    """A weighted mean in words: the parameter itself, or "the (weighted) mean of first..last"."""
     if len(weights) == 1:
         return next(iter(weights))
     names = list(weights)

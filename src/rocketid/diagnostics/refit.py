@@ -878,14 +878,15 @@ class Refit:
         """``(weights, mean, standard error)`` of each mean of :attr:`positive` below zero by more than
         :data:`~rocketid.diagnostics.accept.SIGN_SIGMAS` standard errors: the wrong sign. The standard error
         is bounded by ``sum |w_i| std_i`` (the estimates' covariance is not kept; the bound holds whatever
-        it is, so a mean is called the wrong sign only when it is so even at their worst correlation)."""
+        it is, so a mean is called the wrong sign only when it is so even at their worst correlation). A mean
+        without standard errors is not judged (the refit is then not determined: the coefficients check)."""
         from .accept import SIGN_SIGMAS
         out = []
         for group in self.positive:
             est = [(w, *self.estimate(n)) for n, w in group.items()]
             mean = sum(w * v for w, v, _ in est)
             se = sum(abs(w) * sd for w, _, sd in est)
-            if np.isfinite(mean) and mean < 0 and not (np.isfinite(se) and mean >= -SIGN_SIGMAS * se):
+            if np.isfinite(mean) and np.isfinite(se) and mean < -SIGN_SIGMAS * se:
                 out.append((dict(group), float(mean), float(se)))
         return out
 
