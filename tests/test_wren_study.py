@@ -63,11 +63,13 @@ KNOWN_FAILURES: dict[str, str] = {
                 "together, which no single catalogue shape does; start_mass alone (dm_start -1.59 for -1.5) is "
                 "the step-1 refit with the right size but leaves CD_7 at 2.8",
     # the fresh pairs (2026-11-28, data nobody had fitted; docs/effects.md, "Fresh pairs on Wren-H")
-    "cool-tank+ballast": "83c4694 (fresh pair): burn_rate + wind_pl_5 + base_drag_mach_2, chi2/dof 2.13, partly "
-                         "explained: the cool tank changes thrust and flow in time as the hot and the cold tank do (no "
+    "cool-tank+ballast": "e940a4a (fresh pair): burn_rate + wind_pl_5 + time_offset, chi2/dof 2.59, partly explained "
+                         "(on 83c4694 burn_rate + wind_pl_5 + base_drag_mach_2 at 2.13, the base drag since the wrong "
+                         "sign): the cool tank changes thrust and flow in time as the hot and the cold tank do (no "
                          "catalogue shape), and the 2 kg of ballast is not found under it",
-    "short-web+geoid": "83c4694 (fresh pair): bias_h (-14.0 +- 0.4 m for -15) + base_drag_mach_2, chi2/dof 1.045, partly "
-                       "explained: the burn-through late in the burn is a thrust loss of 9 % at 12 s and 70 % at "
+    "short-web+geoid": "e940a4a (fresh pair): bias_h (-14.3 +- 0.5 m for -15) + base_drag_mach_3 + transonic_drag, "
+                       "chi2/dof 1.031, partly explained (on 83c4694 bias_h + base_drag_mach_2 at 1.045, that base drag "
+                       "since the wrong sign): the burn-through late in the burn is a thrust loss of 9 % at 12 s and 70 % at "
                        "burn-out, which thrust_profile_5 beside the bias fits at 0.983 (BIC 1291 against 1349) but "
                        "judged 35 times a 2 % thrust error at its burn-out knot; a size of 2 % of the largest thrust "
                        "in force where each knot sits was tried and left: it made thrust_profile_9 tie base_drag_mach_5 "
