@@ -1348,7 +1348,7 @@ def _paired(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Effect],
     0.40), and was called explained; the start mass with the temperature, neither near the noise alone at step 1
     (2.93, 2.79), explain the data at a BIC 51 lower. With a nozzle's back-pressure and the same cold day, a
     power-off base drag on two Mach knots of -0.28 at the first (1.026) against the back-pressure with the
-    temperature, 34 lower.
+    temperature, 34 lower (since 2026-11-28 that base drag is also the wrong sign, :attr:`Effect.positive`).
 
     A refined shape of any kind (an event's too) whose family's catalogue shape reached the noise band at step 1
     with a plausible size, yet was no explanation (residuals not white, a coefficient implausible), gets a second
