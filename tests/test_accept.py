@@ -197,6 +197,20 @@ def test_a_refit_without_standard_errors_does_not_explain():
     assert "not determined" in a.reason() and "singular" in a.reason()
 
 
+def test_a_refit_whose_standard_errors_are_a_thousand_realistic_sizes_does_not_explain():
+    """Singular to rounding: on Tern-2 with a back-pressure on a 15 K colder day, a 7-knot density profile reached
+    chi2/dof 1.025 with its knots at 0.13 +- 846 (realistic 0.05) and was called explained, the back-pressure
+    missing; the true pair explained the data 63 lower in BIC (measured on cf496fc). A standard error of 20
+    realistic sizes is a measurement, if a poor one."""
+    from rocketid.diagnostics.accept import UNDETERMINED_FACTOR
+    loose = replace(refit("density_pl_7", 1.0245, value=0.131, size=0.05), std=np.array([0.01, 846.0]))
+    a = accept(loose, BAND)
+    assert not a.accepted and a.admissible and a.failed == ["coefficients"]
+    assert "not determined" in a.reason() and "1.69e+04 times its realistic size" in a.reason()
+    assert accept(replace(loose, std=np.array([0.01, 1.0])), BAND).accepted            # 20 sizes: determined
+    assert UNDETERMINED_FACTOR == 1000.0
+
+
 def test_an_event_the_data_do_not_place_does_not_explain():
     """A located shape whose event time's standard error exceeds the step of the scan that located it (Tern-2's
     drag rise at burn-out "explained" by 9.9 kg released at 2.3 +- 3.1 s, scan step 1.86 s) is not an event the

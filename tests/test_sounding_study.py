@@ -36,12 +36,6 @@ from sounding_study.cases import (A_EXIT, ALL, BASE_DRAG, BIAS_H, BY_NAME, DM0, 
 
 #: Cases measured not to meet the bar (``STUDY.acceptable``), with the measured reason.
 KNOWN_FAILURES: dict[str, str] = {
-    "back-pressure+cold-day": "cf496fc: density_pl_7 at chi2/dof 1.025, called explained with its knots +-850 (not "
-                              "determined), the back-pressure missing. Since the base drag's sign (e940a4a) the "
-                              "2-knot base drag of -0.28 is not admissible, and the refined density profile took its "
-                              "place; the pair of simple effects ends back_pressure + temperature at 1.017, BIC 63 "
-                              "lower (A_e and dT_air right), but holds the profile's family, so the profile stands "
-                              "(step._paired_from). Before e940a4a: back_pressure + temperature, right & explained",
     "headwind": "ab3aede: the wind is found (wind_pl_6, chi2/dof 0.991) but partly explained: CD_0 (the rail-exit Mach "
                 "knot) at its lower bound. The catalogue's wind turns a finned rocket's thrust into the airflow at "
                 "once; the truth's body swings into it as a pendulum (the fins' restoring moment against the body's "

@@ -20,7 +20,8 @@ answer comes from taking the best helper for the explanation. An effect is
    every channel, Holm-corrected over the channels, above :data:`WHITE_LEVEL`
    (at 100 Hz a correct model's residuals pass it; a single channel's uncorrected
    p = 0.012 does not fail a clean fit);
-5. is **determined** and keeps the **base coefficients plausible**: its standard errors exist (a
+5. is **determined** and keeps the **base coefficients plausible**: its standard errors exist and none
+   exceeds :data:`UNDETERMINED_FACTOR` realistic sizes (a
    refit whose reduced Hessian is singular has estimates that are one point of a set that fits as
    well -- on a sounding rocket whose drag rises at burn-out, a 7-knot density profile reached the
    noise that way), a located shape's location is placed (each event time's or hump's standard error
@@ -76,6 +77,12 @@ is a finding when nothing plausible explains them (:attr:`Acceptance.oversized`)
 much (a thrust 12 % off, 6 times the realistic 2 %). Beyond it the shape stands in for something else -- the
 studies' refits that reached the noise at 12-300 times their sizes were density profiles of -176 % and winds
 of 2800 m/s."""
+
+UNDETERMINED_FACTOR = 1000.0
+"""An added parameter whose standard error exceeds this many realistic sizes is not determined by the data, as one
+without a standard error is (the reduced Hessian singular to rounding): Tern-2 with a back-pressure on a cold day
+was called explained by a 7-knot density profile whose knots were -0.17 to 0.19 +- 620-890 (realistic 0.05). The
+documented studies' explained models have standard errors within a few realistic sizes."""
 
 SIGN_SIGMAS = 2.0
 """A mean that an effect's physics makes positive (:attr:`~rocketid.diagnostics.effects.Effect.positive`) is the
@@ -349,10 +356,17 @@ def accept(refit: Refit, band: NoiseBand, *, level: float = 0.05, n_tests: int =
     settled = band.contains(refit.base_chi2_per_dof)
     gain = refit.base_chi2_per_dof - refit.chi2_per_dof
     small_gain = not gain >= SHIFT_GAIN * math.sqrt(2.0 / max(1, band.dof))
+    loose = [n for n in refit.effect_parameters if refit.success and refit.sizes.get(n)
+             and refit.estimate(n)[1] > UNDETERMINED_FACTOR * refit.sizes[n]]
     if refit.success and not all(np.isfinite(refit.estimate(n)[1]) for n in refit.effect_parameters):
         why = next((n for n in refit.notes if n.startswith("no standard errors")), "no standard errors")
         checks.append(Check("coefficients", False, f"not determined by these data ({why}): the estimates are one "
                                                    "point of a set that fits as well, not a measurement"))
+    elif loose:
+        checks.append(Check("coefficients", False, "not determined by these data: " + "; ".join(
+            f"{n} = {refit.estimate(n)[0]:.4g} +- {refit.estimate(n)[1]:.3g}, a standard error "
+            f"{refit.estimate(n)[1] / refit.sizes[n]:.3g} times its realistic size" for n in loose[:3])
+            + ": the estimates are one point of a set that fits as well, not a measurement"))
     elif unplaced := [n for n, step in refit.location_steps.items() if refit.success
                       and not refit.estimate(n)[1] <= step]:
         checks.append(Check("coefficients", False, "; ".join(
