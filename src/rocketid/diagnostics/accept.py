@@ -63,7 +63,7 @@ from ..solve import EstimationResult
 from .refit import Refit
 
 __all__ = ["Check", "Acceptance", "NoiseBand", "noise_band", "accept", "whiteness_ok", "fits_to_noise",
-           "WHITE_LEVEL", "SIZE_FACTOR", "FINDING_FACTOR", "BAND_LEVEL", "SIGN_SIGMAS"]
+           "WHITE_LEVEL", "SIZE_FACTOR", "FINDING_FACTOR", "BAND_LEVEL", "SIGN_SIGMAS", "UNDETERMINED_FACTOR"]
 
 WHITE_LEVEL = 0.001
 """Holm-corrected Ljung-Box p (over the channels) below which residuals are not white."""
@@ -81,8 +81,8 @@ of 2800 m/s."""
 UNDETERMINED_FACTOR = 1000.0
 """An added parameter whose standard error exceeds this many realistic sizes is not determined by the data, as one
 without a standard error is (the reduced Hessian singular to rounding): Tern-2 with a back-pressure on a cold day
-was called explained by a 7-knot density profile whose knots were -0.17 to 0.19 +- 620-890 (realistic 0.05). The
-documented studies' explained models have standard errors within a few realistic sizes."""
+was called explained by a 7-knot density profile whose knots were -0.17 to 0.19 +- 620-890 (realistic 0.05). No
+explained model in the documented studies' tables has a standard error of 100 or more."""
 
 SIGN_SIGMAS = 2.0
 """A mean that an effect's physics makes positive (:attr:`~rocketid.diagnostics.effects.Effect.positive`) is the
