@@ -138,7 +138,7 @@ def test_a_power_off_base_drag_below_zero_over_the_mach_range_is_the_wrong_sign(
     # the standard errors' bound decides close calls: a mean below zero by less than two of it is no finding
     close = _base_drag_refit([-0.04, 0.02, 0.0, 0.0, 0.0], [0.05, 0.01, 0.01, 0.01, 0.01])
     assert accept(close, BAND).check("size").passed
-    # the catalogue's one-number shape: Wren-H on a 10 K colder day, dCD_base -0.0069 +- 0.0021 (measured)
+    # the catalogue's one-number shape: Petrel-V on a 10 K colder day, dCD_base -0.0069 +- 0.0021 (measured)
     single = replace(refit("base_drag", 1.063, value=-0.006876, size=0.1),
                      positive=({"p_base_drag": 1.0},), std=np.array([0.01, 0.0021]))
     assert not accept(single, BAND).check("size").passed

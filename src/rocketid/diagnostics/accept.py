@@ -87,8 +87,8 @@ explained model in the documented studies' tables has a standard error of 100 or
 SIGN_SIGMAS = 2.0
 """A mean that an effect's physics makes positive (:attr:`~rocketid.diagnostics.effects.Effect.positive`) is the
 wrong sign below ``-SIGN_SIGMAS`` times its standard error bound. (Measured on Wren-H: a true base drag's Mach
-average 0.11 +- 0.02; the warm tank's wrong one -0.11 +- 0.02; a 10 K colder day's base drag that stood in for
-the density -0.0069 +- 0.0021.)"""
+average 0.11 +- 0.02; the warm tank's wrong one -0.11 +- 0.02; and on Petrel-V a 10 K colder day's base drag that
+stood in for the density, -0.0069 +- 0.0021.)"""
 
 BAND_LEVEL = 0.001
 """Upper tail of chi2(dof)/dof that bounds the noise band."""
