@@ -624,13 +624,29 @@ def test_a_flexible_shape_that_explains_at_step_1_is_weighed_against_a_pair_of_s
         notes = []
         assert S._paired(ctx, None, candidates, first, notes) is first
         assert "thrust_profile_5 stands" in notes[-1]
-    # a pair that holds the flexible shape's family confirms the family (Kestrel-S's hot motor: start_mass +
-    # thrust_level 7.8 lower in BIC than a 3-knot thrust error, the start mass not in the truth)
-    alt = replace(ends_at(1.004), chosen=[CATALOGUE["start_mass"], CATALOGUE["thrust_level"]])
+    # a pair that holds the flexible shape's family needs BIC_FAMILY_PAIR (Kestrel-S's hot motor: start_mass +
+    # thrust_level 7.8 lower in BIC than a 3-knot thrust error, the start mass not in the truth -> the shape stands;
+    # Tern-2's back-pressure on a cold day: back_pressure + temperature 63 lower than a density profile -> replaced)
+    dof = N_DATA - 9                                   # both models estimate 9: the BIC differs by dchi2/dof * dof
+
+    def family_pair(lower):
+        return replace(ends_at(1.010 - lower / dof), chosen=[CATALOGUE["start_mass"], CATALOGUE["thrust_level"]])
+    assert S.BIC_TIE < 15.0 < S.BIC_FAMILY_PAIR < 63.0
+    for lower in (7.8, 15.0):
+        alt = family_pair(lower)
+        assert S._bic(alt.last) == pytest.approx(S._bic(first.last) - lower, abs=1e-6)
+        monkeypatch.setattr(S, "_forward", lambda *a, **k: alt)
+        notes = []
+        assert S._paired(ctx, None, candidates, first, notes) is first
+        assert "it holds thrust_level, the flexible shape's family" in notes[-1] and "thrust_profile_5 stands" in notes[-1]
+    alt = family_pair(63.0)
     monkeypatch.setattr(S, "_forward", lambda *a, **k: alt)
     notes = []
-    assert S._paired(ctx, None, candidates, first, notes) is first
-    assert "it holds thrust_level, the flexible shape's family" in notes[-1]
+    assert S._paired(ctx, None, candidates, first, notes) is alt
+    assert "lower by more than 20 (it holds thrust_level" in notes[-1] and "replaces the flexible shape" in notes[-1]
+    # a pair of other families 15 lower replaces the shape: the tie margin only
+    other = ends_at(1.010 - 15.0 / dof)
+    assert S._paired(ctx, None, candidates, first, []) is other
     # the pair's search takes its second step among simple shapes: a temperature offset for the density's profile,
     # no thrust profile on knots, no throttle window, none at any depth of a ladder
     simple = {e.name: e for e in S._simple_shapes(candidates)}

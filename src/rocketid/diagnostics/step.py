@@ -165,6 +165,17 @@ number flown only after the window): the rivals then differ in how they carry th
 their physics. (On RA-66M with a +3 % thrust error, ``CD_M_6`` held at its guess, a start-mass error
 predicted at 4.02 sigma^2 against the true thrust error's 24.2 and was called explained.)"""
 
+BIC_FAMILY_PAIR = 2 * BIC_TIE
+"""The BIC margin by which a pair of simple effects (:func:`_paired`) that holds the flexible shape's own family
+(in a simpler shape, beside an effect of another family) must undercut that flexible shape to replace it:
+twice :data:`BIC_TIE`. Such a pair is partly the refinement's question again -- the family's flexible shape
+against a simpler one of the same family -- and the other effect may only stand in for the shape the simpler
+one lacks. Measured: Kestrel-S with a hot motor (a thrust curve 3 % faster and higher) ended a 3-knot thrust
+error at step 1; from the start mass the pair ends ``start_mass`` + ``thrust_level``, a wrong effect beside
+the right family, at a BIC 7.8 lower (9.1 with Earth rotation beside the motor). Tern-2 with a nozzle's
+back-pressure on a day 15 K cold ended a 7-knot density profile; the pair ``back_pressure`` + ``temperature``,
+the truth, is 63 lower. Until 2026-11-29 such a pair never replaced the shape, whatever its BIC."""
+
 SECOND_PATH_REACH = 10.0
 """A second path starts only from a first-step refit whose chi2/dof excess over the noise band is at most this
 many times the excess where the first search ended (:func:`_within_reach`) -- the factor within which the screen
@@ -1336,11 +1347,11 @@ def _paired(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Effect],
     flexible shape (:func:`_flexible`), a search of two steps started from the first step's best admissible refit
     of a simple effect of another family (:func:`_simple_start`), its second step among simple shapes only
     (:func:`_simple_shapes`); its model replaces the flexible shape when it ends explained, every size plausible,
-    with a BIC lower by :data:`BIC_TIE` -- strong evidence, as an explanation already reached is overturned -- and
-    holds no effect of the flexible shape's family (a pair that does confirms the family: Kestrel-S with a hot motor, the truth a thrust curve 3 % faster and higher, took a
-    3-knot thrust error at step 1; from the start mass the search ends ``start_mass`` + ``thrust_level``, 7.8
-    lower in BIC, a wrong effect beside the right family, kept out by the margin alone; with Earth rotation too,
-    9.1 lower). Otherwise ``path`` stands; a note says where the pair's search ended.
+    with a BIC lower by :data:`BIC_TIE` -- strong evidence, as an explanation already reached is overturned -- or
+    by :data:`BIC_FAMILY_PAIR` when the pair holds an effect of the flexible shape's own family (Kestrel-S's hot
+    motor: ``start_mass`` + ``thrust_level``, a wrong effect beside the right family, 7.8 lower than a 3-knot
+    thrust error; Tern-2's back-pressure on a cold day: ``back_pressure`` + ``temperature``, the truth, 63 lower
+    than a 7-knot density profile). Otherwise ``path`` stands; a note says where the pair's search ended.
 
     Two simple effects can bend the trajectory as one flexible shape of a third family does, and the first step
     compares single effects only. Measured on Tern-2 with an atmosphere 15 K colder and a launch mass 20 kg above
@@ -1397,18 +1408,21 @@ def _paired_from(ctx: "_Search", fit: EstimationResult, candidates: Sequence[Eff
              + f", the search of two steps ends with {', '.join(e.name for e in alt.chosen)} at chi2/dof "
              f"{alt.current.chi2_per_dof:.4g}, BIC {_bic(alt.last):.6g} against {shape}'s {_bic(path.last):.6g}")
     family = _family(shape)
-    if not own and any(_family(e.name) == family for e in alt.chosen):
-        # the pair holds the flexible shape's own family: the data want that family, and its shape against a
-        # simpler one beside another effect is the refinement's question, answered at step 1
-        notes.append(f"pair of simple effects: {ended}; it holds {family}, the flexible shape's family: {shape} "
-                     "stands")
-        return path
+    # a pair that holds the flexible shape's own family asks the refinement's question again, beside another
+    # effect that may only stand in for the shape: it needs the larger margin
+    holds = not own and any(_family(e.name) == family for e in alt.chosen)
+    margin = BIC_FAMILY_PAIR if holds else BIC_TIE
     if (alt.ok and alt.last is not None and alt.last.accepted and not alt.ambiguous and len(alt.chosen) == 2
-            and _bic(alt.last) < _bic(path.last) - BIC_TIE):
+            and _bic(alt.last) < _bic(path.last) - margin):
         notes += mine
         notes.append(f"pair of simple effects: {ended}, explained, every size plausible, lower by more than "
-                     f"{BIC_TIE:g}: that model replaces the {kind} shape")
+                     f"{margin:g}" + (f" (it holds {family}, the flexible shape's family)" if holds else "")
+                     + f": that model replaces the {kind} shape")
         return alt
+    if holds:
+        notes.append(f"pair of simple effects: {ended}; it holds {family}, the flexible shape's family, and is "
+                     f"not an explanation with a BIC lower by {margin:g}: {shape} stands")
+        return path
     notes.append(f"pair of simple effects: {ended}; not an explanation with a BIC lower by {BIC_TIE:g}: "
                  f"{shape} stands")
     return path
