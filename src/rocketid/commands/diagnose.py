@@ -70,6 +70,10 @@ __all__ = ["command"]
 @click.option("--resume", is_flag=True,
               help="Continue a diagnosis interrupted or stopped at its --budget: the refits it made, kept in "
                    "DIR/checkpoints (DIR/<flight>/checkpoints), are taken instead of run again.")
+@click.option("--free-shape/--no-free-shape", "free_shape", default=True, show_default=True,
+              help="When the search ends above the noise, fit the free shape the verdict names (a thrust error on "
+                   "the mesh over the burn, a wind or density profile, a drag correction in Mach) to the model: "
+                   "the report says whether what is missing is of that kind, and its shape. Never an explanation.")
 @click.option("--locate-window", "locate_window", type=float, default=None, metavar="SECONDS",
               help="Window length of the located statistics (default: the flight's span / 22).")
 @click.option("--window", "window_text", default=None, metavar="T0:T1",
@@ -102,7 +106,7 @@ __all__ = ["command"]
 @unmeasured_option_decl()
 @verbose_option
 def command(data_files, out, model, level, confirm_top, holdout, max_effects, workers, refit_timeout, budget,
-            resume, locate_window,
+            resume, free_shape, locate_window,
             window_text, columns, time_column, wild_points, correlated_noise, size_opts, per_flight, sigmas,
             sigma_columns, unmeasured):
     """Fit a model to DATA.csv and diagnose what it misses; write DIR/report.html.
@@ -155,7 +159,8 @@ def command(data_files, out, model, level, confirm_top, holdout, max_effects, wo
                  settings=dict(level=level, confirm_top=confirm_top, window=window, holdout=holdout,
                                max_effects=max_effects, workers=workers, refit_timeout=refit_timeout,
                                candidates=candidates, wild_points=wild_points, sizes=sizes,
-                               correlated_noise=correlated_noise, budget=budget, resume=resume))
+                               correlated_noise=correlated_noise, budget=budget, resume=resume,
+                               free_shape=free_shape))
         return
     data_file = data_files[0]
     data = read_data(data_file, spec, time_column=time_column, columns=assignments(columns, "--column"),
@@ -169,7 +174,7 @@ def command(data_files, out, model, level, confirm_top, holdout, max_effects, wo
                           max_effects=max_effects, workers=workers, refit_timeout=refit_timeout, sigma=sigma,
                           flight_window=flight, candidates=candidates, wild_points=wild_points, sizes=sizes,
                           correlated_noise=correlated_noise, budget=budget, progress=status,
-                          checkpoints=Path(out) / "checkpoints", resume=resume)
+                          checkpoints=Path(out) / "checkpoints", resume=resume, free_shape=free_shape)
         report = _relabel(report, label, str(data_file))
         path = report.write(out)
         end_checkpoints(Path(out) / "checkpoints", bool(report.search_stopped), [])

@@ -132,6 +132,10 @@ class DiagnosisReport:
         The errors' correlation in time, channel by channel, found on the base fit
         (:mod:`rocketid.diagnostics.correlated`); a correlated channel is thinned to the samples whose
         errors are independent unless ``correlated_noise="keep"``. None when the test was not made.
+    free_shape : FreeShape or None
+        The free shape the verdict names, fitted to the user's model when the search ended above the
+        noise (:mod:`rocketid.diagnostics.freeshape`): of what kind the missing physics is, and its shape.
+        None when the search reached the noise, was cut short or named a tie, or the kind has none.
     """
 
     model: str
@@ -156,6 +160,7 @@ class DiagnosisReport:
     noise_from_data: dict = field(default_factory=dict)
     wild_points: Any = None
     correlated_noise: Any = None
+    free_shape: Any = None
 
     # ---- verdicts
     @property
@@ -250,6 +255,8 @@ class DiagnosisReport:
                        f"BIC {b.bic[0]:.6g} -> {b.bic[1]:.6g}; {est}.")
         if self.final is not None:
             out.append(f"Verdict: {self.final.verdict}. {self.final.explanation}")
+        if self.free_shape is not None:
+            out.append(self.free_shape.text())
         if self.variant is not None and self.variant.final is not None:
             v = self.variant.final
             out.append(f"On the Mach-indexed variant ({self.variant.fit.spec.name}): {v.verdict}"
@@ -347,6 +354,7 @@ class DiagnosisReport:
                                    for c, (v, n) in self.noise_from_data.items()},
                "wild_points": None if self.wild_points is None else self.wild_points.to_dict(),
                "correlated_noise": None if self.correlated_noise is None else self.correlated_noise.to_dict(),
+               "free_shape": None if self.free_shape is None else self.free_shape.to_dict(),
                "timings": dict(self.timings), "notes": list(self.notes), "environment": environment()}
         return out
 
@@ -653,6 +661,30 @@ def _suggest(ranking) -> str:
     return "a term of your own written with custom_effect"
 
 
+def _free_shape(disc, ranking, settings: dict, budget, t_search: float, notes: list):
+    """The free shape the verdict names, fitted (:mod:`~rocketid.diagnostics.freeshape`), when the search ended
+    above the noise ("partly explained" or "not explained by the catalogue", no tie named, not cut short by the
+    time budget); None otherwise or when the screen's first candidate's kind has no free shape."""
+    from .freeshape import free_shape_check
+    from .step import _family
+    top = ranking.candidates[0] if ranking is not None and getattr(ranking, "candidates", None) else None
+    if (disc is None or top is None or disc.fits_to_noise or disc.stopped or disc.ambiguous
+            or disc.verdict not in ("partly explained", "not explained by the catalogue")):
+        return None
+    left = None if budget is None else budget - (time.perf_counter() - t_search)
+    if left is not None and left <= 0:
+        notes.append("the free shape was not fitted: the time budget had run out")
+        return None
+    timeout = settings["timeout"] if left is None else min(settings["timeout"], left)
+    if settings.get("progress") is not None:
+        settings["progress"](f"free shape: fitting the {top.kind} term the verdict names")
+    try:
+        return free_shape_check(disc, top.kind, _family(top.name), timeout=timeout, options=settings["options"])
+    except RocketidError as exc:
+        notes.append(f"the free shape could not be fitted: {exc}")
+        return None
+
+
 def _blind_spots(ranking, exclude=()) -> str:
     """The candidates the base fit's coefficients absorb so far that, at a realistic size, they would go
     unseen (score test: expected statistic below ``DETECTABLE``), with what absorbs them; "" when none."""
@@ -896,12 +928,13 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
              flight_window: Sequence[float] | None = None, wild_points: str = "drop",
              sizes: Mapping[str, float] | None = None, correlated_noise: str = "thin",
              budget: float | None = None, progress=None, checkpoints: str | Path | None = None,
-             resume: bool = False) -> DiagnosisReport:
+             resume: bool = False, free_shape: bool = True) -> DiagnosisReport:
     """Fit ``model`` to ``data`` and find what it misses::
 
         fit -> compare -> locate -> plausibility
             -> discover (screen -> refit every contender -> accept -> step, to the noise)
-            -> confirm the final model (LR, BIC, hold-out) -> history -> final verdict -> report
+            -> confirm the final model (LR, BIC, hold-out) -> history -> final verdict
+            -> the free shape the verdict names, when the search ended above the noise -> report
 
     Parameters
     ----------
@@ -994,6 +1027,13 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
         the same search, which goes through what was done in no time and on from there (with a
         larger ``budget``, past where it stopped). The files are Python pickles: resume only from
         checkpoints you wrote.
+    free_shape : bool
+        When the search ends above the noise ("partly explained", "not explained by the catalogue"), fit
+        the free shape the verdict names -- a thrust error on the mesh's element boundaries over the burn
+        for a propulsion or mass candidate first in the screen's ranking, a wind or density profile in
+        altitude, a drag correction in Mach -- to the user's model (:mod:`~rocketid.diagnostics.freeshape`):
+        :attr:`DiagnosisReport.free_shape` says whether what is missing is of that kind, and its shape.
+        Never an explanation; it does not change the verdict. It runs within the ``budget``.
 
     Returns
     -------
@@ -1025,12 +1065,15 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
         history = _history(spec, fit, disc, notes)
         after = compare(disc.fit, level=level) if disc is not None and disc.effects else None
         final = _final(disc, ranking, level, window)
+        free = (_timed(timings, "free_shape_s", _free_shape, disc, ranking, search, budget, t_search, notes)
+                if free_shape and confirm_top > 0 else None)
         var = None
         if confirm_top > 0 and (variant is True or (variant == "auto"
                                                     and (final is None or final.verdict != "explained"))):
             settings = dict(level=level, confirm_top=confirm_top, window=window, options=options,
                             max_effects=max_effects, workers=workers, refit_timeout=refit_timeout, refine=refine,
-                            sigma=sigma if counts else None)     # the same data, the same noise (and a widened band)
+                            sigma=sigma if counts else None,     # the same data, the same noise (and a widened band)
+                            free_shape=False)
             var = _variant_search(fit, meas, effects, settings, budget, t_search, progress, timings, notes)
     if checkpoints is not None:
         stopped = bool(_stopped(disc) or (var is not None and _stopped(var.discovery)))
@@ -1040,7 +1083,7 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
                              refit_plausibility=pls, after=after, history=history, level=float(level),
                              timings=timings, notes=tuple(notes), discovery=disc, final=final, variant=var,
                              ranking_failed=failed, noise_from_data=from_data, wild_points=wild,
-                             correlated_noise=corr)
+                             correlated_noise=corr, free_shape=free)
     if out is not None:
         report.write(out)
     return report

@@ -538,6 +538,22 @@ def _confirm_section(report, figs: _Figures) -> str:
     return "\n".join(parts)
 
 
+def _free_shape_plot(free):
+    """The free shape's values at its knots (:class:`~rocketid.diagnostics.freeshape.FreeShape`)."""
+    ax = new_axes((8, 3))
+    percent = free.kind in ("propulsion", "mass") or free.effect.startswith("density")
+    y = 100 * np.asarray(free.values) if percent else np.asarray(free.values)
+    ax.plot(free.knots, y, "o-", ms=3)
+    ax.axhline(0.0, color="0.6", lw=0.8)
+    ax.set_xlabel({"s": "t (s)", "km": "altitude (km)", "Mach": "Mach"}.get(free.unit, free.unit))
+    ax.set_ylabel({"propulsion": "thrust error (%)", "mass": "thrust error (%)"}.get(
+        free.kind, "density deviation (%)" if percent else "wind (m/s)" if free.effect.startswith("wind")
+        else "drag coefficient change"))
+    ax.set_title(f"{free.effect}: chi2/dof {free.chi2_per_dof:.4g}", fontsize=9)
+    ax.figure.tight_layout()
+    return ax.figure
+
+
 def _steps_section(report, figs: _Figures) -> str:
     steps = getattr(report, "steps", ())
     final = getattr(report, "final", None)
@@ -545,6 +561,13 @@ def _steps_section(report, figs: _Figures) -> str:
     if final is not None:
         cls = "ok" if final.verdict in ("explained", "nothing missing") else "fail"
         parts.append(f'<p>Final verdict: <span class="{cls}">{_e(final.verdict)}</span>. {_e(final.explanation)}</p>')
+    free = getattr(report, "free_shape", None)
+    if free is not None:
+        parts.append(f"<p>{_e(free.text())}</p>")
+        if free.values:
+            parts.append(figs.add("free_shape", lambda: _free_shape_plot(free),
+                                  f"The free shape {free.effect}: its values at its knots"
+                                  + (f" (fitted beside {', '.join(free.kept)})" if free.kept else "")))
     if not steps:
         parts.append("<p>No stepwise search was run (rank only, or the discovery failed: see the notes).</p>")
         return "\n".join(parts)

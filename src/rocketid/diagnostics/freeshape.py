@@ -1,0 +1,317 @@
+"""The free-shape check: when the catalogue leaves the fit above the noise, the free shape the verdict names,
+fitted.
+
+::
+
+    screen -> refit -> accept -> step -> free shape -> report
+
+A verdict of "partly explained" with the final model above the noise, or "not explained by the catalogue",
+ends with what to try: a term of free shape of the kind the screen ranked first at the base fit (a thrust
+error in time for a propulsion or mass effect, a wind or density profile in altitude for the environment, a
+drag correction in Mach for the aerodynamics). This step makes that suggestion a measurement: the user's
+model with the free shape (:func:`free_shape_for`), fitted to the same data with the same noise, and -- when
+that alone stays above the noise and the search kept effects of other kinds -- those effects with it.
+
+What it says is of what **kind** the missing physics is and what it looks like, not what it is. A free shape
+of tens of parameters absorbs what it can, effects of other kinds among them (measured on Wren-H: a thrust
+error on the burn's 34 element boundaries reaches chi2/dof 1.02 on a hot tank *with* a day 15 K warmer),
+and its values are not judged by the catalogue's sizes: it is never an explanation, never changes the
+verdict, and its reading is the shape's, for the user to name the physics that makes it and state it as an
+effect of their own (:func:`~rocketid.diagnostics.effects.custom_effect`).
+
+Measured on Wren-H's motor cases (a nitrous-oxide hybrid whose tank temperature or grain changes thrust and
+mass flow through the burn, outside the catalogue's shapes; ``tests/wren_study``): the hot tank (26 C for the
+static firing's 20 C) ends "partly explained" at chi2/dof 12.1; its base model with the thrust error in
+time on the burn's element boundaries reaches 0.978, reading +7.5 to +11 % through the liquid phase and
+-24 to -93 % from 8.5 s (the knee a second earlier); the cold tank, the burn-through and the pad hold
+reach 0.93, 0.94 and 1.00 the same way.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field, replace
+from typing import Sequence
+
+import numpy as np
+
+from ..errors import RocketidError
+from ..solve import EstimationResult, estimate
+from .accept import NoiseBand, fits_to_noise
+from .effects import (DENSITY_KNOT_INTERVALS, WIND_KNOT_INTERVALS, Effect, Vehicle, _powered_knots,
+                      _profile_knots_km, density_profile_effect, drag_mach_effect, thrust_profile_effect,
+                      wind_profile_effect, with_effects)
+
+__all__ = ["FreeShape", "free_shape_for", "free_shape_check", "FREE_SHAPE_KINDS"]
+
+#: The kinds of catalogue effect a free shape is tried for (a sensor's has none: its suggestion is a sensor
+#: model of the failing channel).
+FREE_SHAPE_KINDS = ("propulsion", "mass", "environment", "aero")
+
+#: Consecutive knots whose values lie within this of their run's median are read as one run (a thrust error
+#: of 0.05: two and a half of the catalogue's realistic thrust errors).
+RUN_TOLERANCE = {"propulsion": 0.05, "environment_wind": 3.0, "environment_density": 0.02, "aero": 0.03}
+
+
+@dataclass(frozen=True)
+class FreeShape:
+    """The free shape fitted (:func:`free_shape_check`).
+
+    Attributes
+    ----------
+    kind : str
+        The kind of the screen's first candidate the shape stands for.
+    effect : str
+        The shape's name (``thrust_profile_34``).
+    description : str
+    kept : tuple of str
+        The search's effects fitted with it (empty: the user's model with the shape alone).
+    chi2_per_dof : float
+        Of that fit (NaN when it failed).
+    base_chi2_per_dof : float
+        Of the fit it was added to.
+    reaches_noise : bool
+        chi2/dof inside the noise band and the residuals white.
+    detail : str
+        The noise band's words.
+    knots : tuple of float
+        Where the shape's values sit (s, km or Mach).
+    values : tuple of float
+        The shape's values at its knots.
+    unit : str
+    reading : str
+        The shape in words: its runs of like values.
+    seconds : float
+    message : str
+        Why the fit failed or gave up (empty when it did not).
+    tried : tuple of FreeShape
+        The fits before this one (the shape alone, when it was also fitted with the search's effects).
+    """
+
+    kind: str
+    effect: str
+    description: str
+    kept: tuple
+    chi2_per_dof: float
+    base_chi2_per_dof: float
+    reaches_noise: bool
+    detail: str
+    knots: tuple
+    values: tuple
+    unit: str
+    reading: str
+    seconds: float
+    message: str = ""
+    tried: tuple = field(default=(), repr=False)
+
+    def text(self) -> str:
+        """One or two sentences for the verdict's explanation."""
+        on = f"{self.description}" + (f" beside {', '.join(self.kept)}" if self.kept else " alone")
+        before = "".join(f"{t.description} alone stays at chi2/dof {t.chi2_per_dof:.4g}; " for t in self.tried)
+        if self.message:
+            return f"The free shape {self.effect} ({on}) could not be fitted: {self.message}."
+        if self.reaches_noise:
+            return (f"The free shape the verdict names reaches the noise: {before}{on} fits at chi2/dof "
+                    f"{self.chi2_per_dof:.4g} (from {self.base_chi2_per_dof:.4g}); what is missing acts like "
+                    f"{self._what()}. It reads: {self.reading}. A free shape of {len(self.values)} values "
+                    "absorbs what it can, effects of other kinds too, and is not judged by a realistic size: it "
+                    "is the missing physics' trace, not its name -- name what makes that shape and state it as "
+                    "your own effect (custom_effect).")
+        return (f"The free shape the verdict names does not reach the noise: {before}{on} fits at chi2/dof "
+                f"{self.chi2_per_dof:.4g} (from {self.base_chi2_per_dof:.4g}; {self.detail}): what is missing "
+                f"is not {self._what()} alone.")
+
+    def _what(self) -> str:
+        return {"propulsion": "a change of the thrust in time", "mass": "a change of the thrust in time",
+                "environment": "a change of the air with altitude", "aero": "a change of the drag with Mach"
+                }.get(self.kind, "a change of this kind")
+
+    def to_dict(self) -> dict:
+        return {"kind": self.kind, "effect": self.effect, "description": self.description, "kept": list(self.kept),
+                "chi2_per_dof": None if not math.isfinite(self.chi2_per_dof) else float(self.chi2_per_dof),
+                "base_chi2_per_dof": float(self.base_chi2_per_dof), "reaches_noise": bool(self.reaches_noise),
+                "detail": self.detail, "knots": [float(k) for k in self.knots],
+                "values": [float(v) for v in self.values], "unit": self.unit, "reading": self.reading,
+                "seconds": float(self.seconds), "message": self.message,
+                "tried": [t.to_dict() for t in self.tried]}
+
+
+def free_shape_for(kind: str, family: str, vehicle: Vehicle) -> tuple[Effect, tuple, str] | None:
+    """The free shape for a candidate of ``kind`` (of catalogue ``family``) on ``vehicle``:
+    ``(effect, knots, unit)``, or None when there is none (a sensor's kind; a model whose equations hold a
+    time family, where the Mach-indexed variant answers; too few knots).
+
+    - propulsion or mass: a thrust error ``P (1 + eps(t))`` piecewise linear on the mesh's element boundaries
+      over the burn (from the start to the first boundary at or after the thrust's end);
+      (:func:`_spread`: the short elements at the start merged), more knots than the catalogue's 9;
+    - environment: a wind (the family ``wind``) or a relative density deviation (every other) piecewise linear
+      in altitude on the catalogue's finest knot count, at equal shares of the aerodynamic action;
+    - aero: a drag correction in Mach on the model's Mach table with its intervals quartered, pinned at zero
+      on the table's knots (the catalogue's finest); without a table, 6 interior knots over the Mach range.
+
+    The profiles in altitude and Mach are the catalogue's finest rungs: twice as many knots did not converge
+    on Wren-H's hot tank in IPOPT's 3000 iterations (a wind on 25 knots, a drag correction on 49). What the
+    check adds for them is the fit judged without the catalogue's sizes.
+    """
+    if vehicle is None or vehicle.time_families:
+        return None
+    if kind in ("propulsion", "mass"):
+        knots = _spread(_powered_knots(vehicle)) if len(vehicle.knot_times) >= 3 else ()
+        if len(knots) < 3:
+            return None
+        return thrust_profile_effect(knots), knots, "s"
+    if kind == "environment":
+        wind = family == "wind"
+        n = max(WIND_KNOT_INTERVALS if wind else DENSITY_KNOT_INTERVALS)
+        knots = tuple(float(k) for k in _profile_knots_km(vehicle, n))
+        if len(knots) < 3:
+            return None
+        if wind:
+            return wind_profile_effect(knots, name=f"wind_pl_{len(knots)}"), knots, "km"
+        return density_profile_effect(knots, name=f"density_pl_{len(knots)}"), knots, "km"
+    if kind == "aero":
+        if vehicle.mach is None:
+            return None
+        lo, hi = (float(x) for x in vehicle.mach)
+        table = sorted(float(k) for k in vehicle.mach_knots)
+        if len(table) >= 2:
+            segs, zeros = [(a, b) for a, b in zip(table, table[1:]) if b > lo and a < hi], table
+        else:
+            segs, zeros = [(lo + (hi - lo) * j / 2, lo + (hi - lo) * (j + 1) / 2) for j in range(2)], [lo, hi]
+        free = tuple(sorted({a + (b - a) * i / 4 for a, b in segs for i in range(1, 4)}))
+        if len(free) < 3:
+            return None
+        return drag_mach_effect(free, zeros, name=f"drag_mach_{len(free)}"), free, "Mach"
+    return None
+
+
+def _spread(bounds) -> tuple:
+    """The element boundaries ``bounds`` without those closer to the last one kept than half the median
+    spacing (the short elements a mesh refines at the start: a knot 24 ms after the first one is not placed
+    by the data)."""
+    b = np.asarray(bounds, float)
+    if b.size < 3:
+        return tuple(float(x) for x in b)
+    gap = 0.5 * float(np.median(np.diff(b)))
+    kept = [float(b[0])]
+    for x in b[1:-1]:
+        if x - kept[-1] >= gap and b[-1] - x >= gap:
+            kept.append(float(x))
+    return tuple(kept + [float(b[-1])])
+
+
+def _runs(knots: Sequence[float], values: Sequence[float], tol: float) -> list[tuple[int, int]]:
+    """Runs ``(first, last)`` of consecutive knots whose values lie within ``tol`` of the run's median."""
+    out, i, n = [], 0, len(values)
+    while i < n:
+        j = i
+        while j + 1 < n and np.ptp(values[i:j + 2]) <= 2 * tol \
+                and np.all(np.abs(np.asarray(values[i:j + 2]) - np.median(values[i:j + 2])) <= tol):
+            j += 1
+        out.append((i, j))
+        i = j + 1
+    return out
+
+
+def read_shape(knots: Sequence[float], values: Sequence[float], unit: str, tol: float, *,
+               percent: bool = True) -> str:
+    """A shape in words: each run of three or more like values as its range over its knots' span, the
+    largest departure elsewhere; the values in percent (``percent``) or as they are."""
+    def v(x):
+        if not percent:
+            return f"{x:+.3g}"
+        return f"{100 * x:+.1f} %" if abs(x) < 0.1 else f"{100 * x:+.0f} %"
+    where = (lambda a, b: f"{a:g}-{b:g} {unit}") if unit != "Mach" else (lambda a, b: f"Mach {a:g}-{b:g}")
+    parts, loose = [], []
+    for a, b in _runs(knots, values, tol):
+        if b - a >= 2:
+            lo, hi = min(values[a:b + 1]), max(values[a:b + 1])
+            parts.append(f"{v(lo)} to {v(hi)} over {where(knots[a], knots[b])}" if v(lo) != v(hi)
+                         else f"{v(lo)} over {where(knots[a], knots[b])}")
+        else:
+            loose.extend(range(a, b + 1))
+    if loose:
+        k = max(loose, key=lambda j: abs(values[j]))
+        parts.append(f"elsewhere up to {v(values[k])} (at {knots[k]:g} {unit})" if unit != "Mach"
+                     else f"elsewhere up to {v(values[k])} (at Mach {knots[k]:g})")
+    return "; ".join(parts) if parts else "flat"
+
+
+def _fit_with(base: EstimationResult, effects: Sequence[Effect], start: dict, timeout: float,
+              options) -> EstimationResult:
+    spec = with_effects(base.spec, list(effects))
+    opts = dict(options or {})
+    opts["max_wall_time"] = min(float(opts.get("max_wall_time", timeout)), float(timeout))
+    names = set(spec.parameter_names)
+    return estimate(spec, base.prepared.measurements, guess={k: v for k, v in start.items() if k in names},
+                    mesh=base.prepared.transcription.mesh, options=opts)
+
+
+def _one(base: EstimationResult, shape: Effect, knots: tuple, unit: str, kind: str, family: str,
+         kept: Sequence[Effect], start: dict, band: NoiseBand, timeout: float, options,
+         before: float) -> FreeShape:
+    t0 = time.perf_counter()
+    description = shape.title + (f" on {len(knots)} knots" if "knots" not in shape.title else "")
+    try:
+        new = _fit_with(base, list(kept) + [shape], start, timeout, options)
+    except RocketidError as exc:
+        return FreeShape(kind, shape.name, description, tuple(e.name for e in kept), math.nan, before, False, "",
+                         knots, (), unit, "", time.perf_counter() - t0, str(exc))
+    if not new.success:
+        return FreeShape(kind, shape.name, description, tuple(e.name for e in kept), float(new.chi2_per_dof),
+                         before, False, "", knots, (), unit, "", time.perf_counter() - t0,
+                         f"IPOPT did not converge ({new.message})")
+    ok, detail = fits_to_noise(new, band)
+    values = tuple(float(new.value(n)) for n in shape.parameter_names)
+    key = kind if kind != "environment" else f"environment_{'wind' if family == 'wind' else 'density'}"
+    tol = RUN_TOLERANCE.get(key, RUN_TOLERANCE["propulsion"])
+    reading = read_shape(knots, values, unit, tol, percent=key in ("propulsion", "mass", "environment_density"))
+    if kind in ("propulsion", "mass"):
+        reading = f"the thrust {reading}"
+    elif key == "environment_wind":
+        reading = f"the wind (m/s, along the flight's heading positive) {reading}"
+    elif key == "environment_density":
+        reading = f"the density {reading}"
+    else:
+        reading = f"the drag coefficient {reading}"
+    return FreeShape(kind, shape.name, description, tuple(e.name for e in kept), float(new.chi2_per_dof), before,
+                     bool(ok), detail, knots, values, unit, reading, time.perf_counter() - t0)
+
+
+def free_shape_check(disc, kind: str, family: str, *, timeout: float = 180.0, options=None) -> FreeShape | None:
+    """Fit the free shape the verdict names (:func:`free_shape_for`) to the user's model; when that stays above
+    the noise and the search's final model holds effects of other kinds, fit it with those too.
+
+    Parameters
+    ----------
+    disc : Discovery
+        The search (:func:`~rocketid.diagnostics.step.discover`): its base fit, noise band, vehicle and final
+        effects.
+    kind, family : str
+        The kind and family of the screen's first candidate at the base fit (what the verdict's suggestion
+        names).
+    timeout : float
+        Seconds each fit may take (IPOPT's wall-time limit).
+
+    Returns
+    -------
+    FreeShape or None
+        None when the kind has no free shape on this model.
+    """
+    made = free_shape_for(kind, family, disc.vehicle)
+    if made is None:
+        return None
+    shape, knots, unit = made
+    base = disc.base_fit
+    start = dict(zip(base.spec.parameter_names, (float(v) for v in base.p)))
+    alone = _one(base, shape, knots, unit, kind, family, (), start, disc.band, timeout, options,
+                 float(base.chi2_per_dof))
+    same = {"propulsion", "mass"} if kind in ("propulsion", "mass") else {kind}
+    kept = [e for e in disc.effects if e.kind not in same]
+    if alone.reaches_noise or not kept or alone.message:
+        return alone
+    start = dict(zip(disc.fit.spec.parameter_names, (float(v) for v in disc.fit.p)))
+    both = _one(base, shape, knots, unit, kind, family, kept, start, disc.band, timeout, options,
+                float(base.chi2_per_dof))
+    return replace(both, tried=(alone,))
