@@ -17,12 +17,14 @@ Part A -- candidate effects, their ranking by the score test, confirmation by re
 
 The discovery (issue 8), one module per step, each handing the next an immutable value::
 
-    screen -> refit -> accept -> step -> report
+    screen -> refit -> accept -> step -> free shape -> report
 
 ``screen``   :func:`screen` -> :class:`Screen` (the ranking and the contenders to refit)
 ``refit``    :func:`refit_all` -> tuple of :class:`Refit` (every contender, forked workers, time guard)
 ``accept``   :func:`accept` -> :class:`Acceptance` (does a refit explain the data)
 ``step``     :func:`discover` -> :class:`Discovery` (forward selection, refinement, backward check, verdict)
+``freeshape`` :func:`free_shape_check` -> :class:`FreeShape` (when the search ends above the noise: the free
+             shape the verdict names, fitted -- of what kind the missing physics is, and its trace)
 ``variant``  :func:`mach_variant` (the Mach-indexed variant of a time-knot drag model)
 ``api``      :func:`diagnose` -> :class:`DiagnosisReport` with :class:`FinalModel` (the composition)
 
@@ -67,6 +69,7 @@ from .screen import Screen, screen, vehicle_of
 from .refit import Refit, refit_all
 from .accept import Acceptance, NoiseBand, accept, noise_band
 from .step import Discovery, Step, discover
+from .freeshape import FreeShape, free_shape_check
 from .variant import mach_variant
 from .wild import WildPoint, WildPoints, find_wild_points
 from .correlated import CorrelatedNoise, find_correlated_noise
@@ -74,4 +77,5 @@ from .correlated import CorrelatedNoise, find_correlated_noise
 __all__ += ["compare", "Comparison", "locate", "Location", "check_plausibility", "Plausibility",
             "diagnose", "DiagnosisReport", "FinalModel", "screen", "Screen", "vehicle_of", "refit_all", "Refit",
             "accept", "Acceptance", "NoiseBand", "noise_band", "discover", "Discovery", "Step", "mach_variant",
+            "free_shape_check", "FreeShape",
             "find_wild_points", "WildPoints", "WildPoint", "find_correlated_noise", "CorrelatedNoise"]
