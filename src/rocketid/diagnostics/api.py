@@ -644,7 +644,7 @@ def _suggest(ranking) -> str:
     top = ranking.candidates[0] if ranking is not None and ranking.candidates else None
     kind = top.kind if top is not None else ""
     if kind in ("propulsion", "mass"):
-        return ("a thrust error in time (rocketid.diagnostics.thrust_profile_effect on the mesh's element boundaries), "
+        return ("a thrust error in time (rocketid.diagnostics.thrust_profile_effect on the mesh's element boundaries over the burn), "
                 "a throttle in time that scales thrust and mass flow together (throttle_effect on those knots: an "
                 "engine or motor running at another operating point that changes through the burn), or your own "
                 "propulsion term (custom_effect)")
