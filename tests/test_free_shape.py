@@ -50,6 +50,11 @@ def test_the_free_shape_of_each_kind():
     assert free_shape_for("sensor", "bias_h", veh) is None
     assert free_shape_for("propulsion", "thrust_level", _vehicle(time_families=True)) is None
     assert _spread((0.0, 0.01, 1.0, 2.0, 3.0, 3.02)) == (0.0, 1.0, 2.0, 3.02)
+    # a 66 s burn on 1 s elements: MAX_TIME_KNOTS boundaries spread over it, the ends kept
+    from rocketid.diagnostics.freeshape import MAX_TIME_KNOTS
+    long = free_shape_for("propulsion", "thrust_level", _vehicle(knot_times=tuple(np.arange(0.0, 67.0)),
+                                                                  powered=(0.0, 66.0)))[1]
+    assert len(long) == MAX_TIME_KNOTS and long[0] == 0.0 and long[-1] == 66.0 and set(long) <= set(np.arange(67.0))
 
 
 def test_a_shape_reads_as_runs_of_like_values():

@@ -49,6 +49,10 @@ __all__ = ["FreeShape", "free_shape_for", "free_shape_check", "FREE_SHAPE_KINDS"
 #: model of the failing channel).
 FREE_SHAPE_KINDS = ("propulsion", "mass", "environment", "aero")
 
+#: At most this many knots in time: the boundaries nearest to as many evenly spaced times when the burn has
+#: more (a 66 s burn on 1 s elements). Wren-H's 15.5 s burn has 31.
+MAX_TIME_KNOTS = 32
+
 #: Consecutive knots whose values lie within this of their run's median are read as one run (a thrust error
 #: of 0.05: two and a half of the catalogue's realistic thrust errors).
 RUN_TOLERANCE = {"propulsion": 0.05, "environment_wind": 3.0, "environment_density": 0.02, "aero": 0.03}
@@ -144,7 +148,8 @@ def free_shape_for(kind: str, family: str, vehicle: Vehicle) -> tuple[Effect, tu
 
     - propulsion or mass: a thrust error ``P (1 + eps(t))`` piecewise linear on the mesh's element boundaries
       over the burn (from the start to the first boundary at or after the thrust's end);
-      (:func:`_spread`: the short elements at the start merged), more knots than the catalogue's 9;
+      (:func:`_spread`: the short elements at the start merged), at most :data:`MAX_TIME_KNOTS` of them,
+      more than the catalogue's 9;
     - environment: a wind (the family ``wind``) or a relative density deviation (every other) piecewise linear
       in altitude on the catalogue's finest knot count, at equal shares of the aerodynamic action;
     - aero: a drag correction in Mach on the model's Mach table with its intervals quartered, pinned at zero
@@ -158,6 +163,9 @@ def free_shape_for(kind: str, family: str, vehicle: Vehicle) -> tuple[Effect, tu
         return None
     if kind in ("propulsion", "mass"):
         knots = _spread(_powered_knots(vehicle)) if len(vehicle.knot_times) >= 3 else ()
+        if len(knots) > MAX_TIME_KNOTS:
+            want = np.linspace(knots[0], knots[-1], MAX_TIME_KNOTS)
+            knots = tuple(sorted({min(knots, key=lambda k: abs(k - w)) for w in want}))
         if len(knots) < 3:
             return None
         return thrust_profile_effect(knots), knots, "s"
