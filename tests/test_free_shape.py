@@ -146,3 +146,19 @@ def test_diagnose_fits_the_free_shape_when_it_ends_above_the_noise(hot_tank, tmp
     assert saved["final"]["verdict"] == rep.final.verdict and "free_shape_s" in saved["timings"]
     assert (tmp_path / "r" / "figures" / "free_shape.png").is_file()
     assert "The free shape the verdict names reaches the noise" in (tmp_path / "r" / "report.html").read_text()
+
+
+def test_the_kind_is_the_search_s_first_effect_before_the_screen_s_first_candidate():
+    """Wren-H's cold tank: the screen ranked a density profile first (leading a confounded group with the start mass
+    and the thrust level); the search's refits took the burn rate. The verdict's suggestion and the free shape follow
+    the search; the screen's first candidate only when nothing was added."""
+    from rocketid.diagnostics import CATALOGUE
+    from rocketid.diagnostics.api import _lead, _suggest
+    from rocketid.diagnostics.effects import burn_rate_effect
+    ranking = SimpleNamespace(candidates=[SimpleNamespace(name="density", kind="environment")])
+    searched = SimpleNamespace(effects=(burn_rate_effect(), CATALOGUE["start_speed"]))
+    assert _lead(searched, ranking) == ("propulsion", "thrust_level")
+    assert _lead(SimpleNamespace(effects=()), ranking) == ("environment", "density")
+    assert _lead(None, None) is None
+    assert "thrust error in time" in _suggest(_lead(searched, ranking))
+    assert "density deviation" in _suggest(_lead(None, ranking))

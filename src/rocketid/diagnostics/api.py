@@ -639,10 +639,22 @@ def _history(spec, fit, disc, notes: list):
         return None
 
 
-def _suggest(ranking) -> str:
-    """Which free-shape term to try, from the kind of the best-ranked candidate."""
-    top = ranking.candidates[0] if ranking is not None and ranking.candidates else None
-    kind = top.kind if top is not None else ""
+def _lead(disc, ranking) -> tuple[str, str] | None:
+    """``(kind, family)`` of what the missing physics most looks like: the search's first effect added (the step
+    whose refits lowered the misfit most), else the screen's first candidate at the base fit; None when there is
+    neither. (The screen alone misled: on Wren-H's cold tank it ranked a density profile first, leading a
+    confounded group with the start mass and the thrust level, and the search's refits then took the burn rate.)"""
+    from .step import _family
+    if disc is not None and disc.effects:
+        first = disc.effects[0]
+        return first.kind, _family(first.name)
+    top = ranking.candidates[0] if ranking is not None and getattr(ranking, "candidates", None) else None
+    return (top.kind, _family(top.name)) if top is not None else None
+
+
+def _suggest(lead: tuple[str, str] | None) -> str:
+    """Which free-shape term to try, from the kind of what the missing physics looks like (:func:`_lead`)."""
+    kind = lead[0] if lead is not None else ""
     if kind in ("propulsion", "mass"):
         return ("a thrust error in time (rocketid.diagnostics.thrust_profile_effect on the mesh's element boundaries over the burn), "
                 "a throttle in time that scales thrust and mass flow together (throttle_effect on those knots: an "
@@ -662,13 +674,12 @@ def _suggest(ranking) -> str:
 
 
 def _free_shape(disc, ranking, settings: dict, budget, t_search: float, notes: list):
-    """The free shape the verdict names, fitted (:mod:`~rocketid.diagnostics.freeshape`), when the search ended
-    above the noise ("partly explained" or "not explained by the catalogue", no tie named, not cut short by the
+    """The free shape the verdict names (:func:`_lead`), fitted (:mod:`~rocketid.diagnostics.freeshape`), when the
+    search ended above the noise ("partly explained" or "not explained by the catalogue", no tie named, not cut short by the
     time budget); None otherwise or when the screen's first candidate's kind has no free shape."""
     from .freeshape import free_shape_check
-    from .step import _family
-    top = ranking.candidates[0] if ranking is not None and getattr(ranking, "candidates", None) else None
-    if (disc is None or top is None or disc.fits_to_noise or disc.stopped or disc.ambiguous
+    lead = _lead(disc, ranking)
+    if (disc is None or lead is None or disc.fits_to_noise or disc.stopped or disc.ambiguous
             or disc.verdict not in ("partly explained", "not explained by the catalogue")):
         return None
     left = None if budget is None else budget - (time.perf_counter() - t_search)
@@ -677,9 +688,9 @@ def _free_shape(disc, ranking, settings: dict, budget, t_search: float, notes: l
         return None
     timeout = settings["timeout"] if left is None else min(settings["timeout"], left)
     if settings.get("progress") is not None:
-        settings["progress"](f"free shape: fitting the {top.kind} term the verdict names")
+        settings["progress"](f"free shape: fitting the {lead[0]} term the verdict names")
     try:
-        return free_shape_check(disc, top.kind, _family(top.name), timeout=timeout, options=settings["options"])
+        return free_shape_check(disc, lead[0], lead[1], timeout=timeout, options=settings["options"])
     except RocketidError as exc:
         notes.append(f"the free shape could not be fitted: {exc}")
         return None
@@ -778,14 +789,14 @@ def _final(disc, ranking, level, window) -> FinalModel | None:
                          "against it.")
         else:
             text = (f"the model with {names} does not reach the noise ({disc.noise_detail}); the residual is "
-                    f"located in: {_where(fit, level, window)}.{readings}{amb}" + ("" if disc.stopped else f" Try {_suggest(ranking)}."))
+                    f"located in: {_where(fit, level, window)}.{readings}{amb}" + ("" if disc.stopped else f" Try {_suggest(_lead(disc, ranking))}."))
     elif disc.stopped:
         text = (f"no effect was added before the search was cut short (chi2/dof {fit.chi2_per_dof:.4g}, band <= "
                 f"{band.upper:.4g}); not every candidate was tried, so this does not say the catalogue cannot explain "
                 f"it; the residual sits in: {_where(fit, level, window)}.")
     else:
         text = (f"no catalogue effect explains the misfit (chi2/dof {fit.chi2_per_dof:.4g}, band <= {band.upper:.4g}); "
-                f"the residual sits in: {_where(fit, level, window)}. Try {_suggest(ranking)}.")
+                f"the residual sits in: {_where(fit, level, window)}. Try {_suggest(_lead(disc, ranking))}.")
     if disc.stopped:
         text += (f" The search was cut short: {disc.stopped}. A larger budget (--budget, diagnose(budget=)) lets it "
                  "go on; with --resume (diagnose(resume=True)) from the refits it made (kept with an output folder) "

@@ -6,15 +6,17 @@ fitted.
     screen -> refit -> accept -> step -> free shape -> report
 
 A verdict of "partly explained" with the final model above the noise, or "not explained by the catalogue",
-ends with what to try: a term of free shape of the kind the screen ranked first at the base fit (a thrust
-error in time for a propulsion or mass effect, a wind or density profile in altitude for the environment, a
-drag correction in Mach for the aerodynamics). This step makes that suggestion a measurement: the user's
+ends with what to try: a term of free shape of the kind of the search's first effect added (the screen's
+first candidate when it added none; ``api._lead``): a thrust error in time for a propulsion or mass effect,
+a wind or density profile in altitude for the environment, a drag correction in Mach for the aerodynamics.
+(The screen alone misled: on Wren-H's cold tank it ranked a density profile first, and its free shape
+beside the search's effects reached the noise with the density 36-72 % low at every altitude.) This step makes that suggestion a measurement: the user's
 model with the free shape (:func:`free_shape_for`), fitted to the same data with the same noise, and -- when
 that alone stays above the noise and the search kept effects of other kinds -- those effects with it.
 
 What it says is of what **kind** the missing physics is and what it looks like, not what it is. A free shape
 of tens of parameters absorbs what it can, effects of other kinds among them (measured on Wren-H: a thrust
-error on the burn's 34 element boundaries reaches chi2/dof 1.02 on a hot tank *with* a day 15 K warmer),
+error on the burn's element boundaries reaches chi2/dof 1.02 on a hot tank *with* a day 15 K warmer),
 and its values are not judged by the catalogue's sizes: it is never an explanation, never changes the
 verdict, and its reading is the shape's, for the user to name the physics that makes it and state it as an
 effect of their own (:func:`~rocketid.diagnostics.effects.custom_effect`).
@@ -230,7 +232,7 @@ def read_shape(knots: Sequence[float], values: Sequence[float], unit: str, tol: 
         if not percent:
             return f"{x:+.3g}"
         return f"{100 * x:+.1f} %" if abs(x) < 0.1 else f"{100 * x:+.0f} %"
-    where = (lambda a, b: f"{a:g}-{b:g} {unit}") if unit != "Mach" else (lambda a, b: f"Mach {a:g}-{b:g}")
+    where = (lambda a, b: f"{a:.3g}-{b:.3g} {unit}") if unit != "Mach" else (lambda a, b: f"Mach {a:.3g}-{b:.3g}")
     parts, loose = [], []
     for a, b in _runs(knots, values, tol):
         if b - a >= 2:
@@ -241,8 +243,8 @@ def read_shape(knots: Sequence[float], values: Sequence[float], unit: str, tol: 
             loose.extend(range(a, b + 1))
     if loose:
         k = max(loose, key=lambda j: abs(values[j]))
-        parts.append(f"elsewhere up to {v(values[k])} (at {knots[k]:g} {unit})" if unit != "Mach"
-                     else f"elsewhere up to {v(values[k])} (at Mach {knots[k]:g})")
+        parts.append(f"elsewhere up to {v(values[k])} (at {knots[k]:.3g} {unit})" if unit != "Mach"
+                     else f"elsewhere up to {v(values[k])} (at Mach {knots[k]:.3g})")
     return "; ".join(parts) if parts else "flat"
 
 
@@ -297,8 +299,8 @@ def free_shape_check(disc, kind: str, family: str, *, timeout: float = 180.0, op
         The search (:func:`~rocketid.diagnostics.step.discover`): its base fit, noise band, vehicle and final
         effects.
     kind, family : str
-        The kind and family of the screen's first candidate at the base fit (what the verdict's suggestion
-        names).
+        The kind and family of what the missing physics looks like (the search's first effect added, else the
+        screen's first candidate; what the verdict's suggestion names).
     timeout : float
         Seconds each fit may take (IPOPT's wall-time limit).
 
