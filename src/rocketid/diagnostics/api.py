@@ -675,8 +675,8 @@ def _suggest(lead: tuple[str, str] | None) -> str:
 
 def _free_shape(disc, ranking, settings: dict, budget, t_search: float, notes: list):
     """The free shape the verdict names (:func:`_lead`), fitted (:mod:`~rocketid.diagnostics.freeshape`), when the
-    search ended above the noise ("partly explained" or "not explained by the catalogue", no tie named, not cut short by the
-    time budget); None otherwise or when the screen's first candidate's kind has no free shape."""
+    search ended above the noise ("partly explained" or "not explained by the catalogue", no tie named, not cut
+    short by the time budget); None otherwise or when that kind has no free shape."""
     from .freeshape import free_shape_check
     lead = _lead(disc, ranking)
     if (disc is None or lead is None or disc.fits_to_noise or disc.stopped or disc.ambiguous
@@ -1040,9 +1040,10 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
         checkpoints you wrote.
     free_shape : bool
         When the search ends above the noise ("partly explained", "not explained by the catalogue"), fit
-        the free shape the verdict names -- a thrust error on the mesh's element boundaries over the burn
-        for a propulsion or mass candidate first in the screen's ranking, a wind or density profile in
-        altitude, a drag correction in Mach -- to the user's model (:mod:`~rocketid.diagnostics.freeshape`):
+        the free shape the verdict names -- of the kind of the search's first effect added (the screen's
+        first candidate when none was): a thrust error on the mesh's element boundaries over the burn for a
+        propulsion or mass effect, a wind or density profile in altitude, a drag correction in Mach -- to
+        the user's model (:mod:`~rocketid.diagnostics.freeshape`):
         :attr:`DiagnosisReport.free_shape` says whether what is missing is of that kind, and its shape.
         Never an explanation; it does not change the verdict. It runs within the ``budget``.
 
