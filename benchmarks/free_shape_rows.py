@@ -6,8 +6,8 @@ Each ``DIR`` is a study's case: ``DIR/../<case>.csv`` beside ``DIR = .../report-
 layout) or ``DIR/<case>.csv``. The base model is fitted as ``diagnose`` fits it (wild points dropped, the noise
 from the data with ``--sigma estimate``); the search's final effects are read from ``DIR/diagnosis.json`` and
 rebuilt by name from the catalogue and its refined shapes for this vehicle, their estimates the start; the kind
-is the final model's first effect's (the screen's first candidate when nothing was added), as ``diagnose``
-picks it. Nothing of the search is run again, so a diagnosis made before the free shape existed (or with an
+is picked as ``diagnose`` picks it (``api._lead``: the first effect added of a kind with a free shape, else the
+screen's first candidate). Nothing of the search is run again, so a diagnosis made before the free shape existed (or with an
 older rule for its kind) gets the free shape the current code would fit. One line per case; ``--json`` keeps them.
 """
 
@@ -39,10 +39,9 @@ def _effects_by_name(names, vehicle):
 
 def row(folder: Path, model: str, sigma) -> dict:
     from rocketid.diagnostics.accept import noise_band
-    from rocketid.diagnostics.api import base_fit, resolve_model
+    from rocketid.diagnostics.api import _lead, base_fit, resolve_model
     from rocketid.diagnostics.freeshape import free_shape_check
     from rocketid.diagnostics.screen import vehicle_of
-    from rocketid.diagnostics.step import _family
     from rocketid import read_csv
     diag = json.loads((folder / "diagnosis.json").read_text())
     case = folder.name.removeprefix("report-")
@@ -59,12 +58,9 @@ def row(folder: Path, model: str, sigma) -> dict:
     params = diag["final"]["parameters"]
     final = SimpleNamespace(spec=SimpleNamespace(parameter_names=tuple(params)),
                             p=[params[n]["value"] for n in params])
-    if effects:
-        kind, family = effects[0].kind, _family(effects[0].name)
-    else:
-        top = diag["candidates"][0]
-        kind, family = top["kind"], _family(top["name"])
     disc = SimpleNamespace(base_fit=fit, fit=final, band=band, vehicle=vehicle, effects=tuple(effects))
+    ranking = SimpleNamespace(candidates=[SimpleNamespace(name=c["name"], kind=c["kind"]) for c in diag["candidates"][:1]])
+    kind, family = _lead(disc, ranking)
     fs = free_shape_check(disc, kind, family)
     out = {"case": case, "verdict": diag["final"]["verdict"], "final": names,
            "final_chi2": diag["final"]["chi2_per_dof"], "base_chi2": float(fit.chi2_per_dof),

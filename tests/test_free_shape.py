@@ -160,5 +160,10 @@ def test_the_kind_is_the_search_s_first_effect_before_the_screen_s_first_candida
     assert _lead(searched, ranking) == ("propulsion", "thrust_level")
     assert _lead(SimpleNamespace(effects=()), ranking) == ("environment", "density")
     assert _lead(None, None) is None
+    # a first effect of a kind without a free shape (the start angle of a shallow rail) may be complete: the first
+    # effect of a kind with one leads; a search of sensor effects only keeps the sensor's suggestion
+    assert _lead(SimpleNamespace(effects=(CATALOGUE["start_angle"], burn_rate_effect())), ranking) == ("propulsion",
+                                                                                                   "thrust_level")
+    assert _lead(SimpleNamespace(effects=(CATALOGUE["bias_v"],)), ranking) == ("sensor", "bias_v")
     assert "thrust error in time" in _suggest(_lead(searched, ranking))
     assert "density deviation" in _suggest(_lead(None, ranking))

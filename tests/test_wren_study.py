@@ -38,13 +38,17 @@ KNOWN_FAILURES: dict[str, str] = {
     "hot-tank": "177ddc5: burn_rate + start_speed + wind_pl_5, chi2/dof 929 -> 12.1, partly explained (237 s; before "
                 "every effect of a step was judged by its size, burn_rate + start_mass + base_drag_mach_2 at 1.678 with "
                 "eps_burn 0.1307, 6.5 times its realistic size): the hotter tank changes thrust and mass flow together, "
-                "in time and by 8 %, and no catalogue shape at a solid motor's sizes does that (the user's "
-                "throttle_effect(knots) would; the verdict suggests it)",
+                "in time and by 8 %, and no catalogue shape at a solid motor's sizes does that. Identical on 85acc7a "
+                "(the CLI, 897 s beside two studies), where the free shape the verdict names, a thrust error on the "
+                "burn's 31 element boundaries, reaches chi2/dof 1.011 alone: +7.5 to +12 % over 2-7.5 s, -80 % at "
+                "9.3-10.5 s (the knee a second early)",
     "cold-tank": "177ddc5: burn_rate + start_speed + time_offset, chi2/dof 589 -> 8.01, partly explained (288 s; on "
                  "abfec42 burn_rate + base_drag_mach_5 + start_speed at 1.195; with the rail exit's shapes and only the "
                  "added effect's sizes judged, start_mass_exit third was called explained with eps_burn 5.1 times its "
                  "size): as hot-tank; noise-free, burn_rate + start_exit + thrust_profile_9 reaches the noise with "
-                 "eps_burn -0.107 and the profile 11-30 % in the tail-off",
+                 "eps_burn -0.107 and the profile 11-30 % in the tail-off. Identical on 32ca943 (1789 s at load 4); "
+                 "the free shape (benchmarks/free_shape_rows.py) reaches 1.09 alone (band 1.29): -10 to -6.6 % over "
+                 "2-9 s, the tail longer",
     "hot-tank+hot-day": "177ddc5: burn_rate + wind_pl_5 + time_offset_2, chi2/dof 837 -> 8.48, partly explained (271 s): "
                         "the hot tank's motor change (as hot-tank) hides the warmer air",
     "burn-through": "177ddc5: base_drag_mach_5 + drag_mach_7, chi2/dof 6.33 -> 1.71, partly explained (102 s; before, "

@@ -640,13 +640,16 @@ def _history(spec, fit, disc, notes: list):
 
 
 def _lead(disc, ranking) -> tuple[str, str] | None:
-    """``(kind, family)`` of what the missing physics most looks like: the search's first effect added (the step
-    whose refits lowered the misfit most), else the screen's first candidate at the base fit; None when there is
-    neither. (The screen alone misled: on Wren-H's cold tank it ranked a density profile first, leading a
-    confounded group with the start mass and the thrust level, and the search's refits then took the burn rate.)"""
+    """``(kind, family)`` of what the missing physics most looks like: the search's first effect added of a kind
+    that has a free shape (:data:`~rocketid.diagnostics.freeshape.FREE_SHAPE_KINDS`; its first effect when none
+    has), else the screen's first candidate at the base fit; None when there is neither. (The screen alone
+    misled: on Wren-H's cold tank it ranked a density profile first, leading a confounded group with the start
+    mass and the thrust level, and the search's refits then took the burn rate. A first effect of another kind
+    may be complete and right -- a warm tank on a shallow rail took the start angle first, then the burn rate.)"""
+    from .freeshape import FREE_SHAPE_KINDS
     from .step import _family
     if disc is not None and disc.effects:
-        first = disc.effects[0]
+        first = next((e for e in disc.effects if e.kind in FREE_SHAPE_KINDS), disc.effects[0])
         return first.kind, _family(first.name)
     top = ranking.candidates[0] if ranking is not None and getattr(ranking, "candidates", None) else None
     return (top.kind, _family(top.name)) if top is not None else None

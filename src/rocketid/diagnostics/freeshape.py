@@ -6,8 +6,8 @@ fitted.
     screen -> refit -> accept -> step -> free shape -> report
 
 A verdict of "partly explained" with the final model above the noise, or "not explained by the catalogue",
-ends with what to try: a term of free shape of the kind of the search's first effect added (the screen's
-first candidate when it added none; ``api._lead``): a thrust error in time for a propulsion or mass effect,
+ends with what to try: a term of free shape of the kind of the search's first effect added that has one
+(the screen's first candidate when it added none; ``api._lead``): a thrust error in time for a propulsion or mass effect,
 a wind or density profile in altitude for the environment, a drag correction in Mach for the aerodynamics.
 (The screen alone misled: on Wren-H's cold tank it ranked a density profile first, and its free shape
 beside the search's effects reached the noise with the density 36-72 % low at every altitude.) This step makes that suggestion a measurement: the user's
