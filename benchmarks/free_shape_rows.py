@@ -39,8 +39,8 @@ def _effects_by_name(names, vehicle):
 
 def row(folder: Path, model: str, sigma) -> dict:
     from rocketid.diagnostics.accept import noise_band
-    from rocketid.diagnostics.api import _lead, base_fit, resolve_model
-    from rocketid.diagnostics.freeshape import free_shape_check
+    from rocketid.diagnostics.api import _lead, _leads, base_fit, resolve_model
+    from rocketid.diagnostics.freeshape import FREE_SHAPE_KINDS, free_shape_check
     from rocketid.diagnostics.screen import vehicle_of
     from rocketid import read_csv
     diag = json.loads((folder / "diagnosis.json").read_text())
@@ -61,7 +61,11 @@ def row(folder: Path, model: str, sigma) -> dict:
     disc = SimpleNamespace(base_fit=fit, fit=final, band=band, vehicle=vehicle, effects=tuple(effects))
     ranking = SimpleNamespace(candidates=[SimpleNamespace(name=c["name"], kind=c["kind"]) for c in diag["candidates"][:1]])
     kind, family = _lead(disc, ranking)
-    fs = free_shape_check(disc, kind, family)
+    then = [k for k in _leads(disc, ranking)[1:] if k[0] in FREE_SHAPE_KINDS]
+    # diagnose fits it only when the search ended above the noise (not at a named tie, not cut short)
+    above = (not diag["final"]["fits_to_noise"] and not diag.get("search_stopped")
+             and diag["final"]["verdict"] in ("partly explained", "not explained by the catalogue"))
+    fs = free_shape_check(disc, kind, family, then=then) if above else None
     out = {"case": case, "verdict": diag["final"]["verdict"], "final": names,
            "final_chi2": diag["final"]["chi2_per_dof"], "base_chi2": float(fit.chi2_per_dof),
            "band": float(band.upper), "seconds": time.perf_counter() - t0,
@@ -86,7 +90,10 @@ def main(argv=None) -> int:
                  f"free shape {fs['effect']}" + (f" beside {', '.join(fs['kept'])}" if fs["kept"] else " alone")
                  + f" chi2/dof {fs['chi2_per_dof']:.4g} (band <= {r['band']:.4g}), "
                  + ("reaches the noise" if fs["reaches_noise"] else "above the noise")
-                 + f"; {fs['reading']}") + f" [{r['seconds']:.0f} s]", flush=True)
+                 + f"; {fs['reading'] or fs['message']}"
+                 + "".join(f" (tried before: {t['effect']} beside {t['kept'] or 'nothing'}, "
+                           + (t['message'] if t['message'] else f"chi2/dof {t['chi2_per_dof']:.4g}") + ")"
+                           for t in fs["tried"])) + f" [{r['seconds']:.0f} s]", flush=True)
     if a.json is not None:
         a.json.write_text(json.dumps(rows, indent=1))
     return 0

@@ -127,6 +127,10 @@ def test_a_density_profile_is_not_the_hot_tank(hot_tank):
     fs = free_shape_check(hot_tank, "environment", "density")
     assert not fs.reaches_noise and fs.chi2_per_dof > 2 * hot_tank.band.upper, fs.text()
     assert "is not a change of the air with altitude alone" in fs.text()
+    # with the thrust's kind next, the check goes on to it and says what it tried first
+    both = free_shape_check(hot_tank, "environment", "density", then=[("propulsion", "thrust_level")])
+    assert both.kind == "propulsion" and both.reaches_noise and [t.effect for t in both.tried] == [fs.effect]
+    assert f"{fs.description} alone stays at chi2/dof" in both.text()
 
 
 def test_diagnose_fits_the_free_shape_when_it_ends_above_the_noise(hot_tank, tmp_path):

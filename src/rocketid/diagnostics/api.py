@@ -646,13 +646,27 @@ def _lead(disc, ranking) -> tuple[str, str] | None:
     misled: on Wren-H's cold tank it ranked a density profile first, leading a confounded group with the start
     mass and the thrust level, and the search's refits then took the burn rate. A first effect of another kind
     may be complete and right -- a warm tank on a shallow rail took the start angle first, then the burn rate.)"""
+    leads = _leads(disc, ranking)
+    return leads[0] if leads else None
+
+
+def _leads(disc, ranking) -> list[tuple[str, str]]:
+    """The ``(kind, family)`` of every kind of the search's effects, in the order added, those with a free shape
+    first (one per free shape: a propulsion and a mass effect share the thrust's), else the screen's first
+    candidate's: the free shapes to try in turn (:func:`~rocketid.diagnostics.freeshape.free_shape_check`)."""
     from .freeshape import FREE_SHAPE_KINDS
     from .step import _family
     if disc is not None and disc.effects:
-        first = next((e for e in disc.effects if e.kind in FREE_SHAPE_KINDS), disc.effects[0])
-        return first.kind, _family(first.name)
+        out, seen = [], set()
+        for e in sorted(disc.effects, key=lambda e: e.kind not in FREE_SHAPE_KINDS):
+            fam = _family(e.name)
+            key = "thrust" if e.kind in ("propulsion", "mass") else (e.kind, fam if e.kind == "environment" else "")
+            if key not in seen:
+                seen.add(key)
+                out.append((e.kind, fam))
+        return out
     top = ranking.candidates[0] if ranking is not None and getattr(ranking, "candidates", None) else None
-    return (top.kind, _family(top.name)) if top is not None else None
+    return [(top.kind, _family(top.name))] if top is not None else []
 
 
 def _suggest(lead: tuple[str, str] | None) -> str:
@@ -680,8 +694,9 @@ def _free_shape(disc, ranking, settings: dict, budget, t_search: float, notes: l
     """The free shape the verdict names (:func:`_lead`), fitted (:mod:`~rocketid.diagnostics.freeshape`), when the
     search ended above the noise ("partly explained" or "not explained by the catalogue", no tie named, not cut
     short by the time budget); None otherwise or when that kind has no free shape."""
-    from .freeshape import free_shape_check
+    from .freeshape import FREE_SHAPE_KINDS, free_shape_check
     lead = _lead(disc, ranking)
+    then = [k for k in _leads(disc, ranking)[1:] if k[0] in FREE_SHAPE_KINDS]
     if (disc is None or lead is None or disc.fits_to_noise or disc.stopped or disc.ambiguous
             or disc.verdict not in ("partly explained", "not explained by the catalogue")):
         return None
@@ -693,7 +708,7 @@ def _free_shape(disc, ranking, settings: dict, budget, t_search: float, notes: l
     if settings.get("progress") is not None:
         settings["progress"](f"free shape: fitting the {lead[0]} term the verdict names")
     try:
-        return free_shape_check(disc, lead[0], lead[1], timeout=timeout, options=settings["options"])
+        return free_shape_check(disc, lead[0], lead[1], timeout=timeout, options=settings["options"], then=then)
     except RocketidError as exc:
         notes.append(f"the free shape could not be fitted: {exc}")
         return None

@@ -55,6 +55,11 @@ FREE_SHAPE_KINDS = ("propulsion", "mass", "environment", "aero")
 #: more (a 66 s burn on 1 s elements). Wren-H's 15.5 s burn has 31.
 MAX_TIME_KNOTS = 32
 
+#: IPOPT's iteration limit for a free shape's fit (unless the options set one): the shapes that reach the noise
+#: on Wren-H converge in tens of iterations; a wind on 13 knots far from the noise ran IPOPT's default 3000 to
+#: no end (24 s of the 54 a vented tank's check took).
+MAX_ITER = 500
+
 #: Consecutive knots whose values lie within this of their run's median are read as one run (a thrust error
 #: of 0.05: two and a half of the catalogue's realistic thrust errors).
 RUN_TOLERANCE = {"propulsion": 0.05, "environment_wind": 3.0, "environment_density": 0.02, "aero": 0.03}
@@ -113,10 +118,11 @@ class FreeShape:
 
     def text(self) -> str:
         """One or two sentences for the verdict's explanation."""
-        on = f"{self.description}" + (f" beside {', '.join(self.kept)}" if self.kept else " alone")
-        before = "".join(f"{t.description} alone stays at chi2/dof {t.chi2_per_dof:.4g}; " for t in self.tried)
+        on = self._on()
+        before = "".join((f"{t._on()} could not be fitted; " if t.message else
+                          f"{t._on()} stays at chi2/dof {t.chi2_per_dof:.4g}; ") for t in self.tried)
         if self.message:
-            return f"The free shape {self.effect} ({on}) could not be fitted: {self.message}."
+            return f"The free shape {self.effect} ({before}{on}) could not be fitted: {self.message}."
         if self.reaches_noise:
             return (f"The free shape the verdict names reaches the noise: {before}{on} fits at chi2/dof "
                     f"{self.chi2_per_dof:.4g} (from {self.base_chi2_per_dof:.4g}); what is missing acts like "
@@ -127,6 +133,9 @@ class FreeShape:
         return (f"The free shape the verdict names does not reach the noise: {before}{on} fits at chi2/dof "
                 f"{self.chi2_per_dof:.4g} (from {self.base_chi2_per_dof:.4g}; {self.detail}): what is missing "
                 f"is not {self._what()} alone.")
+
+    def _on(self) -> str:
+        return f"{self.description}" + (f" beside {', '.join(self.kept)}" if self.kept else " alone")
 
     def _what(self) -> str:
         return {"propulsion": "a change of the thrust in time", "mass": "a change of the thrust in time",
@@ -253,6 +262,7 @@ def _fit_with(base: EstimationResult, effects: Sequence[Effect], start: dict, ti
     spec = with_effects(base.spec, list(effects))
     opts = dict(options or {})
     opts["max_wall_time"] = min(float(opts.get("max_wall_time", timeout)), float(timeout))
+    opts.setdefault("max_iter", MAX_ITER)
     names = set(spec.parameter_names)
     return estimate(spec, base.prepared.measurements, guess={k: v for k, v in start.items() if k in names},
                     mesh=base.prepared.transcription.mesh, options=opts)
@@ -289,9 +299,12 @@ def _one(base: EstimationResult, shape: Effect, knots: tuple, unit: str, kind: s
                      bool(ok), detail, knots, values, unit, reading, time.perf_counter() - t0)
 
 
-def free_shape_check(disc, kind: str, family: str, *, timeout: float = 180.0, options=None) -> FreeShape | None:
+def free_shape_check(disc, kind: str, family: str, *, timeout: float = 180.0, options=None,
+                     then: Sequence[tuple[str, str]] = ()) -> FreeShape | None:
     """Fit the free shape the verdict names (:func:`free_shape_for`) to the user's model; when that stays above
-    the noise and the search's final model holds effects of other kinds, fit it with those too.
+    the noise and the search's final model holds effects of other kinds, fit it with those too; when that stays
+    above too, the free shapes of the kinds ``then`` in turn, until one reaches the noise. The one that reaches
+    it is returned, or the last tried, with those before it in :attr:`FreeShape.tried`.
 
     Parameters
     ----------
@@ -303,25 +316,32 @@ def free_shape_check(disc, kind: str, family: str, *, timeout: float = 180.0, op
         screen's first candidate; what the verdict's suggestion names).
     timeout : float
         Seconds each fit may take (IPOPT's wall-time limit).
+    then : sequence of (kind, family)
+        Further kinds to try in turn (the search's other effects' kinds: on Wren-H with 1 kg of nitrous vented
+        and a tailwind the wind came first and its free shape does not converge alone; the motor's is next).
 
     Returns
     -------
     FreeShape or None
         None when the kind has no free shape on this model.
     """
-    made = free_shape_for(kind, family, disc.vehicle)
-    if made is None:
-        return None
-    shape, knots, unit = made
-    base = disc.base_fit
-    start = dict(zip(base.spec.parameter_names, (float(v) for v in base.p)))
-    alone = _one(base, shape, knots, unit, kind, family, (), start, disc.band, timeout, options,
-                 float(base.chi2_per_dof))
-    same = {"propulsion", "mass"} if kind in ("propulsion", "mass") else {kind}
-    kept = [e for e in disc.effects if e.kind not in same]
-    if alone.reaches_noise or not kept or alone.message:
-        return alone
-    start = dict(zip(disc.fit.spec.parameter_names, (float(v) for v in disc.fit.p)))
-    both = _one(base, shape, knots, unit, kind, family, kept, start, disc.band, timeout, options,
-                float(base.chi2_per_dof))
-    return replace(both, tried=(alone,))
+    tried: list[FreeShape] = []
+    for k, fam in [(kind, family)] + list(then):
+        made = free_shape_for(k, fam, disc.vehicle)
+        if made is None:
+            continue
+        shape, knots, unit = made
+        base = disc.base_fit
+        start = dict(zip(base.spec.parameter_names, (float(v) for v in base.p)))
+        fits = [_one(base, shape, knots, unit, k, fam, (), start, disc.band, timeout, options,
+                     float(base.chi2_per_dof))]
+        same = {"propulsion", "mass"} if k in ("propulsion", "mass") else {k}
+        kept = [e for e in disc.effects if e.kind not in same]
+        if not fits[0].reaches_noise and kept:
+            start = dict(zip(disc.fit.spec.parameter_names, (float(v) for v in disc.fit.p)))
+            fits.append(_one(base, shape, knots, unit, k, fam, kept, start, disc.band, timeout, options,
+                             float(base.chi2_per_dof)))
+        tried += fits
+        if fits[-1].reaches_noise:
+            break
+    return replace(tried[-1], tried=tuple(tried[:-1])) if tried else None
