@@ -63,7 +63,7 @@ def row(folder: Path, model: str, sigma) -> dict:
     kind, family = _lead(disc, ranking)
     then = [k for k in _leads(disc, ranking)[1:] if k[0] in FREE_SHAPE_KINDS]
     # diagnose fits it only when the search ended above the noise (not at a named tie, not cut short)
-    above = (not diag["final"]["fits_to_noise"] and not diag.get("search_stopped")
+    above = (kind in FREE_SHAPE_KINDS and not diag["final"]["fits_to_noise"] and not diag.get("search_stopped")
              and diag["final"]["verdict"] in ("partly explained", "not explained by the catalogue"))
     fs = free_shape_check(disc, kind, family, then=then) if above else None
     out = {"case": case, "verdict": diag["final"]["verdict"], "final": names,

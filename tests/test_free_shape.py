@@ -169,5 +169,12 @@ def test_the_kind_is_the_search_s_first_effect_before_the_screen_s_first_candida
     assert _lead(SimpleNamespace(effects=(CATALOGUE["start_angle"], burn_rate_effect())), ranking) == ("propulsion",
                                                                                                    "thrust_level")
     assert _lead(SimpleNamespace(effects=(CATALOGUE["bias_v"],)), ranking) == ("sensor", "bias_v")
+    # the kinds tried in turn: the effects' (with a free shape), the screen's first, the thrust's last whatever was
+    # found (Wren-H's short web with the geoid: an altitude bias and drag shapes found, sensors ranked first)
+    from rocketid.diagnostics.api import _leads
+    sensors = SimpleNamespace(candidates=[SimpleNamespace(name="bias_h", kind="sensor")])
+    found = SimpleNamespace(effects=(CATALOGUE["bias_h"], CATALOGUE["transonic_drag"], CATALOGUE["base_drag"]))
+    assert _leads(found, sensors) == [("aero", "transonic_drag"), ("propulsion", "thrust_level")]
+    assert _leads(searched, ranking) == [("propulsion", "thrust_level"), ("environment", "density")]
     assert "thrust error in time" in _suggest(_lead(searched, ranking))
     assert "density deviation" in _suggest(_lead(None, ranking))

@@ -12,7 +12,9 @@ a wind or density profile in altitude for the environment, a drag correction in 
 (The screen alone misled: on Wren-H's cold tank it ranked a density profile first, and its free shape
 beside the search's effects reached the noise with the density 36-72 % low at every altitude.) This step makes that suggestion a measurement: the user's
 model with the free shape (:func:`free_shape_for`), fitted to the same data with the same noise, and -- when
-that alone stays above the noise and the search kept effects of other kinds -- those effects with it.
+that alone stays above the noise and the search kept effects of other kinds -- those effects with it; then the
+kinds of the search's other effects, the screen's first candidate's and the thrust's in turn (``api._leads``),
+until one reaches the noise.
 
 What it says is of what **kind** the missing physics is and what it looks like, not what it is. A free shape
 of tens of parameters absorbs what it can, effects of other kinds among them (measured on Wren-H: a thrust
