@@ -1921,15 +1921,21 @@ def _profile_knots_km(vehicle: "Vehicle | None", n: int) -> list[float]:
     return [k / 1000.0 for k in knots]
 
 
+def _wind_knots_km(vehicle: "Vehicle | None", n: int) -> list[float]:
+    """A wind profile's knots for ``n`` intervals (:func:`_profile_knots_km`), with a knot at the top of the
+    surface layer (500 m), where a wind grows from its ground value (measured: RA-66M, launched from rest into a
+    wind grown over 300 m, took a spurious misalignment to follow the lift-off when the first knot above the
+    ground was at 2.3 km); a flight that starts aloft has none."""
+    k = _profile_knots_km(vehicle, n)
+    if len(k) > 1 and k[0] == 0.0 and k[1] > 2 * SURFACE_LAYER_M / 1000.0:
+        k = [0.0, SURFACE_LAYER_M / 1000.0] + k[1:]
+    return k
+
+
 def _refine_wind(vehicle: "Vehicle | None") -> list[Effect]:
     out = []
     for n in WIND_KNOT_INTERVALS:
-        k = _profile_knots_km(vehicle, n)
-        # a knot at the top of the surface layer (500 m), where a wind grows from its ground value (measured:
-        # RA-66M, launched from rest into a wind grown over 300 m, took a spurious misalignment to follow the
-        # lift-off when the first knot above the ground was at 2.3 km); a flight that starts aloft has none
-        if len(k) > 1 and k[0] == 0.0 and k[1] > 2 * SURFACE_LAYER_M / 1000.0:
-            k = [0.0, SURFACE_LAYER_M / 1000.0] + k[1:]
+        k = _wind_knots_km(vehicle, n)
         if len(k) >= 2 and all(len(k) > len(e.realistic) for e in out):
             out.append(wind_profile_effect(k, name=f"wind_pl_{len(k)}"))
     return out
@@ -1953,19 +1959,26 @@ def _refine_drag(vehicle: "Vehicle | None") -> list[Effect]:
     if vehicle is None or vehicle.mach is None:
         return []
     lo, hi = (float(x) for x in vehicle.mach)
+    out = []
+    for level in (1, 2):
+        free, zeros = _drag_mach_knots(vehicle, 2 ** level)
+        if free:
+            out.append(drag_mach_effect(free, zeros, name=f"drag_mach_{len(free)}"))
+    return out + ([drag_bump_effect(lo, hi)] if hi > lo else [])
+
+
+def _drag_mach_knots(vehicle: "Vehicle", parts: int) -> tuple[list[float], list[float]]:
+    """``(free, zeros)`` of a drag correction in Mach: the model's Mach table's intervals over the Mach range flown
+    cut in ``parts`` (the correction pinned at 0 on the table's knots); without a table, the range in four
+    intervals so cut, pinned at its ends."""
+    lo, hi = (float(x) for x in vehicle.mach)
     table = sorted(float(k) for k in vehicle.mach_knots)
     if len(table) >= 2:
         segs = [(a, b) for a, b in zip(table, table[1:]) if b > lo and a < hi]
         zeros = table
     else:
         segs, zeros = [(lo + (hi - lo) * j / 4, lo + (hi - lo) * (j + 1) / 4) for j in range(4)], [lo, hi]
-    out = []
-    for level in (1, 2):
-        parts = 2 ** level
-        free = sorted({a + (b - a) * i / parts for a, b in segs for i in range(1, parts)})
-        if free:
-            out.append(drag_mach_effect(free, zeros, name=f"drag_mach_{len(free)}"))
-    return out + ([drag_bump_effect(lo, hi)] if hi > lo else [])
+    return sorted({a + (b - a) * i / parts for a, b in segs for i in range(1, parts)}), zeros
 
 
 def _powered_knots(vehicle: "Vehicle") -> np.ndarray:

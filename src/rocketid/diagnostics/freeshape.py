@@ -43,9 +43,9 @@ import numpy as np
 from ..errors import RocketidError
 from ..solve import EstimationResult, estimate
 from .accept import NoiseBand, fits_to_noise
-from .effects import (DENSITY_KNOT_INTERVALS, WIND_KNOT_INTERVALS, Effect, Vehicle, _powered_knots,
-                      _profile_knots_km, density_profile_effect, drag_mach_effect, thrust_profile_effect,
-                      wind_profile_effect, with_effects)
+from .effects import (DENSITY_KNOT_INTERVALS, WIND_KNOT_INTERVALS, Effect, Vehicle, _drag_mach_knots,
+                      _powered_knots, _profile_knots_km, _wind_knots_km, density_profile_effect, drag_mach_effect,
+                      thrust_profile_effect, wind_profile_effect, with_effects)
 
 __all__ = ["FreeShape", "free_shape_for", "free_shape_check", "FREE_SHAPE_KINDS"]
 
@@ -160,13 +160,13 @@ def free_shape_for(kind: str, family: str, vehicle: Vehicle) -> tuple[Effect, tu
     time family, where the Mach-indexed variant answers; too few knots).
 
     - propulsion or mass: a thrust error ``P (1 + eps(t))`` piecewise linear on the mesh's element boundaries
-      over the burn (from the start to the first boundary at or after the thrust's end);
-      (:func:`_spread`: the short elements at the start merged), at most :data:`MAX_TIME_KNOTS` of them,
-      more than the catalogue's 9;
+      over the burn, from the start to the first boundary at or after the thrust's end (:func:`_spread`: the
+      short elements at the start merged), at most :data:`MAX_TIME_KNOTS` of them, more than the catalogue's 9;
     - environment: a wind (the family ``wind``) or a relative density deviation (every other) piecewise linear
-      in altitude on the catalogue's finest knot count, at equal shares of the aerodynamic action;
-    - aero: a drag correction in Mach on the model's Mach table with its intervals quartered, pinned at zero
-      on the table's knots (the catalogue's finest); without a table, 6 interior knots over the Mach range.
+      in altitude on the catalogue's finest knots (at equal shares of the aerodynamic action; the wind's with
+      the surface layer's top);
+    - aero: a drag correction in Mach on the catalogue's finest knots (the model's Mach table with its
+      intervals quartered, pinned at zero on the table's knots).
 
     The profiles in altitude and Mach are the catalogue's finest rungs: twice as many knots did not converge
     on Wren-H's hot tank in IPOPT's 3000 iterations (a wind on 25 knots, a drag correction on 49). What the
@@ -184,8 +184,8 @@ def free_shape_for(kind: str, family: str, vehicle: Vehicle) -> tuple[Effect, tu
         return thrust_profile_effect(knots), knots, "s"
     if kind == "environment":
         wind = family == "wind"
-        n = max(WIND_KNOT_INTERVALS if wind else DENSITY_KNOT_INTERVALS)
-        knots = tuple(float(k) for k in _profile_knots_km(vehicle, n))
+        knots = tuple(float(k) for k in (_wind_knots_km(vehicle, max(WIND_KNOT_INTERVALS)) if wind else
+                                         _profile_knots_km(vehicle, max(DENSITY_KNOT_INTERVALS))))
         if len(knots) < 3:
             return None
         if wind:
@@ -194,13 +194,8 @@ def free_shape_for(kind: str, family: str, vehicle: Vehicle) -> tuple[Effect, tu
     if kind == "aero":
         if vehicle.mach is None:
             return None
-        lo, hi = (float(x) for x in vehicle.mach)
-        table = sorted(float(k) for k in vehicle.mach_knots)
-        if len(table) >= 2:
-            segs, zeros = [(a, b) for a, b in zip(table, table[1:]) if b > lo and a < hi], table
-        else:
-            segs, zeros = [(lo + (hi - lo) * j / 2, lo + (hi - lo) * (j + 1) / 2) for j in range(2)], [lo, hi]
-        free = tuple(sorted({a + (b - a) * i / 4 for a, b in segs for i in range(1, 4)}))
+        free, zeros = _drag_mach_knots(vehicle, 4)
+        free = tuple(free)
         if len(free) < 3:
             return None
         return drag_mach_effect(free, zeros, name=f"drag_mach_{len(free)}"), free, "Mach"
@@ -227,8 +222,7 @@ def _runs(knots: Sequence[float], values: Sequence[float], tol: float) -> list[t
     out, i, n = [], 0, len(values)
     while i < n:
         j = i
-        while j + 1 < n and np.ptp(values[i:j + 2]) <= 2 * tol \
-                and np.all(np.abs(np.asarray(values[i:j + 2]) - np.median(values[i:j + 2])) <= tol):
+        while j + 1 < n and np.all(np.abs(np.asarray(values[i:j + 2]) - np.median(values[i:j + 2])) <= tol):
             j += 1
         out.append((i, j))
         i = j + 1
