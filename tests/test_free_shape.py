@@ -118,6 +118,11 @@ def test_the_hot_tank_s_motor_is_a_thrust_change_in_time(hot_tank):
     knee = (t >= 9.5) & (t <= 10.5)
     assert knee.any() and np.all(e[knee] < -0.5), dict(zip(t[knee], e[knee]))
     assert "the thrust" in fs.reading and "over 2-7.5 s" in fs.reading, fs.reading
+    # the curve drawn: the static firing's thrust along the base fit, and times 1 + eps(t) at the knots
+    t, stated, fitted = (np.asarray(c) for c in fs.curve)
+    assert t.size == stated.size == fitted.size and 3000 < stated.max() < 4000          # Wren-H: 3.67 kN at its peak
+    at = np.searchsorted(t, 5.0)
+    assert fitted[at] / stated[at] - 1 == pytest.approx(np.interp(t[at], fs.knots, fs.values), abs=1e-9)
 
 
 def test_a_density_profile_is_not_the_hot_tank(hot_tank):

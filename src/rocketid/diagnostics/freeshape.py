@@ -100,6 +100,9 @@ class FreeShape:
         Why the fit failed or gave up (empty when it did not).
     tried : tuple of FreeShape
         The fits before this one (the shape alone, when it was also fitted with the search's effects).
+    curve : tuple
+        For a thrust error: ``(times, stated, fitted)``, the model's thrust along the base fit's nodes and that
+        thrust times ``1 + eps(t)``, N (empty for the other kinds, or when the thrust could not be evaluated).
     """
 
     kind: str
@@ -117,6 +120,7 @@ class FreeShape:
     seconds: float
     message: str = ""
     tried: tuple = field(default=(), repr=False)
+    curve: tuple = field(default=(), repr=False)
 
     def text(self) -> str:
         """One or two sentences for the verdict's explanation."""
@@ -151,7 +155,9 @@ class FreeShape:
                 "detail": self.detail, "knots": [float(k) for k in self.knots],
                 "values": [float(v) for v in self.values], "unit": self.unit, "reading": self.reading,
                 "seconds": float(self.seconds), "message": self.message,
-                "tried": [t.to_dict() for t in self.tried]}
+                "tried": [t.to_dict() for t in self.tried],
+                "curve": ({"times": [float(x) for x in self.curve[0]], "stated": [float(x) for x in self.curve[1]],
+                           "fitted": [float(x) for x in self.curve[2]]} if self.curve else None)}
 
 
 def free_shape_for(kind: str, family: str, vehicle: Vehicle) -> tuple[Effect, tuple, str] | None:
@@ -292,7 +298,24 @@ def _one(base: EstimationResult, shape: Effect, knots: tuple, unit: str, kind: s
     else:
         reading = f"the drag coefficient {reading}"
     return FreeShape(kind, shape.name, description, tuple(e.name for e in kept), float(new.chi2_per_dof), before,
-                     bool(ok), detail, knots, values, unit, reading, time.perf_counter() - t0)
+                     bool(ok), detail, knots, values, unit, reading, time.perf_counter() - t0,
+                     curve=_thrust_curve(base, knots, values) if kind in ("propulsion", "mass") else ())
+
+
+def _thrust_curve(base: EstimationResult, knots: Sequence[float], values: Sequence[float]) -> tuple:
+    """``(times, stated, fitted)``: the model's thrust along ``base``'s nodes, and times ``1 + eps(t)`` (linear
+    between the knots, flat beyond); empty when the model has no thrust role or it cannot be evaluated."""
+    from .screen import _evaluate
+    expr = base.spec.role("thrust")
+    if expr is None:
+        return ()
+    try:
+        stated = np.asarray(_evaluate(base, expr), float) * np.ones_like(base.node_times)
+    except (RocketidError, TypeError, ValueError, ZeroDivisionError):
+        return ()
+    t = np.asarray(base.node_times, float)
+    fitted = stated * (1.0 + np.interp(t, knots, values))
+    return tuple(t), tuple(stated), tuple(fitted)
 
 
 def free_shape_check(disc, kind: str, family: str, *, timeout: float = 180.0, options=None,

@@ -540,16 +540,27 @@ def _confirm_section(report, figs: _Figures) -> str:
 
 def _free_shape_plot(free):
     """The free shape's values at its knots (:class:`~rocketid.diagnostics.freeshape.FreeShape`)."""
-    ax = new_axes((8, 3))
+    if free.curve:
+        top, ax = new_axes((8, 5), 2, 1, sharex=True)
+        t, stated, fitted = (np.asarray(c) for c in free.curve)
+        top.plot(t, stated / 1e3, color="0.5", label="the model's thrust (along the base fit)")
+        top.plot(t, fitted / 1e3, color="tab:red", label="with the free shape")
+        top.set_ylabel("thrust (kN)")
+        top.legend(fontsize=8)
+        top.set_title(f"{free.effect}: chi2/dof {free.chi2_per_dof:.4g}", fontsize=9)
+    else:
+        ax = new_axes((8, 3))
+        ax.set_title(f"{free.effect}: chi2/dof {free.chi2_per_dof:.4g}", fontsize=9)
     percent = free.kind in ("propulsion", "mass") or free.effect.startswith("density")
     y = 100 * np.asarray(free.values) if percent else np.asarray(free.values)
     ax.plot(free.knots, y, "o-", ms=3)
     ax.axhline(0.0, color="0.6", lw=0.8)
+    if free.unit == "s" and len(free.knots) > 1:             # the burn, not the coast after it
+        ax.set_xlim(free.knots[0], free.knots[-1] + 0.1 * (free.knots[-1] - free.knots[0]))
     ax.set_xlabel({"s": "t (s)", "km": "altitude (km)", "Mach": "Mach"}.get(free.unit, free.unit))
     ax.set_ylabel({"propulsion": "thrust error (%)", "mass": "thrust error (%)"}.get(
         free.kind, "density deviation (%)" if percent else "wind (m/s)" if free.effect.startswith("wind")
         else "drag coefficient change"))
-    ax.set_title(f"{free.effect}: chi2/dof {free.chi2_per_dof:.4g}", fontsize=9)
     ax.figure.tight_layout()
     return ax.figure
 
@@ -566,7 +577,9 @@ def _steps_section(report, figs: _Figures) -> str:
         parts.append(f"<p>{_e(free.text())}</p>")
         if free.values:
             parts.append(figs.add("free_shape", lambda: _free_shape_plot(free),
-                                  f"The free shape {free.effect}: its values at its knots"
+                                  (f"The free shape {free.effect}: the model's thrust and the thrust with it "
+                                   "(above), its values at its knots (below)" if free.curve else
+                                   f"The free shape {free.effect}: its values at its knots")
                                   + (f" (fitted beside {', '.join(free.kept)})" if free.kept else "")))
     if not steps:
         parts.append("<p>No stepwise search was run (rank only, or the discovery failed: see the notes).</p>")
