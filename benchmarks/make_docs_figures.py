@@ -1,8 +1,9 @@
-"""Make the figures of docs/diagnose-tutorial.md and docs/time-knot-trap.md.
+"""Make the figures of docs/diagnose-tutorial.md, docs/time-knot-trap.md and the free shape of docs/effects.md.
 
-    python3 benchmarks/make_docs_figures.py            # both pages
-    python3 benchmarks/make_docs_figures.py --trap      # only the time-knot trap
-    python3 benchmarks/make_docs_figures.py --tutorial  # only the tutorial
+    python3 benchmarks/make_docs_figures.py              # all
+    python3 benchmarks/make_docs_figures.py --trap        # only the time-knot trap
+    python3 benchmarks/make_docs_figures.py --tutorial    # only the tutorial
+    python3 benchmarks/make_docs_figures.py --free-shape  # only the free shape on Wren-H's hot tank
 
 Runs the pages' own code (the same data, models and calls) and writes PNG files
 into docs/figures/, printing the numbers the pages quote. Takes about a minute.
@@ -178,16 +179,42 @@ def tutorial_figures():
     print(f"  tutorial loop in {time.perf_counter() - t0:.1f} s")
 
 
+def free_shape_figure():
+    """Wren-H's hot tank (the hybrid study's truth and seed): the free shape a partly explained search fits."""
+    import sys
+    from types import SimpleNamespace
+    tests = Path(__file__).resolve().parents[1] / "tests"
+    sys.path[:0] = [str(tests), str(tests / "vehicles")]
+    import wren
+    from wren_study import truth
+    from wren_study.cases import BY_NAME
+    from rocketid.diagnostics.accept import noise_band
+    from rocketid.diagnostics.api import base_fit
+    from rocketid.diagnostics.freeshape import free_shape_check
+    from rocketid.diagnostics.report import _free_shape_plot
+    from rocketid.diagnostics.screen import vehicle_of
+    case = BY_NAME["hot-tank"]
+    fit, _, counts, _, _ = base_fit(wren.build_model(), truth.measurements(case.hidden, seed=case.seed), "estimate")
+    disc = SimpleNamespace(base_fit=fit, fit=fit, band=noise_band(fit, estimated=counts), vehicle=vehicle_of(fit),
+                           effects=())
+    fs = free_shape_check(disc, "propulsion", "thrust_level")
+    print(f"  hot tank: base chi2/dof {fit.chi2_per_dof:.4g}; {fs.effect} {fs.chi2_per_dof:.4g}; {fs.reading}")
+    _save(_free_shape_plot(fs), "free-shape-hot-tank.png")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--trap", action="store_true")
     ap.add_argument("--tutorial", action="store_true")
+    ap.add_argument("--free-shape", action="store_true")
     a = ap.parse_args()
-    both = not (a.trap or a.tutorial)
-    if a.trap or both:
+    every = not (a.trap or a.tutorial or a.free_shape)
+    if a.trap or every:
         trap_figures()
-    if a.tutorial or both:
+    if a.tutorial or every:
         tutorial_figures()
+    if a.free_shape or every:
+        free_shape_figure()
 
 
 if __name__ == "__main__":
