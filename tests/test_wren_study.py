@@ -50,10 +50,14 @@ KNOWN_FAILURES: dict[str, str] = {
                  "the free shape (benchmarks/free_shape_rows.py) reaches 1.09 alone (band 1.29): -10 to -6.6 % over "
                  "2-9 s, the tail longer",
     "hot-tank+hot-day": "177ddc5: burn_rate + wind_pl_5 + time_offset_2, chi2/dof 837 -> 8.48, partly explained (271 s): "
-                        "the hot tank's motor change (as hot-tank) hides the warmer air",
+                        "the hot tank's motor change (as hot-tank) hides the warmer air. Identical on 32ca943 (1713 s "
+                        "at load 4); the free shape reaches 1.047 alone, +7.6 to +11 % over 2-7.5 s: the warm air "
+                        "inside it",
     "burn-through": "177ddc5: base_drag_mach_5 + drag_mach_7, chi2/dof 6.33 -> 1.71, partly explained (102 s; before, "
                     "+ temperature at 1.556 with dCD_M6 -1.08, ten times its size): a thrust loss from 6.8 s that grows "
-                    "(the port at the liner) is taken by drag shapes; thrust_profile on the mesh did not win",
+                    "(the port at the liner) is taken by drag shapes; thrust_profile on the mesh did not win. On "
+                    "32ca943 (745 s) burn_rate + back_pressure_vacuum_fade + base_drag_mach_2 at 1.215, as since "
+                    "e940a4a; the free shape reaches 0.989 alone: -81 % at 10.5 s, -100 % from 14.5 s",
     "hot-day": "3a42d0c: base_drag called explained; since 9c92e9e (refined shapes of other families weighed as "
                "rivals) a named tie -- base_drag, temperature (dT_air 15 for 15), mass_jettison, throttle_step "
                "reach the noise within BIC 10 and the hold-out from 2 s predicts them alike: not explained by the "
@@ -65,27 +69,33 @@ KNOWN_FAILURES: dict[str, str] = {
                 "judged, and a 13-knot wind swung +-100 m/s between knots): the vented oxidiser changes the "
                 "lift-off mass and the thrust's knee "
                 "together, which no single catalogue shape does; start_mass alone (dm_start -1.59 for -1.5) is "
-                "the step-1 refit with the right size but leaves CD_7 at 2.8",
+                "the step-1 refit with the right size but leaves CD_7 at 2.8. The free shape (e940a4a's report) "
+                "reaches 1.178 alone: the knee early, -61 to -69 % at 9-10.5 s",
     # the fresh pairs (2026-11-28, data nobody had fitted; docs/effects.md, "Fresh pairs on Wren-H")
     "cool-tank+ballast": "e940a4a (fresh pair): burn_rate + wind_pl_5 + time_offset, chi2/dof 2.59, partly explained "
                          "(on 83c4694 burn_rate + wind_pl_5 + base_drag_mach_2 at 2.13, the base drag since the wrong "
                          "sign): the cool tank changes thrust and flow in time as the hot and the cold tank do (no "
-                         "catalogue shape), and the 2 kg of ballast is not found under it",
+                         "catalogue shape), and the 2 kg of ballast is not found under it. The free shape reaches "
+                         "1.065 alone: -8.3 to -13 % over 2-8.5 s, the ballast read as thrust",
     "short-web+geoid": "e940a4a (fresh pair): bias_h (-14.3 +- 0.5 m for -15) + base_drag_mach_3 + transonic_drag, "
                        "chi2/dof 1.031, partly explained (on 83c4694 bias_h + base_drag_mach_2 at 1.045, that base drag "
                        "since the wrong sign): the burn-through late in the burn is a thrust loss of 9 % at 12 s and 70 % at "
                        "burn-out, which thrust_profile_5 beside the bias fits at 0.983 (BIC 1291 against 1349) but "
                        "judged 35 times a 2 % thrust error at its burn-out knot; a size of 2 % of the largest thrust "
                        "in force where each knot sits was tried and left: it made thrust_profile_9 tie base_drag_mach_5 "
-                       "on the base-drag case (BIC 1342.3 against 1342.2)",
+                       "on the base-drag case (BIC 1342.3 against 1342.2). Identical on 32ca943 (485 s); the free "
+                       "shape (the drag's first, then the thrust's) reaches 0.978 beside the three: -12 to -14 % late "
+                       "in the burn",
     "vent+tailwind": "29cfd03 (fresh pair): wind_pl_5 + burn_rate + mass_flow, chi2/dof 3.79, partly explained: the "
                      "wind found, the vented oxidiser (lighter lift-off, earlier knee) not, as in pad-hold; on 83c4694 "
-                     "the diagnosis did not end within the harness's 3600 s at load 4-5",
+                     "the diagnosis did not end within the harness's 3600 s at load 4-5. The free shape: the wind's "
+                     "does not converge; the thrust's beside wind_pl_5 reaches 1.018, the knee early",
     "warm-tank+shallow-rail": "e940a4a (fresh pair): start_angle (-0.990 deg for -1.0) + burn_rate + start_mass, chi2/dof "
                               "1.709, partly explained: the warm tank's motor is not a faster clock (the hot and cold "
                               "tanks' physics, no catalogue shape); on c615eb9 start_angle + burn_rate + base_drag_mach_5 "
                               "at 1.059 was called explained -- a WRONG effect, a power-off increment of -0.25 to -0.03 "
-                              "(less drag once the jet stops), since e940a4a the wrong sign",
+                              "(less drag once the jet stops), since e940a4a the wrong sign. Identical on 32ca943 "
+                              "(520 s); the free shape beside start_angle reaches 1.025: +2.8 to +5.8 % over 2-7 s",
 }
 
 
