@@ -39,7 +39,7 @@ def _effects_by_name(names, vehicle):
 
 def row(folder: Path, model: str, sigma) -> dict:
     from rocketid.diagnostics.accept import noise_band
-    from rocketid.diagnostics.api import _lead, _leads, base_fit, resolve_model
+    from rocketid.diagnostics.api import _leads, base_fit, resolve_model
     from rocketid.diagnostics.freeshape import FREE_SHAPE_KINDS, free_shape_check
     from rocketid.diagnostics.screen import vehicle_of
     from rocketid import read_csv
@@ -60,8 +60,9 @@ def row(folder: Path, model: str, sigma) -> dict:
                             p=[params[n]["value"] for n in params])
     disc = SimpleNamespace(base_fit=fit, fit=final, band=band, vehicle=vehicle, effects=tuple(effects))
     ranking = SimpleNamespace(candidates=[SimpleNamespace(name=c["name"], kind=c["kind"]) for c in diag["candidates"][:1]])
-    kind, family = _lead(disc, ranking)
-    then = [k for k in _leads(disc, ranking)[1:] if k[0] in FREE_SHAPE_KINDS]
+    leads = _leads(disc, ranking)
+    kinds = [k for k in leads if k[0] in FREE_SHAPE_KINDS]
+    (kind, family), then = (kinds[0], kinds[1:]) if kinds and leads[0][0] != "sensor" else (("sensor", ""), [])
     # diagnose fits it only when the search ended above the noise (not at a named tie, not cut short)
     above = (kind in FREE_SHAPE_KINDS and not diag["final"]["fits_to_noise"] and not diag.get("search_stopped")
              and diag["final"]["verdict"] in ("partly explained", "not explained by the catalogue"))

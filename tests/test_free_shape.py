@@ -183,3 +183,30 @@ def test_the_kind_is_the_search_s_first_effect_before_the_screen_s_first_candida
     assert _leads(searched, ranking) == [("propulsion", "thrust_level"), ("environment", "density")]
     assert "thrust error in time" in _suggest(_lead(searched, ranking))
     assert "density deviation" in _suggest(_lead(None, ranking))
+
+
+def test_which_searches_fit_a_free_shape(monkeypatch):
+    """Above the noise, not a tie, not cut short: the first kind with a free shape, the others next; a search of
+    sensor effects only keeps its sensor-model suggestion and fits none; one of a start angle only tries the
+    thrust's."""
+    from rocketid.diagnostics import CATALOGUE
+    from rocketid.diagnostics import api, freeshape
+    from rocketid.diagnostics.effects import burn_rate_effect
+    asked = []
+    monkeypatch.setattr(freeshape, "free_shape_check",
+                        lambda disc, kind, family, **kw: asked.append((kind, family, kw["then"])) or "fitted")
+    ranking = SimpleNamespace(candidates=[SimpleNamespace(name="bias_h", kind="sensor")])
+    settings = dict(timeout=60.0, options=None)
+
+    def run(effects, **kw):
+        disc = SimpleNamespace(effects=tuple(effects), fits_to_noise=False, stopped="", ambiguous="",
+                               verdict="partly explained", **kw)
+        return api._free_shape(disc, ranking, settings, None, 0.0, [])
+    assert run([CATALOGUE["start_angle"], burn_rate_effect(), CATALOGUE["wind"]]) == "fitted"
+    assert asked[-1] == ("propulsion", "thrust_level", [("environment", "wind")])
+    assert run([CATALOGUE["start_angle"]]) == "fitted" and asked[-1] == ("propulsion", "thrust_level", [])
+    n = len(asked)
+    assert run([CATALOGUE["bias_v"], CATALOGUE["time_offset"]]) is None and len(asked) == n
+    disc = SimpleNamespace(effects=(burn_rate_effect(),), fits_to_noise=True, stopped="", ambiguous="",
+                           verdict="partly explained")
+    assert api._free_shape(disc, ranking, settings, None, 0.0, []) is None and len(asked) == n

@@ -702,12 +702,13 @@ def _free_shape(disc, ranking, settings: dict, budget, t_search: float, notes: l
     search ended above the noise ("partly explained" or "not explained by the catalogue", no tie named, not cut
     short by the time budget); None otherwise or when that kind has no free shape."""
     from .freeshape import FREE_SHAPE_KINDS, free_shape_check
-    lead = _lead(disc, ranking)
-    then = [k for k in _leads(disc, ranking)[1:] if k[0] in FREE_SHAPE_KINDS]
-    # a search of sensor or kinematic effects only: the suggestion is a sensor model, and no free shape is tried
-    if (disc is None or lead is None or lead[0] not in FREE_SHAPE_KINDS or disc.fits_to_noise or disc.stopped or disc.ambiguous
-            or disc.verdict not in ("partly explained", "not explained by the catalogue")):
+    leads = _leads(disc, ranking)
+    kinds = [k for k in leads if k[0] in FREE_SHAPE_KINDS]
+    # a search of sensor effects only: the suggestion is a sensor model (a lag in a speed sensor is no force)
+    if (disc is None or not kinds or leads[0][0] == "sensor" or disc.fits_to_noise or disc.stopped
+            or disc.ambiguous or disc.verdict not in ("partly explained", "not explained by the catalogue")):
         return None
+    lead, then = kinds[0], kinds[1:]
     left = None if budget is None else budget - (time.perf_counter() - t_search)
     if left is not None and left <= 0:
         notes.append("the free shape was not fitted: the time budget had run out")
