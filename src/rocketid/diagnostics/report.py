@@ -539,7 +539,8 @@ def _confirm_section(report, figs: _Figures) -> str:
 
 
 def _free_shape_plot(free):
-    """The free shape's values at its knots (:class:`~rocketid.diagnostics.freeshape.FreeShape`)."""
+    """The free shape's values at its knots (:class:`~rocketid.diagnostics.freeshape.FreeShape`), below the model's
+    thrust and the thrust with the shape for a thrust error."""
     if free.curve:
         top, ax = new_axes((8, 5), 2, 1, sharex=True)
         t, stated, fitted = (np.asarray(c) for c in free.curve)
