@@ -75,7 +75,8 @@ KNOWN_FAILURES: dict[str, str] = {
     "cool-tank+ballast": "e940a4a (fresh pair): burn_rate + wind_pl_5 + time_offset, chi2/dof 2.59, partly explained "
                          "(on 83c4694 burn_rate + wind_pl_5 + base_drag_mach_2 at 2.13, the base drag since the wrong "
                          "sign): the cool tank changes thrust and flow in time as the hot and the cold tank do (no "
-                         "catalogue shape), and the 2 kg of ballast is not found under it. The free shape reaches "
+                         "catalogue shape), and the 2 kg of ballast is not found under it. Identical on 32ca943 "
+                         "(2578 s at load 4). The free shape reaches "
                          "1.065 alone: -8.3 to -13 % over 2-8.5 s, the ballast read as thrust",
     "short-web+geoid": "e940a4a (fresh pair): bias_h (-14.3 +- 0.5 m for -15) + base_drag_mach_3 + transonic_drag, "
                        "chi2/dof 1.031, partly explained (on 83c4694 bias_h + base_drag_mach_2 at 1.045, that base drag "
