@@ -69,7 +69,8 @@ KNOWN_FAILURES: dict[str, str] = {
                 "judged, and a 13-knot wind swung +-100 m/s between knots): the vented oxidiser changes the "
                 "lift-off mass and the thrust's knee "
                 "together, which no single catalogue shape does; start_mass alone (dm_start -1.59 for -1.5) is "
-                "the step-1 refit with the right size but leaves CD_7 at 2.8. The free shape (e940a4a's report) "
+                "the step-1 refit with the right size but leaves CD_7 at 2.8. Identical on 32ca943 (3461 s at "
+                "load 4). The free shape (e940a4a's report) "
                 "reaches 1.178 alone: the knee early, -61 to -69 % at 9-10.5 s",
     # the fresh pairs (2026-11-28, data nobody had fitted; docs/effects.md, "Fresh pairs on Wren-H")
     "cool-tank+ballast": "e940a4a (fresh pair): burn_rate + wind_pl_5 + time_offset, chi2/dof 2.59, partly explained "
