@@ -6,8 +6,8 @@ Each ``DIR`` is a study's case: ``DIR/../<case>.csv`` beside ``DIR = .../report-
 layout) or ``DIR/<case>.csv``. The base model is fitted as ``diagnose`` fits it (wild points dropped, the noise
 from the data with ``--sigma estimate``); the search's final effects are read from ``DIR/diagnosis.json`` and
 rebuilt by name from the catalogue and its refined shapes for this vehicle, their estimates the start; the kind
-is picked as ``diagnose`` picks it (``api._lead``: the first effect added of a kind with a free shape, else the
-screen's first candidate). Nothing of the search is run again, so a diagnosis made before the free shape existed (or with an
+is picked as ``diagnose`` picks it (``api._free_shape_kinds``: the kinds of the effects added that have a free
+shape, the screen's first candidate's, the thrust's, in turn). Nothing of the search is run again, so a diagnosis made before the free shape existed (or with an
 older rule for its kind) gets the free shape the current code would fit. One line per case; ``--json`` keeps them.
 """
 
@@ -39,8 +39,8 @@ def _effects_by_name(names, vehicle):
 
 def row(folder: Path, model: str, sigma) -> dict:
     from rocketid.diagnostics.accept import noise_band
-    from rocketid.diagnostics.api import _leads, base_fit, resolve_model
-    from rocketid.diagnostics.freeshape import FREE_SHAPE_KINDS, free_shape_check
+    from rocketid.diagnostics.api import _free_shape_kinds, base_fit, resolve_model
+    from rocketid.diagnostics.freeshape import free_shape_check
     from rocketid.diagnostics.screen import vehicle_of
     from rocketid import read_csv
     diag = json.loads((folder / "diagnosis.json").read_text())
@@ -60,13 +60,11 @@ def row(folder: Path, model: str, sigma) -> dict:
                             p=[params[n]["value"] for n in params])
     disc = SimpleNamespace(base_fit=fit, fit=final, band=band, vehicle=vehicle, effects=tuple(effects))
     ranking = SimpleNamespace(candidates=[SimpleNamespace(name=c["name"], kind=c["kind"]) for c in diag["candidates"][:1]])
-    leads = _leads(disc, ranking)
-    kinds = [k for k in leads if k[0] in FREE_SHAPE_KINDS]
-    (kind, family), then = (kinds[0], kinds[1:]) if kinds and leads[0][0] != "sensor" else (("sensor", ""), [])
+    kinds = _free_shape_kinds(disc, ranking)
     # diagnose fits it only when the search ended above the noise (not at a named tie, not cut short)
-    above = (kind in FREE_SHAPE_KINDS and not diag["final"]["fits_to_noise"] and not diag.get("search_stopped")
+    above = (kinds and not diag["final"]["fits_to_noise"] and not diag.get("search_stopped")
              and diag["final"]["verdict"] in ("partly explained", "not explained by the catalogue"))
-    fs = free_shape_check(disc, kind, family, then=then) if above else None
+    fs = free_shape_check(disc, *kinds[0], then=kinds[1:]) if above else None
     out = {"case": case, "verdict": diag["final"]["verdict"], "final": names,
            "final_chi2": diag["final"]["chi2_per_dof"], "base_chi2": float(fit.chi2_per_dof),
            "band": float(band.upper), "seconds": time.perf_counter() - t0,

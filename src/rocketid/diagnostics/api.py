@@ -697,16 +697,24 @@ def _suggest(lead: tuple[str, str] | None) -> str:
     return "a term of your own written with custom_effect"
 
 
+def _free_shape_kinds(disc, ranking) -> list[tuple[str, str]]:
+    """The ``(kind, family)`` whose free shapes to fit, in turn (:func:`_leads`, those with a free shape); empty for
+    a search of sensor effects only, whose suggestion is a sensor model (a lag in a speed sensor is no force)."""
+    from .freeshape import FREE_SHAPE_KINDS
+    leads = _leads(disc, ranking)
+    if not leads or leads[0][0] == "sensor":
+        return []
+    return [k for k in leads if k[0] in FREE_SHAPE_KINDS]
+
+
 def _free_shape(disc, ranking, settings: dict, budget, t_search: float, notes: list):
     """The free shape the verdict names (:func:`_lead`), fitted (:mod:`~rocketid.diagnostics.freeshape`), when the
     search ended above the noise ("partly explained" or "not explained by the catalogue", no tie named, not cut
     short by the time budget); None otherwise or when that kind has no free shape."""
-    from .freeshape import FREE_SHAPE_KINDS, free_shape_check
-    leads = _leads(disc, ranking)
-    kinds = [k for k in leads if k[0] in FREE_SHAPE_KINDS]
-    # a search of sensor effects only: the suggestion is a sensor model (a lag in a speed sensor is no force)
-    if (disc is None or not kinds or leads[0][0] == "sensor" or disc.fits_to_noise or disc.stopped
-            or disc.ambiguous or disc.verdict not in ("partly explained", "not explained by the catalogue")):
+    from .freeshape import free_shape_check
+    kinds = _free_shape_kinds(disc, ranking)
+    if (disc is None or not kinds or disc.fits_to_noise or disc.stopped or disc.ambiguous
+            or disc.verdict not in ("partly explained", "not explained by the catalogue")):
         return None
     lead, then = kinds[0], kinds[1:]
     left = None if budget is None else budget - (time.perf_counter() - t_search)
