@@ -90,6 +90,7 @@ def main(argv=None) -> int:
                  + f" chi2/dof {fs['chi2_per_dof']:.4g} (band <= {r['band']:.4g}), "
                  + ("reaches the noise" if fs["reaches_noise"] else "above the noise")
                  + f"; {fs['reading'] or fs['message']}"
+                 + (f"; not needed: {', '.join(fs['not_needed'])}" if fs.get("not_needed") else "")
                  + "".join(f" (tried before: {t['effect']} beside {t['kept'] or 'nothing'}, "
                            + (t['message'] if t['message'] else f"chi2/dof {t['chi2_per_dof']:.4g}") + ")"
                            for t in fs["tried"])) + f" [{r['seconds']:.0f} s]", flush=True)

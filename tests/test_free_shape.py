@@ -107,11 +107,20 @@ def test_the_hot_tank_s_motor_is_a_thrust_change_in_time(hot_tank):
     thrust error on the burn's element boundaries reaches the noise band with white residuals, and reads +6 to +13 %
     through the liquid phase (the truth's vapour pressure 58 bar for 50.6: +8 % thrust) and the thrust's knee early
     (the truth's liquid runs out a second before the static firing's: at 9.5-10.5 s the fitted error is below -50 %)."""
+    from rocketid.diagnostics import CATALOGUE
+    from rocketid.diagnostics.effects import burn_rate_effect
     from rocketid.diagnostics.freeshape import free_shape_check
-    fs = free_shape_check(hot_tank, "propulsion", "thrust_level")
+    # the search's outline as the study's ended: the burn rate and a start speed (a wrong effect of another kind)
+    searched = SimpleNamespace(**{**vars(hot_tank), "effects": (burn_rate_effect(), CATALOGUE["start_speed"])})
+    fs = free_shape_check(searched, "propulsion", "thrust_level")
     assert hot_tank.base_fit.chi2_per_dof > 100
     assert fs.reaches_noise, fs.text()
     assert fs.chi2_per_dof <= hot_tank.band.upper and not fs.kept and not fs.tried
+    # alone at the noise: the start speed is not needed, the burn rate's place taken -- and said so
+    assert fs.not_needed == ("start_speed",) and fs.replaces == ("burn_rate",), fs
+    assert "the search's start_speed is not needed to reach the noise" in fs.text(), fs.text()
+    assert "unconfirmed either way" in fs.text() and "takes the place of the search's burn_rate" in fs.text()
+    assert fs.to_dict()["not_needed"] == ["start_speed"] and fs.parameters["eps_P0"] == fs.values[0]
     t, e = np.asarray(fs.knots), np.asarray(fs.values)
     liquid = (t >= 2.0) & (t <= 7.5)
     assert np.all((e[liquid] > 0.06) & (e[liquid] < 0.13)), dict(zip(t[liquid], e[liquid]))
@@ -137,6 +146,33 @@ def test_a_density_profile_is_not_the_hot_tank(hot_tank):
     assert not fs.reaches_noise and fs.chi2_per_dof > 2 * hot_tank.band.upper, fs.text()
     assert "is not a change of the air with altitude alone" in fs.text()
     assert f"{fs.description} alone stays at chi2/dof" in both.text()
+
+
+def test_beside_the_search_s_effects_the_shape_keeps_only_those_it_needs():
+    """Wren-H with its tank at 23 C (about +4 % thrust, the liquid out early) on a rail at 84 deg declared 85: the
+    thrust's free shape alone stays above the noise (the start angle is no thrust); beside the search's start angle
+    and a transonic drag rise (a wrong effect, of the kind the study's searches took beside the motor) it reaches
+    the noise; dropped one at a time, the drag rise goes and the start angle stays. The kept effect is the truth's
+    (the angle near -1 deg), the drag rise is named not needed, the burn rate's place taken."""
+    import wren as V
+    from wren_study import truth
+    from wren_study.cases import BY_NAME
+    from rocketid.diagnostics import CATALOGUE
+    from rocketid.diagnostics.accept import noise_band
+    from rocketid.diagnostics.api import base_fit
+    from rocketid.diagnostics.effects import burn_rate_effect
+    from rocketid.diagnostics.freeshape import free_shape_check
+    from rocketid.diagnostics.screen import vehicle_of
+    case = BY_NAME["warm-tank+shallow-rail"]
+    fit, _, counts, _, _ = base_fit(V.build_model(), truth.measurements(case.hidden, seed=case.seed), "estimate")
+    disc = SimpleNamespace(base_fit=fit, fit=fit, band=noise_band(fit, estimated=counts), vehicle=vehicle_of(fit),
+                           effects=(CATALOGUE["start_angle"], burn_rate_effect(), CATALOGUE["transonic_drag"]))
+    fs = free_shape_check(disc, "propulsion", "thrust_level")
+    assert fs.reaches_noise and fs.kept == ("start_angle",), fs.text()
+    assert fs.not_needed == ("transonic_drag",) and fs.replaces == ("burn_rate",)
+    assert [(t.kept, t.reaches_noise) for t in fs.tried] == [((), False)], [t.text() for t in fs.tried]
+    assert math.degrees(fs.parameters["dgamma_start"]) == pytest.approx(-1.0, abs=0.3), fs.parameters
+    assert "beside start_angle fits at chi2/dof" in fs.text() and "transonic_drag is not needed" in fs.text()
 
 
 def test_diagnose_fits_the_free_shape_when_it_ends_above_the_noise(hot_tank, tmp_path):

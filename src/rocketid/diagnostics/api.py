@@ -657,8 +657,8 @@ def _leads(disc, ranking) -> list[tuple[str, str]]:
     (:func:`~rocketid.diagnostics.freeshape.free_shape_check`). The thrust's comes last whatever was found: a
     force in time over the burn, the term a motor outside the catalogue needs (Wren-H's grain 13 mm short with its
     GPS altitude 15 m low: the search took the altitude bias and two drag shapes, the screen ranked four sensor
-    errors and the density first, and the thrust's free shape beside them reaches the noise, 12-14 % low late in
-    the burn)."""
+    errors and the density first, and the thrust's free shape reaches the noise beside the bias alone, the drag
+    shapes not needed)."""
     from .freeshape import FREE_SHAPE_KINDS
     from .step import _family
     effects = list(disc.effects) if disc is not None else []

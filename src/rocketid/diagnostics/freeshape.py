@@ -14,7 +14,11 @@ beside the search's effects reached the noise with the density 36-72 % low at ev
 model with the free shape (:func:`free_shape_for`), fitted to the same data with the same noise, and -- when
 that alone stays above the noise and the search kept effects of other kinds -- those effects with it; then the
 kinds of the search's other effects, the screen's first candidate's and the thrust's in turn (``api._leads``),
-until one reaches the noise.
+until one reaches the noise. A shape that reaches the noise beside the search's effects is then fitted without
+each in turn, and keeps only those it needs (backward elimination to the noise); the effects of other kinds it
+does without are named (:attr:`FreeShape.not_needed`): on Wren-H's grain 13 mm short with its GPS altitude 15 m
+low the thrust's shape reached the noise beside the altitude bias and two drag shapes, and keeps the bias alone
+(-12.2 m for -15), the drag shapes not needed.
 
 What it says is of what **kind** the missing physics is and what it looks like, not what it is. A free shape
 of tens of parameters absorbs what it can, effects of other kinds among them (measured on Wren-H: a thrust
@@ -100,6 +104,16 @@ class FreeShape:
         Why the fit failed or gave up (empty when it did not).
     tried : tuple of FreeShape
         The fits before this one (the shape alone, when it was also fitted with the search's effects).
+    not_needed : tuple of str
+        When it reaches the noise: the search's effects of other kinds it does without (all of them when it
+        reaches the noise alone; those :func:`free_shape_check` could drop one at a time and stay at the noise
+        when it needed some). They may stand in for the shape the catalogue lacks -- or be real effects the
+        free shape absorbs: unconfirmed either way.
+    replaces : tuple of str
+        The search's effects of the shape's own kind, which the shape takes the place of (the catalogue's
+        nearest shapes of that kind: the burn rate for a thrust error in time).
+    parameters : dict
+        The fit's estimates, every parameter by name (empty when it failed).
     curve : tuple
         For a thrust error: ``(times, stated, fitted)``, the model's thrust along the base fit's nodes and that
         thrust times ``1 + eps(t)``, N (empty for the other kinds, or when the thrust could not be evaluated).
@@ -121,6 +135,9 @@ class FreeShape:
     message: str = ""
     tried: tuple = field(default=(), repr=False)
     curve: tuple = field(default=(), repr=False)
+    not_needed: tuple = ()
+    replaces: tuple = ()
+    parameters: dict = field(default_factory=dict, repr=False)
 
     def text(self) -> str:
         """One or two sentences for the verdict's explanation."""
@@ -135,10 +152,24 @@ class FreeShape:
                     f"{self._what()}. It reads: {self.reading}. A free shape of {len(self.values)} values "
                     "absorbs what it can, effects of other kinds too, and is not judged by a realistic size: it "
                     "is the missing physics' trace, not its name -- name what makes that shape and state it as "
-                    "your own effect (custom_effect).")
+                    "your own effect (custom_effect)." + self._others())
         return (f"The free shape the verdict names does not reach the noise: {before}{on} fits at chi2/dof "
                 f"{self.chi2_per_dof:.4g} (from {self.base_chi2_per_dof:.4g}; {self.detail}): what is missing "
                 f"is not {self._what()} alone.")
+
+    def _others(self) -> str:
+        if not (self.not_needed or self.replaces):
+            return ""
+        out = ""
+        if self.replaces:
+            out += (f" It takes the place of the search's {_and(self.replaces)}, the catalogue's nearest "
+                    f"shape{'s' if len(self.replaces) > 1 else ''} of that kind.")
+        if self.not_needed:
+            one = len(self.not_needed) == 1
+            out += (f" Beside it the search's {_and(self.not_needed)} {'is' if one else 'are'} not needed to reach "
+                    f"the noise: {'it' if one else 'they'} may stand in for the shape the catalogue lacks, or be "
+                    f"real and absorbed by the free shape -- unconfirmed either way, not found.")
+        return out
 
     def _on(self) -> str:
         return f"{self.description}" + (f" beside {', '.join(self.kept)}" if self.kept else " alone")
@@ -156,6 +187,8 @@ class FreeShape:
                 "values": [float(v) for v in self.values], "unit": self.unit, "reading": self.reading,
                 "seconds": float(self.seconds), "message": self.message,
                 "tried": [t.to_dict() for t in self.tried],
+                "not_needed": list(self.not_needed), "replaces": list(self.replaces),
+                "parameters": {k: float(v) for k, v in self.parameters.items()},
                 "curve": ({"times": [float(x) for x in self.curve[0]], "stated": [float(x) for x in self.curve[1]],
                            "fitted": [float(x) for x in self.curve[2]]} if self.curve else None)}
 
@@ -221,6 +254,11 @@ def _spread(bounds) -> tuple:
         if x - kept[-1] >= gap and b[-1] - x >= gap:
             kept.append(float(x))
     return tuple(kept + [float(b[-1])])
+
+
+def _and(names: Sequence[str]) -> str:
+    names = list(names)
+    return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} and {names[-1]}"
 
 
 def _runs(knots: Sequence[float], values: Sequence[float], tol: float) -> list[tuple[int, int]]:
@@ -299,7 +337,8 @@ def _one(base: EstimationResult, shape: Effect, knots: tuple, unit: str, kind: s
         reading = f"the drag coefficient {reading}"
     return FreeShape(kind, shape.name, description, tuple(e.name for e in kept), float(new.chi2_per_dof), before,
                      bool(ok), detail, knots, values, unit, reading, time.perf_counter() - t0,
-                     curve=_thrust_curve(base, knots, values) if kind in ("propulsion", "mass") else ())
+                     curve=_thrust_curve(base, knots, values) if kind in ("propulsion", "mass") else (),
+                     parameters=dict(zip(new.spec.parameter_names, (float(v) for v in new.p))))
 
 
 def _thrust_curve(base: EstimationResult, knots: Sequence[float], values: Sequence[float]) -> tuple:
@@ -360,7 +399,34 @@ def free_shape_check(disc, kind: str, family: str, *, timeout: float = 180.0, op
             start = dict(zip(disc.fit.spec.parameter_names, (float(v) for v in disc.fit.p)))
             fits.append(_one(base, shape, knots, unit, k, fam, kept, start, disc.band, timeout, options,
                              float(base.chi2_per_dof)))
+            if fits[-1].reaches_noise and len(kept) > 1:
+                fits[-1] = _without(base, shape, knots, unit, k, fam, kept, fits[-1], disc.band, timeout, options)
         tried += fits
         if fits[-1].reaches_noise:
+            last = fits[-1]
+            tried[-1] = replace(last, replaces=tuple(e.name for e in disc.effects if e.kind in same),
+                                not_needed=tuple(e.name for e in kept if e.name not in last.kept))
             break
     return replace(tried[-1], tried=tuple(tried[:-1])) if tried else None
+
+
+def _without(base, shape, knots, unit, kind, family, kept, fit: FreeShape, band, timeout, options) -> FreeShape:
+    """``fit`` (the free shape beside ``kept``, at the noise) without the kept effects it does not need: each
+    dropped in turn and the shape refitted from ``fit``'s estimates; of the drops that stay at the noise the one
+    with the lowest chi2/dof is made, until none stays (backward elimination to the noise). A free shape reaching
+    the noise beside the search's wrong effects kept them all (Wren-H's grain 13 mm short with its GPS altitude
+    15 m low: the thrust's shape beside the altitude bias and two drag shapes)."""
+    kept = list(kept)
+    while len(kept) > 1:
+        outs = []
+        for e in kept:
+            rest = [x for x in kept if x is not e]
+            new = _one(base, shape, knots, unit, kind, family, rest, fit.parameters, band, timeout, options,
+                       fit.base_chi2_per_dof)
+            if new.reaches_noise:
+                outs.append((new.chi2_per_dof, e.name, new, e))
+        if not outs:
+            break
+        _, _, fit, e = min(outs, key=lambda o: o[:2])
+        kept.remove(e)
+    return fit
