@@ -127,6 +127,9 @@ def test_the_hot_tank_s_motor_is_a_thrust_change_in_time(hot_tank):
     knee = (t >= 9.5) & (t <= 10.5)
     assert knee.any() and np.all(e[knee] < -0.5), dict(zip(t[knee], e[knee]))
     assert "the thrust" in fs.reading and "over 2-7.5 s" in fs.reading, fs.reading
+    # the knots of the first second after the rail (the GPS from 2 s) are read apart: not placed one by one
+    assert "before the first sample at 2 s" in fs.reading and "not placed one by one" in fs.reading, fs.reading
+    assert fs.first_sample == 2.0 and fs.to_dict()["first_sample"] == 2.0
     # the curve drawn: the static firing's thrust along the base fit, and times 1 + eps(t) at the knots
     t, stated, fitted = (np.asarray(c) for c in fs.curve)
     assert t.size == stated.size == fitted.size and 3000 < stated.max() < 4000          # Wren-H: 3.67 kN at its peak

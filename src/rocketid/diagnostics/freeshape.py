@@ -114,6 +114,9 @@ class FreeShape:
         nearest shapes of that kind: the burn rate for a thrust error in time).
     parameters : dict
         The fit's estimates, every parameter by name (empty when it failed).
+    first_sample : float
+        For a shape in time: the data's first sample time, before which its knots are not placed one by one
+        (their values read apart); NaN otherwise.
     curve : tuple
         For a thrust error: ``(times, stated, fitted)``, the model's thrust along the base fit's nodes and that
         thrust times ``1 + eps(t)``, N (empty for the other kinds, or when the thrust could not be evaluated).
@@ -138,6 +141,7 @@ class FreeShape:
     not_needed: tuple = ()
     replaces: tuple = ()
     parameters: dict = field(default_factory=dict, repr=False)
+    first_sample: float = math.nan
 
     def text(self) -> str:
         """One or two sentences for the verdict's explanation."""
@@ -189,6 +193,7 @@ class FreeShape:
                 "tried": [t.to_dict() for t in self.tried],
                 "not_needed": list(self.not_needed), "replaces": list(self.replaces),
                 "parameters": {k: float(v) for k, v in self.parameters.items()},
+                "first_sample": float(self.first_sample) if math.isfinite(self.first_sample) else None,
                 "curve": ({"times": [float(x) for x in self.curve[0]], "stated": [float(x) for x in self.curve[1]],
                            "fitted": [float(x) for x in self.curve[2]]} if self.curve else None)}
 
@@ -326,7 +331,15 @@ def _one(base: EstimationResult, shape: Effect, knots: tuple, unit: str, kind: s
     values = tuple(float(new.value(n)) for n in shape.parameter_names)
     key = kind if kind != "environment" else f"environment_{'wind' if family == 'wind' else 'density'}"
     tol = RUN_TOLERANCE.get(key, RUN_TOLERANCE["propulsion"])
-    reading = read_shape(knots, values, unit, tol, percent=key in ("propulsion", "mass", "environment_density"))
+    percent = key in ("propulsion", "mass", "environment_density")
+    early = _before_first_sample(base, knots) if kind in ("propulsion", "mass") else 0
+    reading = read_shape(knots[early:], values[early:], unit, tol, percent=percent)
+    if early:
+        first = _first_sample(base)
+        lo, hi = min(values[:early]), max(values[:early])
+        reading += (f"; before the first sample at {first:.3g} s, {100 * lo:+.0f} to {100 * hi:+.0f} % on "
+                    f"{early} knot{'s' if early > 1 else ''}, not placed one by one by the data (only through the "
+                    "state they leave at that sample)")
     if kind in ("propulsion", "mass"):
         reading = f"the thrust {reading}"
     elif key == "environment_wind":
@@ -338,7 +351,21 @@ def _one(base: EstimationResult, shape: Effect, knots: tuple, unit: str, kind: s
     return FreeShape(kind, shape.name, description, tuple(e.name for e in kept), float(new.chi2_per_dof), before,
                      bool(ok), detail, knots, values, unit, reading, time.perf_counter() - t0,
                      curve=_thrust_curve(base, knots, values) if kind in ("propulsion", "mass") else (),
-                     parameters=dict(zip(new.spec.parameter_names, (float(v) for v in new.p))))
+                     parameters=dict(zip(new.spec.parameter_names, (float(v) for v in new.p))),
+                     first_sample=_first_sample(base) if unit == "s" else math.nan)
+
+
+def _first_sample(base: EstimationResult) -> float:
+    return min(float(c.times[0]) for c in base.prepared.measurements.channels if c.times.size)
+
+
+def _before_first_sample(base: EstimationResult, knots: Sequence[float]) -> int:
+    """How many of the time ``knots`` lie before the data's first sample (Wren-H: three knots of the first second
+    after the rail, its GPS from 2 s), read apart: their values are placed only together, through the state they
+    leave at that sample. None are set apart when fewer than three knots would remain."""
+    first = _first_sample(base)
+    n = int(sum(float(k) < first - 1e-9 for k in knots))
+    return n if len(knots) - n >= 3 else 0
 
 
 def _thrust_curve(base: EstimationResult, knots: Sequence[float], values: Sequence[float]) -> tuple:

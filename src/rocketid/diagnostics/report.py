@@ -556,6 +556,12 @@ def _free_shape_plot(free):
     y = 100 * np.asarray(free.values) if percent else np.asarray(free.values)
     ax.plot(free.knots, y, "o-", ms=3)
     ax.axhline(0.0, color="0.6", lw=0.8)
+    first = getattr(free, "first_sample", float("nan"))
+    if np.isfinite(first) and free.knots and free.knots[0] < first:    # no data yet: the values placed only together
+        for a in ((top, ax) if free.curve else (ax,)):
+            a.axvspan(free.knots[0], first, color="0.9", zorder=0)
+        ax.text(0.5 * (free.knots[0] + first), 0.03, "no data\nyet", transform=ax.get_xaxis_transform(),
+                ha="center", va="bottom", fontsize=7, color="0.4")
     if free.unit == "s" and len(free.knots) > 1:             # the burn, not the coast after it
         ax.set_xlim(free.knots[0], free.knots[-1] + 0.1 * (free.knots[-1] - free.knots[0]))
     ax.set_xlabel({"s": "t (s)", "km": "altitude (km)", "Mach": "Mach"}.get(free.unit, free.unit))
