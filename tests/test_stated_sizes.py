@@ -10,6 +10,8 @@ wind.
 
 from __future__ import annotations
 
+import json
+
 
 import pytest
 
@@ -86,9 +88,11 @@ def test_the_command_line_and_the_model_file_state_sizes(tmp_path, thrust_12):
     model.write_text("from rocketid.cases import ra66m\n\n\ndef build_model():\n    return ra66m()\n\n\n"
                      "def realistic_sizes():\n    return {'eps_thrust': 0.10}\n")
     res = CliRunner().invoke(cli, ["diagnose", str(csv), "--model", str(model), "--out", str(tmp_path / "a"),
-                                   "--workers", "2", "--max-effects", "1", "--holdout", "none"])
+                                   "--workers", "2", "--max-effects", "1", "--holdout", "none", "--no-refine"])
     assert res.exit_code == 0, res.output
     assert "Verdict: explained" in res.output and "(realistic 0.1)" in res.output
+    notes = json.loads((tmp_path / "a" / "diagnosis.json").read_text())["notes"]
+    assert any(n.startswith("the refined shapes were not tried (refine=False, --no-refine)") for n in notes), notes
     res = CliRunner().invoke(cli, ["diagnose", str(csv), "--model", str(model), "--out", str(tmp_path / "b"),
                                    "--size", "eps_thrust=wide"])
     assert res.exit_code == 2 and "eps_thrust" in res.output

@@ -74,6 +74,10 @@ __all__ = ["command"]
               help="When the search ends above the noise, fit the free shape the verdict names (a thrust error on "
                    "the mesh over the burn, a wind or density profile, a drag correction in Mach) to the model: "
                    "the report says whether what is missing is of that kind, and its shape. Never an explanation.")
+@click.option("--refine/--no-refine", "refine", default=True, show_default=True,
+              help="Try the refined shapes of the families the search meets (more knots, a surface wind, event "
+                   "times, the fuller shapes of a snug choice's near rivals). --no-refine is several times faster "
+                   "on a clear case and keeps every family at its catalogue shape: a first look, not the answer.")
 @click.option("--locate-window", "locate_window", type=float, default=None, metavar="SECONDS",
               help="Window length of the located statistics (default: the flight's span / 22).")
 @click.option("--window", "window_text", default=None, metavar="T0:T1",
@@ -106,7 +110,7 @@ __all__ = ["command"]
 @unmeasured_option_decl()
 @verbose_option
 def command(data_files, out, model, level, confirm_top, holdout, max_effects, workers, refit_timeout, budget,
-            resume, free_shape, locate_window,
+            resume, free_shape, refine, locate_window,
             window_text, columns, time_column, wild_points, correlated_noise, size_opts, per_flight, sigmas,
             sigma_columns, unmeasured):
     """Fit a model to DATA.csv and diagnose what it misses; write DIR/report.html.
@@ -160,7 +164,7 @@ def command(data_files, out, model, level, confirm_top, holdout, max_effects, wo
                                max_effects=max_effects, workers=workers, refit_timeout=refit_timeout,
                                candidates=candidates, wild_points=wild_points, sizes=sizes,
                                correlated_noise=correlated_noise, budget=budget, resume=resume,
-                               free_shape=free_shape))
+                               free_shape=free_shape, refine=refine))
         return
     data_file = data_files[0]
     data = read_data(data_file, spec, time_column=time_column, columns=assignments(columns, "--column"),
@@ -174,7 +178,8 @@ def command(data_files, out, model, level, confirm_top, holdout, max_effects, wo
                           max_effects=max_effects, workers=workers, refit_timeout=refit_timeout, sigma=sigma,
                           flight_window=flight, candidates=candidates, wild_points=wild_points, sizes=sizes,
                           correlated_noise=correlated_noise, budget=budget, progress=status,
-                          checkpoints=Path(out) / "checkpoints", resume=resume, free_shape=free_shape)
+                          checkpoints=Path(out) / "checkpoints", resume=resume, free_shape=free_shape,
+                          refine=refine)
         report = _relabel(report, label, str(data_file))
         path = report.write(out)
         end_checkpoints(Path(out) / "checkpoints", bool(report.search_stopped), [])

@@ -1102,6 +1102,10 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
     effects = _stated(_candidate_effects(candidates), sizes, fit, notes)
     search = dict(level=level, max_effects=int(max_effects), workers=workers, timeout=float(refit_timeout),
                   options=options, refine=refine, holdout=holdout, budget=budget, progress=progress)
+    if not refine and confirm_top > 0:
+        notes.append("the refined shapes were not tried (refine=False, --no-refine): every family stayed at its "
+                     "catalogue shape, and a snug choice's near rivals were not given their fuller shapes -- a "
+                     "first look; run with them before taking the verdict as the answer")
     t_search = time.perf_counter()
     from .refit import refit_checkpoints
     with refit_checkpoints(checkpoints):
