@@ -140,7 +140,7 @@ class FreeShape:
     curve: tuple = field(default=(), repr=False)
     not_needed: tuple = ()
     replaces: tuple = ()
-    parameters: dict = field(default_factory=dict, repr=False)
+    parameters: dict = field(default_factory=dict, repr=False, compare=False)
     first_sample: float = math.nan
 
     def text(self) -> str:
