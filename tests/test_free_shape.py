@@ -151,6 +151,42 @@ def test_a_density_profile_is_not_the_hot_tank(hot_tank):
     assert f"{fs.description} alone stays at chi2/dof" in both.text()
 
 
+def test_a_drag_shape_draws_the_drag_it_changes():
+    """The aerodynamics' free shape (a drag correction in Mach on the table's quarters, pinned at the table's
+    knots), RA-66M flown with a transonic drag rise: the report draws what it changes -- the model's drag
+    coefficient against Mach along the base fit and along the fit with the correction (the table refitted beside
+    it). (On Wren-H's hot tank and power-off base drag the 21-knot correction runs to IPOPT's 500 iterations: the
+    check then says it could not be fitted.)"""
+    import rocketid as ri
+    from rocketid.cases import ra66m, ra66m_truth
+    from rocketid.diagnostics.accept import noise_band
+    from rocketid.diagnostics.api import base_fit
+    from rocketid.diagnostics.effects import with_effects
+    from rocketid.diagnostics.freeshape import free_shape_check
+    from rocketid.diagnostics.report import _free_shape_plot
+    from rocketid.diagnostics.screen import vehicle_of
+    spec = with_effects(ra66m(), "transonic_drag")
+    p = ra66m_truth(spec)
+    p[list(spec.parameter_names).index("dCD_transonic")] = 0.08
+    fit, _, _, _, _ = base_fit(ra66m(), ri.simulate_measurements(spec, p, ri.ra66_times(), seed=0), None)
+    disc = SimpleNamespace(base_fit=fit, fit=fit, band=noise_band(fit), vehicle=vehicle_of(fit), effects=())
+    fs = free_shape_check(disc, "aero", "transonic_drag")
+    assert fs.kind == "aero" and fs.values and not fs.message, fs.text()
+    mach, cd, mach_fit, cd_fit = (np.asarray(c) for c in fs.drag)
+    assert mach.size == cd.size == fit.node_times.size and mach_fit.size == cd_fit.size
+    lo, hi = disc.vehicle.mach
+    assert mach.max() == pytest.approx(hi, rel=0.05) and 0.05 < np.median(cd) < 2.0
+    # the fitted curve is the fit's own drag coefficient: the correction plus the table refitted beside it
+    assert not np.allclose(cd, np.interp(mach, mach_fit[np.argsort(mach_fit)], cd_fit[np.argsort(mach_fit)]))
+    assert not fs.curve and fs.to_dict()["drag"]["fitted"]["cd"] == list(cd_fit)
+    # held at zero on the table's knots, the free knots between them
+    table = disc.vehicle.mach_knots
+    assert fs.pins and set(fs.pins) <= set(table) and not set(fs.pins) & set(fs.knots)
+    assert fs.to_dict()["pins"] == list(fs.pins)
+    fig = _free_shape_plot(fs)
+    assert fig.axes[0].get_xlabel() == "Mach" and len(fig.axes[0].lines) == 2
+
+
 def test_beside_the_search_s_effects_the_shape_keeps_only_those_it_needs():
     """Wren-H with its tank at 23 C (about +4 % thrust, the liquid out early) on a rail at 84 deg declared 85: the
     thrust's free shape alone stays above the noise (the start angle is no thrust); beside the search's start angle

@@ -117,6 +117,14 @@ class FreeShape:
     first_sample : float
         For a shape in time: the data's first sample time, before which its knots are not placed one by one
         (their values read apart); NaN otherwise.
+    drag : tuple
+        For a drag correction in Mach: ``(mach, cd, mach_fitted, cd_fitted)``, the model's drag coefficient
+        along the base fit's nodes against their Mach number, and the drag coefficient of the fit with the
+        shape (its table refitted beside the correction) along that fit's nodes (empty for the other kinds,
+        or when the model has no drag-coefficient or Mach role).
+    pins : tuple of float
+        For a drag correction in Mach: where it is held at zero (the model's Mach table's knots), between which
+        :attr:`knots` sit.
     curve : tuple
         For a thrust error: ``(times, stated, fitted)``, the model's thrust along the base fit's nodes and that
         thrust times ``1 + eps(t)``, N (empty for the other kinds, or when the thrust could not be evaluated).
@@ -142,6 +150,8 @@ class FreeShape:
     replaces: tuple = ()
     parameters: dict = field(default_factory=dict, repr=False, compare=False)
     first_sample: float = math.nan
+    drag: tuple = field(default=(), repr=False)
+    pins: tuple = ()
 
     def text(self) -> str:
         """One or two sentences for the verdict's explanation."""
@@ -194,6 +204,9 @@ class FreeShape:
                 "not_needed": list(self.not_needed), "replaces": list(self.replaces),
                 "parameters": {k: float(v) for k, v in self.parameters.items()},
                 "first_sample": float(self.first_sample) if math.isfinite(self.first_sample) else None,
+                "drag": ({"stated": {"mach": [float(x) for x in self.drag[0]], "cd": [float(x) for x in self.drag[1]]},
+                          "fitted": {"mach": [float(x) for x in self.drag[2]], "cd": [float(x) for x in self.drag[3]]}}
+                         if self.drag else None), "pins": [float(x) for x in self.pins],
                 "curve": ({"times": [float(x) for x in self.curve[0]], "stated": [float(x) for x in self.curve[1]],
                            "fitted": [float(x) for x in self.curve[2]]} if self.curve else None)}
 
@@ -352,7 +365,8 @@ def _one(base: EstimationResult, shape: Effect, knots: tuple, unit: str, kind: s
                      bool(ok), detail, knots, values, unit, reading, time.perf_counter() - t0,
                      curve=_thrust_curve(base, knots, values) if kind in ("propulsion", "mass") else (),
                      parameters=dict(zip(new.spec.parameter_names, (float(v) for v in new.p))),
-                     first_sample=_first_sample(base) if unit == "s" else math.nan)
+                     first_sample=_first_sample(base) if unit == "s" else math.nan,
+                     drag=_drag_curve(base, new) if kind == "aero" else ())
 
 
 def _first_sample(base: EstimationResult) -> float:
@@ -382,6 +396,25 @@ def _thrust_curve(base: EstimationResult, knots: Sequence[float], values: Sequen
     t = np.asarray(base.node_times, float)
     fitted = stated * (1.0 + np.interp(t, knots, values))
     return tuple(t), tuple(stated), tuple(fitted)
+
+
+def _drag_curve(base: EstimationResult, new: EstimationResult) -> tuple:
+    """``(mach, cd, mach_fitted, cd_fitted)``: the drag coefficient against the Mach number along ``base``'s nodes
+    and along ``new``'s (the fit with the correction, whose model's drag-coefficient role holds it); empty when
+    the model lacks either role or they cannot be evaluated."""
+    from .screen import _evaluate
+    out = []
+    for fit in (base, new):
+        cd, mach = fit.spec.role("drag_coefficient"), fit.spec.role("mach")
+        if cd is None or mach is None:
+            return ()
+        try:
+            ones = np.ones_like(fit.node_times)
+            out += [tuple(np.asarray(_evaluate(fit, mach), float) * ones),
+                    tuple(np.asarray(_evaluate(fit, cd), float) * ones)]
+        except (RocketidError, TypeError, ValueError, ZeroDivisionError):
+            return ()
+    return tuple(out)
 
 
 def free_shape_check(disc, kind: str, family: str, *, timeout: float = 180.0, options=None,
@@ -434,7 +467,13 @@ def free_shape_check(disc, kind: str, family: str, *, timeout: float = 180.0, op
             tried[-1] = replace(last, replaces=tuple(e.name for e in disc.effects if e.kind in same),
                                 not_needed=tuple(e.name for e in kept if e.name not in last.kept))
             break
-    return replace(tried[-1], tried=tuple(tried[:-1])) if tried else None
+    if not tried:
+        return None
+    out = replace(tried[-1], tried=tuple(tried[:-1]))
+    if out.kind == "aero":
+        _, zeros = _drag_mach_knots(disc.vehicle, 4)
+        out = replace(out, pins=tuple(float(z) for z in zeros if all(abs(z - k) > 1e-9 for k in out.knots)))
+    return out
 
 
 def _without(base, shape, knots, unit, kind, family, kept, fit: FreeShape, band, timeout, options) -> FreeShape:

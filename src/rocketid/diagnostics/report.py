@@ -541,7 +541,16 @@ def _confirm_section(report, figs: _Figures) -> str:
 def _free_shape_plot(free):
     """The free shape's values at its knots (:class:`~rocketid.diagnostics.freeshape.FreeShape`), below the model's
     thrust and the thrust with the shape for a thrust error."""
-    if free.curve:
+    drag = getattr(free, "drag", ())
+    if drag:
+        top, ax = new_axes((8, 5), 2, 1)
+        top.plot(drag[0], drag[1], color="0.5", label="the model's drag coefficient (the base fit)")
+        top.plot(drag[2], drag[3], color="tab:red", label="with the free shape (its fit)")
+        top.set_xlabel("Mach")
+        top.set_ylabel("drag coefficient")
+        top.legend(fontsize=8)
+        top.set_title(f"{free.effect}: chi2/dof {free.chi2_per_dof:.4g}", fontsize=9)
+    elif free.curve:
         top, ax = new_axes((8, 5), 2, 1, sharex=True)
         t, stated, fitted = (np.asarray(c) for c in free.curve)
         top.plot(t, stated / 1e3, color="0.5", label="the model's thrust (along the base fit)")
@@ -554,7 +563,16 @@ def _free_shape_plot(free):
         ax.set_title(f"{free.effect}: chi2/dof {free.chi2_per_dof:.4g}", fontsize=9)
     percent = free.kind in ("propulsion", "mass") or free.effect.startswith("density")
     y = 100 * np.asarray(free.values) if percent else np.asarray(free.values)
-    ax.plot(free.knots, y, "o-", ms=3)
+    pins = tuple(getattr(free, "pins", ()))
+    if pins and free.values:                 # a drag correction held at zero on the table's knots, between them free
+        both = sorted([(k, v) for k, v in zip(free.knots, y)] + [(z, 0.0) for z in pins])
+        ax.plot([k for k, _ in both], [v for _, v in both], "-", color="tab:blue", lw=1)
+        ax.plot(free.knots, y, "o", ms=3, color="tab:blue")
+        ax.plot(pins, np.zeros(len(pins)), "o", ms=4, mfc="white", color="tab:blue",
+                label="held at 0 (the table's knots)")
+        ax.legend(fontsize=7)
+    else:
+        ax.plot(free.knots, y, "o-", ms=3)
     ax.axhline(0.0, color="0.6", lw=0.8)
     first = getattr(free, "first_sample", float("nan"))
     if np.isfinite(first) and free.knots and free.knots[0] < first:    # no data yet: the values placed only together
@@ -586,6 +604,9 @@ def _steps_section(report, figs: _Figures) -> str:
             parts.append(figs.add("free_shape", lambda: _free_shape_plot(free),
                                   (f"The free shape {free.effect}: the model's thrust and the thrust with it "
                                    "(above), its values at its knots (below)" if free.curve else
+                                   f"The free shape {free.effect}: the model's drag coefficient against Mach and "
+                                   "that of the fit with it (above), its values at its knots (below)"
+                                   if getattr(free, "drag", ()) else
                                    f"The free shape {free.effect}: its values at its knots")
                                   + (f" (fitted beside {', '.join(free.kept)})" if free.kept else "")))
     if not steps:
