@@ -226,6 +226,7 @@ def test_diagnose_fits_the_free_shape_when_it_ends_above_the_noise(hot_tank, tmp
     fs = rep.free_shape
     assert fs is not None and fs.kind == "propulsion" and fs.reaches_noise, fs
     assert any(line == fs.text() for line in rep.verdict())
+    assert "Try a thrust error in time" in rep.final.explanation, rep.final.explanation
     saved = json.loads((tmp_path / "r" / "diagnosis.json").read_text())
     assert saved["free_shape"]["effect"] == fs.effect and saved["free_shape"]["reaches_noise"] is True
     assert saved["final"]["verdict"] == rep.final.verdict and "free_shape_s" in saved["timings"]
@@ -256,6 +257,11 @@ def test_the_kind_is_the_search_s_first_effect_before_the_screen_s_first_candida
     sensors = SimpleNamespace(candidates=[SimpleNamespace(name="bias_h", kind="sensor")])
     found = SimpleNamespace(effects=(CATALOGUE["bias_h"], CATALOGUE["transonic_drag"], CATALOGUE["base_drag"]))
     assert _leads(found, sensors) == [("aero", "transonic_drag"), ("propulsion", "thrust_level")]
+    # the verdict's "Try ..." follows the free shape that reached the noise (there: the thrust's, not the drag's)
+    from rocketid.diagnostics.api import _tried_lead
+    assert _tried_lead(found, sensors, SimpleNamespace(reaches_noise=True, kind="propulsion")) == ("propulsion", "")
+    assert _tried_lead(found, sensors, SimpleNamespace(reaches_noise=False, kind="propulsion")) == _lead(found, sensors)
+    assert _tried_lead(found, sensors) == ("aero", "transonic_drag")
     assert _leads(searched, ranking) == [("propulsion", "thrust_level"), ("environment", "density")]
     assert "thrust error in time" in _suggest(_lead(searched, ranking))
     assert "density deviation" in _suggest(_lead(None, ranking))

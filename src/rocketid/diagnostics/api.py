@@ -754,8 +754,18 @@ def _where(fit, level, window) -> str:
     return loc.findings[0].text if loc.findings else "spread over the flight, no window stands out"
 
 
-def _final(disc, ranking, level, window) -> FinalModel | None:
-    """The final model in the user's words."""
+def _tried_lead(disc, ranking, free=None) -> tuple[str, str] | None:
+    """What the verdict's "Try ..." names: the kind of the free shape that reached the noise, when one did (the
+    check went on past the search's first kind: Wren-H's short web with its GPS altitude low led with the drag,
+    whose free shape stays above the noise, and the thrust's reaches it); else :func:`_lead`."""
+    if free is not None and free.reaches_noise:
+        return (free.kind, "")
+    return _lead(disc, ranking)
+
+
+def _final(disc, ranking, level, window, free=None) -> FinalModel | None:
+    """The final model in the user's words (``free``: the free shape fitted, which the "Try ..." follows when it
+    reached the noise)."""
     if disc is None:
         return None
     fit = disc.fit
@@ -824,14 +834,14 @@ def _final(disc, ranking, level, window) -> FinalModel | None:
                          "against it.")
         else:
             text = (f"the model with {names} does not reach the noise ({disc.noise_detail}); the residual is "
-                    f"located in: {_where(fit, level, window)}.{readings}{amb}" + ("" if disc.stopped else f" Try {_suggest(_lead(disc, ranking))}."))
+                    f"located in: {_where(fit, level, window)}.{readings}{amb}" + ("" if disc.stopped else f" Try {_suggest(_tried_lead(disc, ranking, free))}."))
     elif disc.stopped:
         text = (f"no effect was added before the search was cut short (chi2/dof {fit.chi2_per_dof:.4g}, band <= "
                 f"{band.upper:.4g}); not every candidate was tried, so this does not say the catalogue cannot explain "
                 f"it; the residual sits in: {_where(fit, level, window)}.")
     else:
         text = (f"no catalogue effect explains the misfit (chi2/dof {fit.chi2_per_dof:.4g}, band <= {band.upper:.4g}); "
-                f"the residual sits in: {_where(fit, level, window)}. Try {_suggest(_lead(disc, ranking))}.")
+                f"the residual sits in: {_where(fit, level, window)}. Try {_suggest(_tried_lead(disc, ranking, free))}.")
     if disc.stopped:
         text += (f" The search was cut short: {disc.stopped}. A larger budget (--budget, diagnose(budget=)) lets it "
                  "go on; with --resume (diagnose(resume=True)) from the refits it made (kept with an output folder) "
@@ -1115,9 +1125,9 @@ def diagnose(data: Measurements | str | Path, model: str | Path | ModelSpec | Mo
         disc = _prediction_check(disc, confs, notes)
         history = _history(spec, fit, disc, notes)
         after = compare(disc.fit, level=level) if disc is not None and disc.effects else None
-        final = _final(disc, ranking, level, window)
         free = (_timed(timings, "free_shape_s", _free_shape, disc, ranking, search, budget, t_search, notes)
                 if free_shape and confirm_top > 0 else None)
+        final = _final(disc, ranking, level, window, free)
         var = None
         if confirm_top > 0 and (variant is True or (variant == "auto"
                                                     and (final is None or final.verdict != "explained"))):
