@@ -65,6 +65,15 @@ def test_a_shape_reads_as_runs_of_like_values():
     assert "+8.0 % to +10 % over 1.5-4.5 s" in text and "-80 % to -75 % over 5.5-7.5 s" in text, text
     assert "elsewhere up to +30 % (at 0.6 s)" in text
     assert read_shape((0.0, 1.0, 2.0), (0.0, 0.0, 0.0), "s", 0.05) == "+0.0 % over 0-2 s"
+    # the knots read apart are those whose whole interval lies before the first sample (Wren-H: GPS from 2 s);
+    # a lift-off knot 0.1 s before the first sample reaches into the data and is placed (Auk-B)
+    from rocketid.diagnostics.freeshape import _before_first_sample
+    def fit(first):
+        chan = SimpleNamespace(times=np.array([first, first + 0.1]))
+        return SimpleNamespace(prepared=SimpleNamespace(measurements=SimpleNamespace(channels=(chan,))))
+    assert _before_first_sample(fit(2.0), (0.6, 1.0, 1.5, 2.0, 2.5, 3.0, 3.5)) == 3
+    assert _before_first_sample(fit(0.1), (0.0, 3.5, 7.0, 10.5)) == 0
+    assert _before_first_sample(fit(2.0), (0.6, 1.0, 2.0, 3.0)) == 0          # fewer than three would remain
 
 
 def test_the_words_say_a_trace_not_an_explanation():

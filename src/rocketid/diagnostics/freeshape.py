@@ -350,7 +350,7 @@ def _one(base: EstimationResult, shape: Effect, knots: tuple, unit: str, kind: s
     if early:
         first = _first_sample(base)
         lo, hi = min(values[:early]), max(values[:early])
-        reading += (f"; before the first sample at {first:.3g} s, {100 * lo:+.0f} to {100 * hi:+.0f} % on "
+        reading += (f"; before the first sample at {first:.3g} s, {100 * lo:+.3g} to {100 * hi:+.3g} % on "
                     f"{early} knot{'s' if early > 1 else ''}, not placed one by one by the data (only through the "
                     "state they leave at that sample)")
     if kind in ("propulsion", "mass"):
@@ -374,11 +374,13 @@ def _first_sample(base: EstimationResult) -> float:
 
 
 def _before_first_sample(base: EstimationResult, knots: Sequence[float]) -> int:
-    """How many of the time ``knots`` lie before the data's first sample (Wren-H: three knots of the first second
-    after the rail, its GPS from 2 s), read apart: their values are placed only together, through the state they
-    leave at that sample. None are set apart when fewer than three knots would remain."""
+    """How many of the time ``knots`` act only before the data's first sample -- the next knot at or before it,
+    so that the knot's whole interval lies before the data (Wren-H: three knots of the first second after the
+    rail, its GPS from 2 s) -- read apart: their values are placed only together, through the state they leave at
+    that sample. A knot whose interval reaches into the data (a lift-off knot 0.1 s before the first sample) is
+    placed. None are set apart when fewer than three knots would remain."""
     first = _first_sample(base)
-    n = int(sum(float(k) < first - 1e-9 for k in knots))
+    n = int(sum(float(b) <= first + 1e-9 for b in knots[1:]))
     return n if len(knots) - n >= 3 else 0
 
 
