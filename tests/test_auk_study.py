@@ -32,7 +32,29 @@ from auk_study.cases import (ALL, BIAS_H, BY_NAME, COLD, COLD_DAY, JET, LATE, LA
 from auk_study.run import STUDY
 
 #: Cases measured not to meet the bar (``STUDY.acceptable``), with the measured reason.
-KNOWN_FAILURES: dict[str, str] = {}
+KNOWN_FAILURES: dict[str, str] = {
+    "core-misalignment": "2a62fcc (first run): misalignment_fade (delta_thrust 0.00464 = 0.27 deg for 0.25, s_fade "
+                         "0.78) and wind_pl_6 (a surface headwind of 8.5 m/s) reach the noise within BIC 10 and the "
+                         "hold-out does not decide (CD_6 beyond its window): the tie named, nothing added, partly "
+                         "explained. The catalogue's misalignment turns the whole thrust; the truth's only the core's "
+                         "(about a third of it in the boost, all of it after the jettison)",
+    "core-misalignment+cold-day": "2a62fcc (first run): as core-misalignment (misalignment_fade 0.27 deg, s_fade "
+                                  "0.86, ties wind_pl_6 within BIC 10), nothing added; the cold day is not in these "
+                                  "data (cold-day alone: nothing missing, the drag table takes it up)",
+    "deep-bucket+latency": "2a62fcc (first run): time_offset (0.156 s for 0.15) + thrust_profile_5 + "
+                           "back_pressure_vacuum (A_e_vac 0.48) at chi2/dof 1.106 above the band 1.078, v not white: "
+                           "partly explained with a wrong family, not called explained. The free shape, a thrust error "
+                           "on 32 knots beside time_offset, reaches 1.026 (residuals not white) and reads -11 to "
+                           "-5.4 % over 35.3-43 s: the bucket delivered 6.7 % low",
+    "late-separation": "2a62fcc (first run): drag_mach_6 + bias_x at chi2/dof 1.097 above the band, partly "
+                       "explained with wrong families, not called explained. The free shape, a thrust error on 32 "
+                       "knots alone, reaches the noise (1.003) and reads -21 % at 39 s (the casings carried past "
+                       "40 s), drag_mach_6 and bias_x not needed",
+    "cold-boosters": "2a62fcc (first run, 2927 s of search): thrust_profile_5 + time_offset + misalignment_fade at "
+                     "chi2/dof 3.92, partly explained -- a thrust shape found beside two wrong effects, not called "
+                     "explained. No free shape reaches the noise: the thrust's on 32 knots over the 110 s burn "
+                     "(3.5 s apart) stays at 1.21 -- too coarse for the boosters' tail-off moved 1.5 s later",
+}
 
 
 @pytest.fixture(scope="module")
