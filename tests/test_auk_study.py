@@ -55,7 +55,9 @@ KNOWN_FAILURES: dict[str, str] = {
                     "trade off against CD_5 and CD_6 (CD_6 0.594 for 0.29). The truth: one booster 12 % weak over "
                     "its burn (6 % of the pair's thrust) and 516 kg of grain carried to the jettison; a start mass "
                     "carried for the whole flight and a thrust that grows with altitude imitate it, the drag table "
-                    "absorbing the rest. Not yet mended",
+                    "absorbing the rest. The path (diagnosis.json): step 1 refined to thrust_profile_9 at chi2/dof "
+                    "1.005 (the right family) but not accepted; step 2 added back_pressure beside it; the exchange "
+                    "then put start_mass in the profile's place (BIC 3344.5 -> 3305.8). Not yet mended",
     "cold-boosters": "2a62fcc (first run, 2927 s of search): thrust_profile_5 + time_offset + misalignment_fade at "
                      "chi2/dof 3.92, partly explained -- a thrust shape found beside two wrong effects, not called "
                      "explained. No free shape reaches the noise: the thrust's on 32 knots over the 110 s burn "
