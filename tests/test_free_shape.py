@@ -68,12 +68,9 @@ def test_a_shape_reads_as_runs_of_like_values():
     # the knots read apart are those whose whole interval lies before the first sample (Wren-H: GPS from 2 s);
     # a lift-off knot 0.1 s before the first sample reaches into the data and is placed (Auk-B)
     from rocketid.diagnostics.freeshape import _before_first_sample
-    def fit(first):
-        chan = SimpleNamespace(times=np.array([first, first + 0.1]))
-        return SimpleNamespace(prepared=SimpleNamespace(measurements=SimpleNamespace(channels=(chan,))))
-    assert _before_first_sample(fit(2.0), (0.6, 1.0, 1.5, 2.0, 2.5, 3.0, 3.5)) == 3
-    assert _before_first_sample(fit(0.1), (0.0, 3.5, 7.0, 10.5)) == 0
-    assert _before_first_sample(fit(2.0), (0.6, 1.0, 2.0, 3.0)) == 0          # fewer than three would remain
+    assert _before_first_sample(2.0, (0.6, 1.0, 1.5, 2.0, 2.5, 3.0, 3.5)) == 3
+    assert _before_first_sample(0.1, (0.0, 3.5, 7.0, 10.5)) == 0
+    assert _before_first_sample(2.0, (0.6, 1.0, 2.0, 3.0)) == 0          # fewer than three would remain
 
 
 def test_the_words_say_a_trace_not_an_explanation():

@@ -345,10 +345,10 @@ def _one(base: EstimationResult, shape: Effect, knots: tuple, unit: str, kind: s
     key = kind if kind != "environment" else f"environment_{'wind' if family == 'wind' else 'density'}"
     tol = RUN_TOLERANCE.get(key, RUN_TOLERANCE["propulsion"])
     percent = key in ("propulsion", "mass", "environment_density")
-    early = _before_first_sample(base, knots) if kind in ("propulsion", "mass") else 0
+    first = _first_sample(base) if unit == "s" else math.nan
+    early = _before_first_sample(first, knots) if kind in ("propulsion", "mass") else 0
     reading = read_shape(knots[early:], values[early:], unit, tol, percent=percent)
     if early:
-        first = _first_sample(base)
         lo, hi = min(values[:early]), max(values[:early])
         reading += (f"; before the first sample at {first:.3g} s, {100 * lo:+.3g} to {100 * hi:+.3g} % on "
                     f"{early} knot{'s' if early > 1 else ''}, not placed one by one by the data (only through the "
@@ -365,7 +365,7 @@ def _one(base: EstimationResult, shape: Effect, knots: tuple, unit: str, kind: s
                      bool(ok), detail, knots, values, unit, reading, time.perf_counter() - t0,
                      curve=_thrust_curve(base, knots, values) if kind in ("propulsion", "mass") else (),
                      parameters=dict(zip(new.spec.parameter_names, (float(v) for v in new.p))),
-                     first_sample=_first_sample(base) if unit == "s" else math.nan,
+                     first_sample=first,
                      drag=_drag_curve(base, new) if kind == "aero" else ())
 
 
@@ -373,13 +373,13 @@ def _first_sample(base: EstimationResult) -> float:
     return min(float(c.times[0]) for c in base.prepared.measurements.channels if c.times.size)
 
 
-def _before_first_sample(base: EstimationResult, knots: Sequence[float]) -> int:
+def _before_first_sample(first: float, knots: Sequence[float]) -> int:
     """How many of the time ``knots`` act only before the data's first sample -- the next knot at or before it,
     so that the knot's whole interval lies before the data (Wren-H: three knots of the first second after the
     rail, its GPS from 2 s) -- read apart: their values are placed only together, through the state they leave at
     that sample. A knot whose interval reaches into the data (a lift-off knot 0.1 s before the first sample) is
-    placed. None are set apart when fewer than three knots would remain."""
-    first = _first_sample(base)
+    placed. None are set apart when fewer than three knots would remain. ``first``: the data's first sample
+    time (:func:`_first_sample`)."""
     n = int(sum(float(b) <= first + 1e-9 for b in knots[1:]))
     return n if len(knots) - n >= 3 else 0
 
