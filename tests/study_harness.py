@@ -96,7 +96,7 @@ def family(effect: str) -> str:
     """The catalogue family of an effect name (``wind_pl_6`` -> ``wind``, ``bias_h_drift`` -> ``bias_h``)."""
     if effect in LATER_SHAPES:
         return LATER_SHAPES[effect]
-    for fam in ("thrust_profile", "wind", "density", "back_pressure", "base_drag", "drag_mach", "bias_x", "bias_h", "bias_v",
+    for fam in ("thrust_profile", "thrust_level", "burn_rate", "wind", "density", "back_pressure", "base_drag", "drag_mach", "bias_x", "bias_h", "bias_v",
                 "misalignment", "earth_rotation", "time_offset", "transonic_drag", "mass_flow", "start_mass",
                 "scale_v", "scale_h"):
         if effect == fam or effect.startswith(fam + "_"):

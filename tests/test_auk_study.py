@@ -19,6 +19,7 @@ whole study with its table is ``python tests/auk_study/run.py --json auk.json``.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -183,6 +184,53 @@ def test_the_altitude_bias_shows_through_its_samples(clean_outputs):
     assert BIAS_H / (A.SIGMA["h"] / math.sqrt(shift.size)) > 5 * 10
     for name in ("x", "v"):
         assert np.array_equal(moved[name], clean_outputs[name])
+
+
+def test_the_boosters_are_a_motor_of_their_own(auk_spec):
+    """The thrust reads the boosters' table beside the throttled core: one motor among others, offered its own
+    level and burn-rate errors as refined shapes of ``thrust_level``; a one-table vehicle has none."""
+    from rocketid.diagnostics.effects import Vehicle, thrust_motors, CATALOGUE
+    assert thrust_motors(auk_spec) == ("booster_thrust",)
+    import wren
+    assert thrust_motors(wren.build_model()) == ()
+    vehicle = Vehicle(thrust=1.25e6, mass=6e4, mass_flow=300.0, speed=1100.0, start_speed=0.0, duration=A.TF,
+                      altitude=(0.0, 4e4), mach=(0.0, 3.5), sigma=A.SIGMA, sample_interval=0.1,
+                      knot_times=tuple(np.linspace(0.0, A.TF, 23)), motors=("booster_thrust",))
+    names = [e.name for e in CATALOGUE["thrust_level"].refinements(vehicle)]
+    assert names[-2:] == ["thrust_level_booster_thrust", "burn_rate_booster_thrust"]
+    no_motor = [e.name for e in CATALOGUE["thrust_level"].refinements(replace(vehicle, motors=()))]
+    assert not any(n.endswith("booster_thrust") for n in no_motor)
+
+
+@pytest.mark.parametrize("effect, value, hidden, channel, within", [
+    # one booster 12 % weak with its grain flow (the pair 6 % low, Isp kept): the same physics, measured 1.7e-6 m/s
+    ("thrust_level_booster_thrust", -WEAK / 2, Hidden(weak_booster=WEAK), "v", 1e-3),
+    # the truth's 0.96 P(t / 1.04) against k P(k t) at k = 1 / 1.04: the truth's impulse 0.16 % short of the
+    # table's, which the burn-rate shape keeps -- measured 0.53 m/s of the effect's 14.7 m/s
+    ("burn_rate_booster_thrust", 1 / COLD[1] - 1, Hidden(cold_boosters=COLD), "v", 0.05),
+])
+def test_a_motors_shape_flies_the_truths_booster(auk_spec, clean_outputs, effect, value, hidden, channel, within):
+    """The motor's shapes on Auk-B against the truth's boosters (``auk_study/truth.py``: the pair's thrust and
+    grain flow as a share of boosters on a stretched clock, in polar coordinates, not through the model's
+    input): at the truth's value the shape moves the flight as the hidden effect does, to ``within`` of the
+    effect's largest change."""
+    from rocketid.diagnostics.effects import motor_burn_effect, motor_level_effect, with_effects
+    make = motor_level_effect if effect.startswith("thrust_level") else motor_burn_effect
+    e = make("booster_thrust")
+    assert e.name == effect
+    augmented = with_effects(auk_spec, [e])
+    values = {**A.truth(auk_spec), e.parameter_names[0]: value}
+    shaped = ri.simulate(augmented, values, A.sample_times()).outputs()[channel]
+    moved = truth.exact_outputs(hidden, A.sample_times())[channel]
+    change = float(np.max(np.abs(moved - clean_outputs[channel])))
+    assert float(np.max(np.abs(shaped - moved))) < within * change
+
+
+def test_a_motor_must_be_one_of_the_thrusts(auk_spec):
+    """A motor shape on an input the thrust does not read (the pitch program) is refused with the motors named."""
+    from rocketid.diagnostics.effects import motor_level_effect, with_effects
+    with pytest.raises(ri.ModelError, match="booster_thrust"):
+        with_effects(auk_spec, [motor_level_effect("phi")])
 
 
 def test_the_cases_are_consistent():

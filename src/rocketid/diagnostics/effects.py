@@ -63,7 +63,8 @@ __all__ = ["Effect", "Vehicle", "back_pressure_effect", "thrust_profile_effect",
            "density_profile_effect", "drag_mach_effect", "piecewise_linear", "CATALOGUE", "KINDS", "custom_effect", "with_effects", "apply_effect", "resolve_effects",
            "is_present", "check_effect_parameters", "effect_parameter_problems", "wind_effect", "density_effect", "earth_rotation_effect",
            "liftoff_fade", "EARTH_RATE", "LIFTOFF_FADE_TIME", "misalignment_onset_effect", "mass_jettison_effect", "throttle_step_effect", "onset_step",
-           "ONSET_STARTS", "temperature_effect", "burn_rate_effect", "earth_rotation_site_effect", "rotation_reading", "base_drag_mach_effect", "TEMPERATURE_REALISTIC_K"]
+           "ONSET_STARTS", "temperature_effect", "burn_rate_effect", "earth_rotation_site_effect", "rotation_reading", "base_drag_mach_effect", "TEMPERATURE_REALISTIC_K",
+           "thrust_motors", "motor_level_effect", "motor_burn_effect"]
 
 #: The kinds of effect (``"custom"`` for the user's own).
 KINDS = ("propulsion", "mass", "aero", "environment", "kinematics", "sensor", "custom")
@@ -248,6 +249,9 @@ class Vehicle:
         The declared start is a rail exit: a moving start after ignition that the stated thrust reaches
         along a rail (:func:`_rail_exit_ratio`); the exit's shapes (``start_exit``, ``start_mass_exit``)
         are offered only then.
+    motors : tuple of str
+        The thrust's motors among others (:func:`thrust_motors`: a booster's thrust table beside a core's
+        thrust), each offered its own level and burn-rate errors; empty for a vehicle with one thrust.
     """
 
     thrust: float
@@ -266,6 +270,7 @@ class Vehicle:
     time_families: bool = False
     powered: tuple = ()
     rail_exit: bool = False
+    motors: tuple = ()
 
 
 # ---------------------------------------------------------------------------
@@ -753,6 +758,109 @@ def burn_rate_effect() -> Effect:
                   "the motor's curve run k times faster (a hot or cold solid grain; a liquid engine off its "
                   "stated chamber pressure), the stated specific impulse and propellant kept",
                   {"eps_burn": 0.02})
+
+
+def thrust_motors(spec) -> tuple[str, ...]:
+    """The thrust's motors among others: each known input (a motor's thrust table, a thrust written as an
+    expression of time) that the ``thrust`` role reads beside another time-varying thrust that does not read
+    it -- a strap-on booster's table beside a throttled core, one motor of a cluster with its own table. A
+    vehicle whose thrust is one motor's (the thrust proportional to one table) has none: its thrust errors
+    are the whole thrust's (``thrust_level``, ``burn_rate``). ``spec`` is a :class:`~rocketid.model.ModelSpec`
+    or :class:`~rocketid.model.Model`; names in declaration order."""
+    expand = spec.expand if hasattr(spec, "expand") else (lambda e: _expanded(spec, e))
+    role = spec.role("thrust")
+    inputs = tuple(spec.inputs if hasattr(spec, "inputs") else spec._inputs)
+    if role is None or len(inputs) == 0:
+        return ()
+    thrust = expand(role)
+    symbols = {u.symbol for u in inputs}
+    out = []
+    for u in inputs:
+        if u.symbol not in thrust.free_symbols:
+            continue
+        rest = thrust.xreplace({u.symbol: sp.S.Zero})
+        if rest.free_symbols & ((symbols - {u.symbol}) | {spec.t}):
+            out.append(str(u.symbol))
+    return tuple(out)
+
+
+def _motor_input(m: Model, motor: str, effect: str):
+    """The known input named ``motor`` that the thrust reads beside another thrust (:func:`thrust_motors`)."""
+    if motor not in thrust_motors(m):
+        raise ModelError(f"effect {effect!r} scales the motor whose thrust is the input {motor!r}, which the "
+                         f"thrust of model {m.name!r} does not read beside another thrust (its motors: "
+                         f"{', '.join(thrust_motors(m)) or 'none'}); use thrust_level or burn_rate for the whole thrust")
+    return next(u for u in m._inputs if str(u.symbol) == motor)
+
+
+def _edit_motor(m: Model, mo: "_Motor", sub: dict, mass_extra: sp.Expr = sp.S.Zero) -> None:
+    """Redefine thrust, mass and mass-state flows with the input substitution ``sub``."""
+    m.redefine(mo.thrust_symbol, mo.thrust.xreplace(sub))
+    m.redefine(mo.mass_symbol, mo.mass.xreplace(sub) + mass_extra)
+    for state, flow in mo.flows.items():
+        m.ode({state: flow.xreplace(sub)})
+
+
+def motor_level_effect(motor: str) -> Effect:
+    """One motor's thrust and mass flow ``1 + eps`` times their stated values, the others' as stated.
+
+    For a vehicle with more than one thrust (:func:`thrust_motors`: a strap-on booster's thrust table beside
+    a throttled core), a level error of one of them: the input ``u`` -- the motor's stated thrust, from a
+    static firing -- read as ``(1 + eps) u`` everywhere the thrust, the mass and the mass states' equations
+    read it. A propellant burnt at ``u / (Isp g0)`` then burns ``1 + eps`` times as fast: the specific impulse
+    is kept (a grain lit on part of its surface, a motor from another lot; ``eps < 0`` leaves propellant
+    unburnt, which a mass written with the motor's jettison carries to it). Realistic size 0.02 of that
+    motor's thrust, like :data:`CATALOGUE`'s ``thrust_level`` of the whole thrust. Offered as a refined
+    shape of ``thrust_level`` when the vehicle has motors; name ``thrust_level_<input>``, parameter
+    ``eps_thrust_<input>``.
+    """
+    name, par = f"thrust_level_{motor}", f"eps_thrust_{motor}"
+
+    def apply(m: Model) -> tuple:
+        u = _motor_input(m, motor, name)
+        mo = _motor(m, name)
+        eps = m.parameter(par, 0.0, bounds=(-0.5, 0.5), nominal=0.02)
+        _edit_motor(m, mo, {u.symbol: (1 + eps) * u.symbol})
+        return (eps,)
+
+    return Effect(name, f"level error of the motor {motor} (thrust and mass flow)", "propulsion", apply,
+                  f"{motor} read as (1 + {par}) {motor} in the thrust, the mass and the mass flow: one motor's "
+                  "thrust and propellant flow off their stated values together, the others' as stated",
+                  {par: 0.02})
+
+
+def motor_burn_effect(motor: str) -> Effect:
+    """One motor burning ``1 + eps`` times faster than stated, the others as stated.
+
+    :func:`burn_rate_effect` for one motor among others (:func:`thrust_motors`): the input ``u`` is read as
+    ``k u(t_i + k (t - t_i))``, ``k = 1 + eps``, ``t_i`` the first time of its table (its ignition; the
+    model's start for an expression), everywhere the thrust, the mass and the mass states' equations read it
+    -- a solid booster whose grain is colder (slower, lower) or hotter than its static firing's, the other
+    motors unaffected. When the data start after ``t_i`` a mass state has burnt ``eps (t0 - t_i)`` times
+    that motor's flow more by ``t0`` (first order), which the mass takes off. Realistic size 0.02. Offered as
+    a refined shape of ``thrust_level`` when the vehicle has motors; name ``burn_rate_<input>``, parameter
+    ``eps_burn_<input>``.
+    """
+    name, par = f"burn_rate_{motor}", f"eps_burn_{motor}"
+
+    def apply(m: Model) -> tuple:
+        u = _motor_input(m, motor, name)
+        mo = _motor(m, name)
+        origin = float(u.times[0]) if u.expr is None else float(m.t0)
+        eps = m.parameter(par, 0.0, bounds=(-0.3, 0.3), nominal=0.02)
+        k = 1 + eps
+        clock = origin + k * (m.t - origin)
+        warped = u.expr.xreplace({m.t: clock}) if u.expr is not None else _input_table(u)(clock)
+        start = {**mo.at_start}
+        alone = sum((f.xreplace(start) - f.xreplace({u.symbol: sp.S.Zero}).xreplace(start)
+                     for f in mo.flows.values()), sp.S.Zero)
+        _edit_motor(m, mo, {u.symbol: k * warped}, eps * alone * (float(m.t0) - origin))
+        return (eps,)
+
+    return Effect(name, f"burn-rate error of the motor {motor}", "propulsion", apply,
+                  f"{motor} read as k {motor}(t_i + k (t - t_i)), k = 1 + {par}, in the thrust, the mass and the "
+                  "mass flow: one motor's curve run k times faster (a hot or cold grain), the others as stated",
+                  {par: 0.02})
 
 
 TRANSONIC_MACH = 1.1
@@ -1997,10 +2105,10 @@ def _refine_thrust(vehicle: "Vehicle | None") -> list[Effect]:
     thrust's end, :func:`_powered_knots`): on a vehicle that coasts two thirds of its flight, knots over the
     whole horizon left the burn one segment (Wren-H: knots at 0.59, 22 and 44 s for a 15.5 s burn)."""
     if vehicle is None or len(vehicle.knot_times) < 3:
-        return [burn_rate_effect()]
+        return [burn_rate_effect()] + _motor_shapes(vehicle)
     bounds = _powered_knots(vehicle)
     if bounds.size < 3:
-        return [burn_rate_effect()]
+        return [burn_rate_effect()] + _motor_shapes(vehicle)
     out = []
     for n in (3, 5, 9):
         want = np.linspace(bounds[0], bounds[-1], n)
@@ -2008,7 +2116,14 @@ def _refine_thrust(vehicle: "Vehicle | None") -> list[Effect]:
         if len(knots) >= 2:
             out.append(thrust_profile_effect(knots))
     w = _onset_width(vehicle)
-    return [burn_rate_effect()] + out + [throttle_step_effect(bounds[0], bounds[-1], w), throttle_window_effect(bounds[0], bounds[-1], w)]
+    return ([burn_rate_effect()] + out + [throttle_step_effect(bounds[0], bounds[-1], w),
+                                          throttle_window_effect(bounds[0], bounds[-1], w)] + _motor_shapes(vehicle))
+
+
+def _motor_shapes(vehicle: "Vehicle | None") -> list[Effect]:
+    """Each motor's level and burn-rate errors (:attr:`Vehicle.motors`)."""
+    motors = vehicle.motors if vehicle is not None else ()
+    return [e for mo in motors for e in (motor_level_effect(mo), motor_burn_effect(mo))]
 
 
 def time_offset_second_effect(vehicle: "Vehicle | None" = None) -> Effect:

@@ -42,7 +42,7 @@ import numpy as np
 from ..errors import ModelError, RocketidError
 from ..simulate import evaluate_along
 from ..solve import EstimationResult
-from .effects import Effect, Vehicle
+from .effects import Effect, Vehicle, thrust_motors
 from .score import CandidateRanking, ScanPeak, rank_candidates, scan_peak, scan_profile
 
 __all__ = ["Contender", "Screen", "screen", "vehicle_of", "WITHIN", "MAX_CONTENDERS"]
@@ -147,7 +147,7 @@ def vehicle_of(fit: EstimationResult) -> Vehicle:
         knot_times=tuple(float(b) for b in fit.prepared.transcription.mesh.boundaries),
         mach_knots=_mach_knots(spec), aero_altitudes=_aero_altitudes(np.asarray(t, float), alt, qbar),
         time_families=bool(spec.families), powered=_powered(np.asarray(t, float), thrust),
-        rail_exit=speed is not None and float(speed[0]) > 0 and _rail_exit(spec))
+        rail_exit=speed is not None and float(speed[0]) > 0 and _rail_exit(spec), motors=thrust_motors(spec))
 
 
 def _rail_exit(spec) -> bool:
