@@ -2121,9 +2121,12 @@ def _refine_thrust(vehicle: "Vehicle | None") -> list[Effect]:
 
 
 def _motor_shapes(vehicle: "Vehicle | None") -> list[Effect]:
-    """Each motor's level and burn-rate errors (:attr:`Vehicle.motors`)."""
+    """Each motor's level and burn-rate errors (:attr:`Vehicle.motors`), each tried beside the thrust's ladder
+    (``rung`` False): one parameter each, not a rung more flexible than the 9-knot profile. (Measured on
+    Auk-B's cold boosters with them as the ladder's last rungs: the ladder stopped at the motor's level, whose
+    BIC is above the 9-knot profile's, and the motor's burn rate -- the truth's shape -- was never refitted.)"""
     motors = vehicle.motors if vehicle is not None else ()
-    return [e for mo in motors for e in (motor_level_effect(mo), motor_burn_effect(mo))]
+    return [replace(e, rung=False) for mo in motors for e in (motor_level_effect(mo), motor_burn_effect(mo))]
 
 
 def time_offset_second_effect(vehicle: "Vehicle | None" = None) -> Effect:
