@@ -289,3 +289,24 @@ def test_diagnose_on_auk_case(case, tmp_path, monkeypatch, request):
     """``rocketid diagnose`` (CLI) on the case: clean data add nothing, an effect the base fit does not show may
     go unfound, a visible one is found and explained, and a wrong family is never reported as explained."""
     STUDY.check_case(case, KNOWN_FAILURES, tmp_path, monkeypatch, request)
+
+
+def test_a_late_separation_is_scanned_when_the_fit_is_above_the_noise(auk_spec):
+    """A change over 1.5 s is invisible to its family's constant shape: on the late separation the constant
+    thrust error is not significant (measured statistic 0.06), so only a fit above the noise has the located
+    shapes of such families scanned, and then the throttle window's scan makes ``thrust_level`` a contender,
+    placed over the separation (measured: a predicted fall of J of 259 at 39.5-43.0 s, six times the
+    leader's); at the noise it is not scanned and not a contender."""
+    from rocketid.diagnostics.effects import CATALOGUE
+    from rocketid.diagnostics.screen import screen
+    case = BY_NAME["late-separation"]
+    fit = ri.estimate(auk_spec, truth.measurements(case.hidden, case.seed))
+    assert fit.chi2_per_dof > 1.1
+    candidates = list(CATALOGUE.values())
+    below = screen(fit, candidates)
+    assert "thrust_level" not in below.names
+    above = screen(fit, candidates, above_noise=True, ranking=below.ranking)
+    thrust = next(c for c in above.contenders if c.effect.name == "thrust_level")
+    assert thrust.located == "throttle_window"
+    where = [float(x) for x in thrust.why.split(" at ")[1].split(" ")[0].split("-")]
+    assert where[0] < A.T_SEP + LATE < where[1] and where[0] > A.T_SEP - 5, thrust.why

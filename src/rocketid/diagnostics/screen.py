@@ -23,7 +23,14 @@ leader's). Such a family is a contender when its best scan location is
 significant after correcting for the locations scored and the candidates
 (Bonferroni), and its predicted fall is within :data:`WITHIN` of the leader's;
 it is marked (:attr:`Contender.located`) so that the refits try its located
-shapes.
+shapes. When the fit does not reach the noise, the families the score test
+finds *not* significant are scanned too: a change over a second or two is
+invisible to its family's constant shape (Auk-B's boosters separated 1.5 s
+late: 3.2 t carried 1.5 s longer, the constant thrust error's statistic 0.06,
+not significant, while the throttle window's scan put a predicted fall of J of
+259 -- six times the leader's -- at 39.5-43.0 s). On data at the noise (clean
+data) they are not scanned: a scan is a sensitivity solve of a 32-copy bank,
+and its code generation on a new model.
 
 The vehicle's scales (:class:`~rocketid.diagnostics.effects.Vehicle`: thrust,
 mass flow, speed, the altitude and Mach ranges flown) are read from the fit
@@ -213,7 +220,8 @@ def _start(c, effect: Effect, vehicle: Vehicle | None, spec) -> dict:
 
 
 def screen(fit: EstimationResult, candidates: Sequence[Effect], *, level: float = 0.05,
-           vehicle: Vehicle | None = None, ranking: CandidateRanking | None = None) -> Screen:
+           vehicle: Vehicle | None = None, ranking: CandidateRanking | None = None,
+           above_noise: bool = False) -> Screen:
     """Rank ``candidates`` at ``fit`` (the score test) and pick the contenders (module notes).
 
     Parameters
@@ -228,6 +236,9 @@ def screen(fit: EstimationResult, candidates: Sequence[Effect], *, level: float 
         Scales for the starting values (default: read from ``fit``).
     ranking : CandidateRanking, optional
         A ranking already made at ``fit`` (reused).
+    above_noise : bool
+        ``fit`` does not reach the noise: the located shapes of the families the score test finds **not**
+        significant are scanned too (module notes).
 
     Returns
     -------
@@ -247,9 +258,9 @@ def screen(fit: EstimationResult, candidates: Sequence[Effect], *, level: float 
                           (f"the candidate ranking failed ({exc}); every candidate is refitted",), failed=str(exc))
     vehicle = vehicle if vehicle is not None else vehicle_of(fit)
     sig = [c for c in ranking.candidates if c.significant]
-    if not sig:
+    if not sig and not above_noise:
         return Screen(ranking, (), (f"no candidate is significant at {level:g}: nothing is refitted",))
-    lead = max(c.predicted_drop for c in sig)
+    lead = max((c.predicted_drop for c in sig), default=0.0)
     leaders = set()
     chosen = []
     for c in sig:
@@ -264,7 +275,11 @@ def screen(fit: EstimationResult, candidates: Sequence[Effect], *, level: float 
     # the significant candidates left out whose located shapes' scans qualify them (module notes)
     scans: dict = {}
     named = {c.name for c, _ in chosen[:MAX_CONTENDERS]}
-    located = _located(fit, ranking, [c for c in sig if c.name not in named], vehicle, level, lead, scans)
+    pool = ranking.candidates if above_noise else sig
+    located = _located(fit, ranking, [c for c in pool if c.name not in named], vehicle, level, lead, scans)
+    if not chosen and not located:
+        return Screen(ranking, (), (f"no candidate is significant at {level:g}, and no located shape's scan is: "
+                                    "nothing is refitted",), scans=scans)
     if len(chosen) > MAX_CONTENDERS:
         cut = [c.name for c, _ in chosen[MAX_CONTENDERS:] if c.name not in located]
         if cut:
@@ -292,7 +307,7 @@ def screen(fit: EstimationResult, candidates: Sequence[Effect], *, level: float 
 
 def _located(fit: EstimationResult, ranking: CandidateRanking, candidates, vehicle: Vehicle, level: float,
              lead: float, scans: dict) -> dict[str, tuple[str, ScanPeak]]:
-    """Of ``candidates`` (significant ones the screen left out), those whose located shapes' scans qualify
+    """Of ``candidates`` (the ones the screen left out), those whose located shapes' scans qualify
     them (module notes): candidate name -> (the located shape, its scan's peak), the best-scoring shape of each
     family. ``scans`` collects the profiles made. (Scanning only these keeps the scans' cost -- a sensitivity
     solve of a 32-copy bank each, and its code generation on a new model -- off clean data and off families
