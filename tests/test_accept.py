@@ -1034,7 +1034,7 @@ def test_a_tie_is_declared_only_after_the_refined_shapes_are_tried(monkeypatch):
     # (the data's scale: tied at chi2/dof 1.0100 and 1.0103 of 19 791 degrees of freedom)
     ctx = SimpleNamespace(holdout=None, level=0.05, options=None, timeout=60.0, band=BAND, say=lambda m: None,
                           vehicle=None, refine=True)
-    at = SimpleNamespace(chi2_per_dof=1.05, residuals={})   # above the band (the screen is faked)
+    at = SimpleNamespace(chi2_per_dof=1.05)
     refine_to(1.0050)
     notes, steps = [], []
     scr2, accs2, effect, pick, why, ambiguous, rivals = S._next_choice(ctx, at, [], [], 2, notes, steps)

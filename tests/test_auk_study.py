@@ -291,12 +291,13 @@ def test_diagnose_on_auk_case(case, tmp_path, monkeypatch, request):
     STUDY.check_case(case, KNOWN_FAILURES, tmp_path, monkeypatch, request)
 
 
-def test_a_late_separation_is_scanned_when_the_fit_is_above_the_noise(auk_spec):
+def test_a_late_separation_is_scanned_when_the_constant_shapes_fall_short(auk_spec):
     """A change over 1.5 s is invisible to its family's constant shape: on the late separation the constant
-    thrust error is not significant (measured statistic 0.06), so only a fit above the noise has the located
-    shapes of such families scanned, and then the throttle window's scan makes ``thrust_level`` a contender,
-    placed over the separation (measured: a predicted fall of J of 259 at 39.5-43.0 s, six times the
-    leader's); at the noise it is not scanned and not a contender."""
+    thrust error is not significant (measured statistic 0.06). When the significant candidates cannot account
+    for the misfit (the leader's predicted fall under half the fall to the noise band) the located shapes of
+    such families are scanned, and the throttle window's scan makes ``thrust_level`` a contender, placed over
+    the separation (measured: a predicted fall of J of 259 at 39.5-43.0 s, six times the leader's); without
+    the excess (a fit at the noise) it is not scanned and not a contender."""
     from rocketid.diagnostics.effects import CATALOGUE
     from rocketid.diagnostics.screen import screen
     case = BY_NAME["late-separation"]
@@ -305,7 +306,12 @@ def test_a_late_separation_is_scanned_when_the_fit_is_above_the_noise(auk_spec):
     candidates = list(CATALOGUE.values())
     below = screen(fit, candidates)
     assert "thrust_level" not in below.names
-    above = screen(fit, candidates, above_noise=True, ranking=below.ranking)
+    # the fall of J to the band's upper edge: the leader's predicted fall (41) is less than half of it
+    band_upper = 1.078
+    dof = sum(len(c.times) for c in fit.prepared.measurements.channels) - len(fit.p)
+    excess = 0.5 * (fit.chi2_per_dof - band_upper) * dof
+    assert max(c.predicted_drop for c in below.ranking.candidates if c.significant) < 0.5 * excess
+    above = screen(fit, candidates, excess=excess, ranking=below.ranking)
     thrust = next(c for c in above.contenders if c.effect.name == "thrust_level")
     assert thrust.located == "throttle_window"
     where = [float(x) for x in thrust.why.split(" at ")[1].split(" ")[0].split("-")]

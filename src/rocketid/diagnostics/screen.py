@@ -23,14 +23,17 @@ leader's). Such a family is a contender when its best scan location is
 significant after correcting for the locations scored and the candidates
 (Bonferroni), and its predicted fall is within :data:`WITHIN` of the leader's;
 it is marked (:attr:`Contender.located`) so that the refits try its located
-shapes. When the fit does not reach the noise, the families the score test
-finds *not* significant are scanned too: a change over a second or two is
-invisible to its family's constant shape (Auk-B's boosters separated 1.5 s
-late: 3.2 t carried 1.5 s longer, the constant thrust error's statistic 0.06,
-not significant, while the throttle window's scan put a predicted fall of J of
-259 -- six times the leader's -- at 39.5-43.0 s). On data at the noise (clean
-data) they are not scanned: a scan is a sensitivity solve of a 32-copy bank,
-and its code generation on a new model.
+shapes. When the significant candidates' largest predicted fall is less than
+:data:`WIDE_SHARE` of the fall that would bring the fit to the noise band --
+no constant shape the score test sees can account for the misfit -- the
+families it finds *not* significant are scanned too: a change over a second or
+two is invisible to its family's constant shape (Auk-B's boosters separated
+1.5 s late: 3.2 t carried 1.5 s longer, the constant thrust error's statistic
+0.06, not significant, the leader's predicted fall 41 of the 145 to the band,
+while the throttle window's scan put a predicted fall of 259 at 39.5-43.0 s).
+Otherwise they are not scanned: a scan is a sensitivity solve of a 32-copy
+bank, and its code generation on a new model; a fit the constant shapes can
+explain (a thrust level error) and data at the noise pay nothing.
 
 The vehicle's scales (:class:`~rocketid.diagnostics.effects.Vehicle`: thrust,
 mass flow, speed, the altitude and Mach ranges flown) are read from the fit
@@ -59,6 +62,11 @@ WITHIN = 10.0
 
 MAX_CONTENDERS = 10
 """At most this many contenders per step (best ranked first)."""
+
+
+WIDE_SHARE = 0.5
+"""The share of the fall of ``J`` to the noise band that the significant candidates' largest predicted fall must
+reach for the screen to leave the non-significant families' located shapes unscanned (module notes)."""
 
 
 @dataclass(frozen=True)
@@ -221,7 +229,7 @@ def _start(c, effect: Effect, vehicle: Vehicle | None, spec) -> dict:
 
 def screen(fit: EstimationResult, candidates: Sequence[Effect], *, level: float = 0.05,
            vehicle: Vehicle | None = None, ranking: CandidateRanking | None = None,
-           above_noise: bool = False) -> Screen:
+           excess: float = 0.0) -> Screen:
     """Rank ``candidates`` at ``fit`` (the score test) and pick the contenders (module notes).
 
     Parameters
@@ -236,9 +244,10 @@ def screen(fit: EstimationResult, candidates: Sequence[Effect], *, level: float 
         Scales for the starting values (default: read from ``fit``).
     ranking : CandidateRanking, optional
         A ranking already made at ``fit`` (reused).
-    above_noise : bool
-        ``fit`` does not reach the noise: the located shapes of the families the score test finds **not**
-        significant are scanned too (module notes).
+    excess : float
+        The fall of ``J`` that would bring ``fit`` to the noise band's upper edge (0 when it is inside). When
+        the significant candidates' largest predicted fall is less than half of it, the located shapes of the
+        families the score test finds **not** significant are scanned too (module notes).
 
     Returns
     -------
@@ -258,9 +267,10 @@ def screen(fit: EstimationResult, candidates: Sequence[Effect], *, level: float 
                           (f"the candidate ranking failed ({exc}); every candidate is refitted",), failed=str(exc))
     vehicle = vehicle if vehicle is not None else vehicle_of(fit)
     sig = [c for c in ranking.candidates if c.significant]
-    if not sig and not above_noise:
-        return Screen(ranking, (), (f"no candidate is significant at {level:g}: nothing is refitted",))
     lead = max((c.predicted_drop for c in sig), default=0.0)
+    wide = lead < WIDE_SHARE * excess
+    if not sig and not wide:
+        return Screen(ranking, (), (f"no candidate is significant at {level:g}: nothing is refitted",))
     leaders = set()
     chosen = []
     for c in sig:
@@ -275,7 +285,7 @@ def screen(fit: EstimationResult, candidates: Sequence[Effect], *, level: float 
     # the significant candidates left out whose located shapes' scans qualify them (module notes)
     scans: dict = {}
     named = {c.name for c, _ in chosen[:MAX_CONTENDERS]}
-    pool = ranking.candidates if above_noise else sig
+    pool = ranking.candidates if wide else sig
     located = _located(fit, ranking, [c for c in pool if c.name not in named], vehicle, level, lead, scans)
     if not chosen and not located:
         return Screen(ranking, (), (f"no candidate is significant at {level:g}, and no located shape's scan is: "

@@ -1155,7 +1155,7 @@ def _next_choice(ctx: "_Search", current: EstimationResult, chosen: list, candid
     keep = tuple(e.name for e in chosen)
     ctx.say(f"step {number}: ranking the candidates at chi2/dof {current.chi2_per_dof:.4g}")
     scr = screen(current, [e for e in candidates if e.name not in keep], level=level, vehicle=ctx.vehicle,
-                 above_noise=not fits_to_noise(current, band)[0])
+                 excess=max(0.0, 0.5 * (current.chi2_per_dof - band.upper) * band.dof))
     if scr.contenders:
         ctx.say(f"step {number}: refitting {len(scr.contenders)} contender(s): {', '.join(scr.names)}")
     else:
