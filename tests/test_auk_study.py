@@ -224,6 +224,10 @@ def test_a_motors_shape_flies_the_truths_booster(auk_spec, clean_outputs, effect
     moved = truth.exact_outputs(hidden, A.sample_times())[channel]
     change = float(np.max(np.abs(moved - clean_outputs[channel])))
     assert float(np.max(np.abs(shaped - moved))) < within * change
+    # at zero the shape is the stated motor: the base model's flight
+    values[e.parameter_names[0]] = 0.0
+    at_zero = ri.simulate(augmented, values, A.sample_times()).outputs()[channel]
+    assert float(np.max(np.abs(at_zero - clean_outputs[channel]))) < 1e-3
 
 
 def test_a_motor_must_be_one_of_the_thrusts(auk_spec):

@@ -1084,3 +1084,27 @@ def test_the_back_pressure_fade_is_estimated_where_the_data_see_the_tail_off():
     o_data = ri.Measurements(tuple(ri.Channel(n, o_t, o_exact[n], osprey.SIGMA[n]) for n in ("x", "h", "v")))
     burns_through = vehicle_of(ri.estimate(o_spec, o_data))
     assert [e.name for e in CATALOGUE["back_pressure"].refinements(burns_through)] == ["back_pressure_vacuum"]
+
+
+def test_a_thrust_input_beside_another_thrust_is_a_motor():
+    """``thrust_motors``: each known input the thrust reads beside another time-varying thrust -- two tables
+    of a cluster, a sustainer written in time beside a booster's table -- and none for a thrust that is one
+    table times constants and the altitude (one motor with its nozzle term), or a thrust constant in time."""
+    from rocketid.diagnostics.effects import thrust_motors
+
+    def model(thrust_of):
+        m = ri.Model("motors", 0.0, 20.0)
+        h = m.state("h", 0.0)
+        a = m.input("a", times=[0.0, 10.0, 20.0], values=[1e4, 2e4, 0.0])
+        b = m.input("b", times=[0.0, 5.0, 20.0], values=[5e3, 5e3, 0.0])
+        sustainer = m.input("sustainer", sp.Piecewise((3e3, m.t <= 12.0), (0.0, True)), breakpoints=[12.0])
+        thrust = m.define("thrust", thrust_of(m, a, b, sustainer, h))
+        m.declare_role("thrust", thrust)
+        m.ode({h: thrust / 1e3})
+        return m
+
+    assert thrust_motors(model(lambda m, a, b, s, h: a + 2 * b)) == ("a", "b")
+    assert thrust_motors(model(lambda m, a, b, s, h: b + s)) == ("b", "sustainer")
+    assert thrust_motors(model(lambda m, a, b, s, h: a + 1e3 * (1 - m.t / 20))) == ("a",)
+    assert thrust_motors(model(lambda m, a, b, s, h: a * (1 + 1e-5 * h) + 0.5 * h)) == ()
+    assert thrust_motors(model(lambda m, a, b, s, h: 4e4 + 0 * a)) == ()
