@@ -188,7 +188,8 @@ def test_the_altitude_bias_shows_through_its_samples(clean_outputs):
 
 def test_the_boosters_are_a_motor_of_their_own(auk_spec):
     """The thrust reads the boosters' table beside the throttled core: one motor among others, offered its own
-    level and burn-rate errors as refined shapes of ``thrust_level``; a one-table vehicle has none."""
+    level and burn-rate errors as refined shapes of ``thrust_level``, and its thrust or every other turned as
+    refined shapes of ``misalignment``, each beside its family's ladder; a one-table vehicle has none."""
     from rocketid.diagnostics.effects import Vehicle, thrust_motors, CATALOGUE
     assert thrust_motors(auk_spec) == ("booster_thrust",)
     import wren
@@ -200,6 +201,9 @@ def test_the_boosters_are_a_motor_of_their_own(auk_spec):
     assert names[-2:] == ["thrust_level_booster_thrust", "burn_rate_booster_thrust"]
     no_motor = [e.name for e in CATALOGUE["thrust_level"].refinements(replace(vehicle, motors=()))]
     assert not any(n.endswith("booster_thrust") for n in no_motor)
+    turned = [e.name for e in CATALOGUE["misalignment"].refinements(vehicle)]
+    assert turned[-2:] == ["misalignment_booster_thrust", "misalignment_other_than_booster_thrust"]
+    assert all(not e.rung for e in CATALOGUE["misalignment"].refinements(vehicle)[-2:])
 
 
 @pytest.mark.parametrize("effect, value, hidden, channel, within", [
@@ -208,15 +212,21 @@ def test_the_boosters_are_a_motor_of_their_own(auk_spec):
     # the truth's 0.96 P(t / 1.04) against k P(k t) at k = 1 / 1.04: the truth's impulse 0.16 % short of the
     # table's, which the burn-rate shape keeps -- measured 0.53 m/s of the effect's 14.7 m/s
     ("burn_rate_booster_thrust", 1 / COLD[1] - 1, Hidden(cold_boosters=COLD), "v", 0.05),
+    # the core's thrust turned 0.25 deg, the boosters' along the body: the truth turns the core's force vector
+    # from lift-off, the shape the resultant by the core's share, phased in by the lift-off fade -- measured
+    # 5.7 m of the effect's 182 m in x (the whole thrust turned: 45.7 m)
+    ("misalignment_other_than_booster_thrust", MIS, Hidden(core_misalign=MIS), "x", 0.05),
 ])
 def test_a_motors_shape_flies_the_truths_booster(auk_spec, clean_outputs, effect, value, hidden, channel, within):
     """The motor's shapes on Auk-B against the truth's boosters (``auk_study/truth.py``: the pair's thrust and
     grain flow as a share of boosters on a stretched clock, in polar coordinates, not through the model's
     input): at the truth's value the shape moves the flight as the hidden effect does, to ``within`` of the
     effect's largest change."""
-    from rocketid.diagnostics.effects import motor_burn_effect, motor_level_effect, with_effects
-    make = motor_level_effect if effect.startswith("thrust_level") else motor_burn_effect
-    e = make("booster_thrust")
+    from rocketid.diagnostics.effects import (motor_burn_effect, motor_level_effect, motor_misalignment_effect,
+                                              with_effects)
+    e = {"thrust_level": motor_level_effect, "burn_rate": motor_burn_effect,
+         "misalignment": lambda mo: motor_misalignment_effect(mo, other=True)}[effect.split("_booster")[0].split(
+             "_other")[0]]("booster_thrust")
     assert e.name == effect
     augmented = with_effects(auk_spec, [e])
     values = {**A.truth(auk_spec), e.parameter_names[0]: value}

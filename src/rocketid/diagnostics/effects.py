@@ -64,7 +64,8 @@ __all__ = ["Effect", "Vehicle", "back_pressure_effect", "thrust_profile_effect",
            "is_present", "check_effect_parameters", "effect_parameter_problems", "wind_effect", "density_effect", "earth_rotation_effect",
            "liftoff_fade", "EARTH_RATE", "LIFTOFF_FADE_TIME", "misalignment_onset_effect", "mass_jettison_effect", "throttle_step_effect", "onset_step",
            "ONSET_STARTS", "temperature_effect", "burn_rate_effect", "earth_rotation_site_effect", "rotation_reading", "base_drag_mach_effect", "TEMPERATURE_REALISTIC_K",
-           "thrust_motors", "motor_level_effect", "motor_burn_effect"]
+           "thrust_motors", "motor_level_effect", "motor_burn_effect",
+           "motor_misalignment_effect"]
 
 #: The kinds of effect (``"custom"`` for the user's own).
 KINDS = ("propulsion", "mass", "aero", "environment", "kinematics", "sensor", "custom")
@@ -863,6 +864,41 @@ def motor_burn_effect(motor: str) -> Effect:
                   {par: 0.02})
 
 
+def motor_misalignment_effect(motor: str, *, other: bool = False) -> Effect:
+    """One motor's thrust turned off the body axis, the others' along it (``other``: every thrust but that
+    motor's turned -- a core engine's gimbal bias beside aligned boosters).
+
+    For a vehicle with more than one thrust (:func:`thrust_motors`), the turned part's share of the thrust,
+    ``s(t) = P_part / P``, turns the resultant by ``delta_thrust s(t)`` (to first order in ``delta_thrust``:
+    a quarter of a degree off is 4e-3 rad, whose second-order error is 1e-5 of the force): the thrust direction
+    ``alpha_thrust + delta_thrust s(t)``, phased in at lift-off from rest as the catalogue's ``misalignment``
+    is. ``P_part`` is the thrust with every other motor's input at zero (``other``: with that motor's input at
+    zero). Offered as refined shapes of ``misalignment`` when the vehicle has motors, beside its ladder; names
+    ``misalignment_<input>`` and ``misalignment_other_than_<input>``, parameter ``delta_thrust`` (0.25 deg).
+    """
+    name = f"misalignment_other_than_{motor}" if other else f"misalignment_{motor}"
+
+    def apply(m: Model) -> tuple:
+        u = _motor_input(m, motor, name)
+        sym, at = _role_definition(m, "thrust_direction", name)
+        thrust = _expanded(m, _role(m, "thrust", name))
+        without = thrust.xreplace({u.symbol: sp.S.Zero})
+        part = without if other else thrust - without
+        # the share of the thrust turned; a vanishing thrust (all motors out) turns nothing
+        share = part / sp.Max(thrust, 1e-3)
+        delta = m.parameter("delta_thrust", 0.0, nominal=math.radians(0.25))
+        v = m.role("speed")
+        moving = v is not None and m.has(str(v)) and _initial_value(m, v) > 0
+        m.redefine(sym, at + delta * share * (1 if moving else liftoff_fade(m.t - m.t0)))
+        return (delta,)
+
+    whose = f"every thrust but {motor}'s" if other else f"the motor {motor}'s thrust"
+    return Effect(name, f"thrust misalignment of {whose}", "propulsion", apply,
+                  f"thrust direction alpha_thrust + delta_thrust s(t), s the share of {whose} in the thrust (the "
+                  "resultant turned to first order), phased in at lift-off from rest", {"delta_thrust": math.radians(0.25)},
+                  rung=False)
+
+
 TRANSONIC_MACH = 1.1
 TRANSONIC_WIDTH = 0.2
 
@@ -1168,7 +1204,9 @@ def _refine_start_mass(vehicle: "Vehicle | None") -> list[Effect]:
 
 def _refine_misalignment(vehicle: "Vehicle | None") -> list[Effect]:
     """From rest the misalignment is phased in at lift-off, and its fade time is estimated; on every vehicle
-    it may also appear at an estimated time inside the flight (:func:`misalignment_onset_effect`)."""
+    it may also appear at an estimated time inside the flight (:func:`misalignment_onset_effect`); on a vehicle
+    with motors (:attr:`Vehicle.motors`) one motor's thrust, or every other, may be the one turned
+    (:func:`motor_misalignment_effect`)."""
     moving = _moving(vehicle)
     out = [] if moving else [
         Effect("misalignment_fade", "thrust misalignment, fade time estimated", "propulsion", _misalignment_fade,
@@ -1178,7 +1216,8 @@ def _refine_misalignment(vehicle: "Vehicle | None") -> list[Effect]:
     if vehicle is not None and len(vehicle.knot_times) >= 2:
         out.append(misalignment_onset_effect(vehicle.knot_times[0], vehicle.knot_times[-1], _onset_width(vehicle),
                                              from_rest=not moving))
-    return out
+    motors = vehicle.motors if vehicle is not None else ()
+    return out + [motor_misalignment_effect(mo, other=o) for mo in motors for o in (False, True)]
 
 
 _CHANNEL_ROLE = {"x": "downrange", "h": "altitude", "v": "speed"}
