@@ -252,7 +252,8 @@ class Vehicle:
         are offered only then.
     motors : tuple of str
         The thrust's motors among others (:func:`thrust_motors`: a booster's thrust table beside a core's
-        thrust), each offered its own level and burn-rate errors; empty for a vehicle with one thrust.
+        thrust), each offered its own level, burn-rate and misalignment shapes; empty for a vehicle with one
+        thrust.
     """
 
     thrust: float

@@ -55,7 +55,7 @@ from ..solve import EstimationResult
 from .effects import Effect, Vehicle, thrust_motors
 from .score import CandidateRanking, ScanPeak, rank_candidates, scan_peak, scan_profile
 
-__all__ = ["Contender", "Screen", "screen", "vehicle_of", "WITHIN", "MAX_CONTENDERS"]
+__all__ = ["Contender", "Screen", "screen", "vehicle_of", "WITHIN", "MAX_CONTENDERS", "WIDE_SHARE"]
 
 WITHIN = 10.0
 """A significant candidate whose predicted fall of the objective is within this factor of the leader's is a contender."""
