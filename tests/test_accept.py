@@ -1400,3 +1400,34 @@ def test_a_model_that_reaches_the_noise_takes_an_effect_only_on_decisive_evidenc
     assert "not below 0.00025" in S._not_decisive(weak) and "over the 4 contender(s)" in S._not_decisive(weak)
     strong = accept(refit("density", 0.9774, value=0.02, size=0.05, base_chi2=0.9798), BAND, n_tests=5)
     assert strong.refit.lr_p_value < 1e-9 and strong.accepted and S._decisive(strong)
+
+
+def test_a_refit_at_the_noise_held_back_by_its_size_is_named_as_a_lead():
+    """A search that ends above the noise names the refit that reached the noise with white residuals and failed
+    the size check alone -- as a place to look, not an explanation (Auk-B's late separation: a full throttle cut
+    over 0.2 s at 40.6 s, the lost impulse of casings carried 1.5 s too long); a refit that also fails another
+    check is not named, and a final model at the noise gets no lead."""
+    from rocketid.diagnostics.api import _size_lead
+    from rocketid.diagnostics.effects import CATALOGUE, throttle_window_effect
+
+    window = throttle_window_effect(0.0, 110.0, 2.0)
+    names = ("CD", "d_window", "t_win_on", "t_win_off")
+    cut = refit("throttle_window", 0.985, value=1.0, size=0.1, at_bound=("d_window",))
+    cut = Refit(**{**cut.__dict__, "parameter_names": names, "p": np.array([0.3, 1.0, 40.59, 40.81]),
+                   "std": np.array([0.01, 0.01, 0.01, 0.01]), "effect_parameters": names[1:],
+                   "sizes": {"d_window": 0.1}})
+    drag = refit("transonic_drag", 1.02, value=1.5, size=0.2, white={"x": 0.0, "h": 0.0, "v": 0.0})
+    accs = (accept(cut, BAND), accept(drag, BAND))
+    assert accs[0].failed == ["size"] and "size" in accs[1].failed and len(accs[1].failed) > 1
+    step = SimpleNamespace(screen=SimpleNamespace(contenders=(SimpleNamespace(effect=window),
+                                                               SimpleNamespace(effect=CATALOGUE["transonic_drag"]))),
+                           acceptances=accs)
+    disc = SimpleNamespace(fits_to_noise=False, steps=(step,), vehicle=None)
+    lead = _size_lead(disc)
+    assert "throttle_window (chi2/dof 0.985" in lead and "not an explanation" in lead
+    assert "d_window 1 (10 times its realistic 0.1)" in lead
+    assert "t_win_on 40.59 s after the start" in lead and "t_win_off 40.81 s after the start" in lead
+    assert "transonic_drag" not in lead
+    assert _size_lead(SimpleNamespace(fits_to_noise=True, steps=(step,), vehicle=None)) == ""
+    drag_only = SimpleNamespace(screen=SimpleNamespace(contenders=step.screen.contenders[1:]), acceptances=accs[1:])
+    assert _size_lead(SimpleNamespace(fits_to_noise=False, steps=(drag_only,), vehicle=None)) == ""

@@ -763,6 +763,43 @@ def _tried_lead(disc, ranking, free=None) -> tuple[str, str] | None:
     return _lead(disc, ranking)
 
 
+def _size_lead(disc) -> str:
+    """The refit of the search that reaches the noise with white residuals and fails the size check alone (the
+    lowest chi2/dof of them), in words: where the data ask for a change of that kind, larger (or narrower) than
+    the catalogue calls realistic -- not an explanation, a place to look. Empty when there is none, or when the
+    final model reaches the noise. (Auk-B's boosters dropped 1.5 s late: the throttle window reached chi2/dof
+    0.985, white, as a full cut over 40.59-40.81 s -- the same lost impulse as the 7 % of 3.2 t carried 1.5 s
+    longer, on the ridge where depth and width trade off -- and the search ended on a drag correction.)"""
+    if disc is None or disc.fits_to_noise:
+        return ""
+    best = None
+    for step in disc.steps:
+        for c, a in zip(step.screen.contenders, step.acceptances):
+            r = a.refit
+            if a.failed == ["size"] and r.success and (best is None or r.chi2_per_dof < best[1].refit.chi2_per_dof):
+                best = (c.effect, a)
+    if best is None:
+        return ""
+    effect, a = best
+    r = a.refit
+    sizes, places = effect.sizes(disc.vehicle), effect.locations
+    parts = []
+    for n in effect.parameter_names:
+        if n not in r.parameter_names:
+            continue
+        v = r.estimate(n)[0]
+        if n in places:
+            parts.append(f"{n} {v:.4g}" + (" s after the start" if places[n] == "s" else f" ({places[n]})"))
+        else:
+            parts.append(f"{n} {v:.4g}" + (f" ({abs(v) / sizes[n]:.2g} times its realistic {sizes[n]:.3g})"
+                                           if sizes.get(n) else ""))
+    extra = [x for x in r.effects if x != effect.name]
+    beside = f" beside {', '.join(extra)}" if extra else ""
+    return (f" One refit reaches the noise with white residuals, but at an implausible size: {effect.name}{beside} "
+            f"(chi2/dof {r.chi2_per_dof:.4g}; {'; '.join(parts)}) -- not an explanation, but where the data ask for a "
+            f"change of that kind ({effect.title}) beyond its realistic size: compare it with the flight's events.")
+
+
 def _final(disc, ranking, level, window, free=None) -> FinalModel | None:
     """The final model in the user's words (``free``: the free shape fitted, which the "Try ..." follows when it
     reached the noise)."""
@@ -834,14 +871,16 @@ def _final(disc, ranking, level, window, free=None) -> FinalModel | None:
                          "against it.")
         else:
             text = (f"the model with {names} does not reach the noise ({disc.noise_detail}); the residual is "
-                    f"located in: {_where(fit, level, window)}.{readings}{amb}" + ("" if disc.stopped else f" Try {_suggest(_tried_lead(disc, ranking, free))}."))
+                    f"located in: {_where(fit, level, window)}.{readings}{amb}" + ("" if disc.stopped else f" Try {_suggest(_tried_lead(disc, ranking, free))}.")
+                    + _size_lead(disc))
     elif disc.stopped:
         text = (f"no effect was added before the search was cut short (chi2/dof {fit.chi2_per_dof:.4g}, band <= "
                 f"{band.upper:.4g}); not every candidate was tried, so this does not say the catalogue cannot explain "
                 f"it; the residual sits in: {_where(fit, level, window)}.")
     else:
         text = (f"no catalogue effect explains the misfit (chi2/dof {fit.chi2_per_dof:.4g}, band <= {band.upper:.4g}); "
-                f"the residual sits in: {_where(fit, level, window)}. Try {_suggest(_tried_lead(disc, ranking, free))}.")
+                f"the residual sits in: {_where(fit, level, window)}. Try {_suggest(_tried_lead(disc, ranking, free))}."
+                + _size_lead(disc))
     if disc.stopped:
         text += (f" The search was cut short: {disc.stopped}. A larger budget (--budget, diagnose(budget=)) lets it "
                  "go on; with --resume (diagnose(resume=True)) from the refits it made (kept with an output folder) "
