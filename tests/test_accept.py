@@ -1431,3 +1431,23 @@ def test_a_refit_at_the_noise_held_back_by_its_size_is_named_as_a_lead():
     assert _size_lead(SimpleNamespace(fits_to_noise=True, steps=(step,), vehicle=None)) == ""
     drag_only = SimpleNamespace(screen=SimpleNamespace(contenders=step.screen.contenders[1:]), acceptances=accs[1:])
     assert _size_lead(SimpleNamespace(fits_to_noise=False, steps=(drag_only,), vehicle=None)) == ""
+
+
+def test_a_wind_knot_beyond_the_strongest_jet_streams_is_implausible():
+    """A wind knot's size is judged against five realistic sizes (150 m/s aloft) and against the most physics
+    allows anywhere (``WIND_MOST``, 120 m/s: the strongest jet-stream cores measured): Auk-B's late separation
+    beside a 35 m/s jet was called explained with a knot at -147 m/s (4.9 realistic sizes); now that knot fails
+    the size check, by name, and the refit is no finding either; 100 m/s passes."""
+    from rocketid.diagnostics.effects import CATALOGUE, WIND_MOST, wind_profile_effect
+    wind = wind_profile_effect((0.0, 0.5, 5.0, 11.0, 16.0), name="wind_pl_test")
+    assert wind.most == {n: WIND_MOST for n in wind.realistic} and WIND_MOST == 120.0
+    assert set(CATALOGUE["wind"].most) == set(CATALOGUE["wind"].realistic)
+
+    def knot(value):
+        r = refit("wind_pl_test", 1.02, value=value, size=30.0)
+        return accept(Refit(**{**r.__dict__, "most": {"p_wind_pl_test": WIND_MOST}}), BAND)
+
+    spike = knot(-147.0)
+    assert spike.failed == ["size"] and "beyond 120, the most its physics allows" in spike.check("size").detail
+    assert not spike.oversized
+    assert knot(-100.0).accepted

@@ -293,6 +293,8 @@ class Acceptance:
             return False
         if any(abs(r.estimate(k)[0]) < m for k, m in r.least.items()):
             return False
+        if any(abs(r.estimate(k)[0]) > m for k, m in r.most.items()):
+            return False
         if any(v > SIZE_FACTOR for v in r.change_ratio().values()) or r.wrong_signs():
             return False
         ratios = r.size_ratio().values()
@@ -387,14 +389,16 @@ def accept(refit: Refit, band: NoiseBand, *, level: float = 0.05, n_tests: int =
     big = {k: r for k, r in ratios.items() if r > SIZE_FACTOR}
     steep = {ab: r for ab, r in (refit.change_ratio() if refit.success else {}).items() if r > SIZE_FACTOR}
     small = {k: m for k, m in refit.least.items() if refit.success and abs(refit.estimate(k)[0]) < m}
+    huge = {k: m for k, m in refit.most.items() if refit.success and abs(refit.estimate(k)[0]) > m}
     bound = list(refit.at_bound)
     wrong = refit.wrong_signs() if refit.success else []
-    if big or bound or small or steep or wrong:
+    if big or bound or small or steep or wrong or huge:
         bits = [f"{k} = {refit.estimate(k)[0]:.4g} is {r:.1f} times its realistic size {refit.sizes[k]:.3g}"
                 for k, r in big.items()]
         bits += [f"{b} - {a} = {refit.estimate(b)[0] - refit.estimate(a)[0]:+.4g} is {r:.1f} times the realistic change "
                  f"{refit.changes[(a, b)]:.3g} between them" for (a, b), r in steep.items()]
         bits += [f"{k} = {refit.estimate(k)[0]:.3g} is below {m:g}, the least its physics allows" for k, m in small.items()]
+        bits += [f"{k} = {refit.estimate(k)[0]:.4g} is beyond {m:g}, the most its physics allows" for k, m in huge.items()]
         bits += [f"{k} is held at a bound" for k in bound]
         bits += [f"{_mean_words(g)} = {m:.3g} +- {se:.2g} is below zero: the wrong sign for its physics"
                  for g, m, se in wrong]

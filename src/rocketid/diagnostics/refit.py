@@ -712,6 +712,7 @@ def _acceptance(fit: EstimationResult, new: EstimationResult, effects: Sequence[
         r = summarize_refit(new, fit.objective, fit.n_estimated, effects, tuple(e.name for e in effects), sizes,
                             level=level, base_parameters=base_spec.parameter_names,
                             least={k: v for e in effects for k, v in e.least.items()},
+                            most={k: v for e in effects for k, v in e.most.items()},
                             positive=[g for e in effects for g in e.positive],
                             base_values=dict(zip(fit.spec.parameter_names, (float(v) for v in fit.p))),
                             base_chi2_per_dof=fit.chi2_per_dof)
@@ -815,6 +816,7 @@ class Refit:
     seconds: float = 0.0
     notes: tuple = ()
     least: dict = field(default_factory=dict)
+    most: dict = field(default_factory=dict)
     base_values: dict = field(default_factory=dict)
     base_chi2_per_dof: float = float("nan")
     location_steps: dict = field(default_factory=dict)
@@ -1012,6 +1014,7 @@ def summarize_refit(new: EstimationResult, base_objective: float, base_n_estimat
                     added: Sequence[str], sizes: Mapping[str, float], *, level: float = 0.05,
                     base_parameters: Sequence[str] = (), seconds: float = 0.0, notes: Sequence[str] = (),
                     least: Mapping[str, float] | None = None, base_values: Mapping[str, float] | None = None,
+                    most: Mapping[str, float] | None = None,
                     base_chi2_per_dof: float = float("nan"), model_parameters: Sequence[str] | None = None,
                     changes: Mapping[tuple, float] | None = None, positive: Sequence[Mapping] = ()) -> Refit:
     """The :class:`Refit` of a fitted model with ``effects``: whiteness per channel, standard
@@ -1068,6 +1071,7 @@ def summarize_refit(new: EstimationResult, base_objective: float, base_n_estimat
                  sizes={k: float(v) for k, v in sizes.items() if k in all_effects}, at_bound=bound,
                  plausible_coefficients=plaus, implausible=failing, identifiability=ident, seconds=float(seconds),
                  notes=tuple(notes), least={k: float(v) for k, v in (least or {}).items() if k in eff_params},
+                 most={k: float(v) for k, v in (most or {}).items() if k in eff_params},
                  base_values={k: float(v) for k, v in (base_values or {}).items()},
                  base_chi2_per_dof=float(base_chi2_per_dof),
                  location_steps={n: step for e in effects if e.name in added_set and e.scan is not None
@@ -1223,6 +1227,7 @@ def summarize_task(task: RefitTask, new: EstimationResult, *, seconds: float = 0
                            base_parameters=task.base_parameters, seconds=seconds,
                            notes=notes, least={k: v for e in task.effects if e.name in task.added
                                                for k, v in e.least.items()},
+                           most={k: v for e in task.effects for k, v in e.most.items()},
                            base_values=task.base_values, base_chi2_per_dof=task.base_chi2_per_dof,
                            model_parameters=task.base_spec.parameter_names, changes=task.changes,
                            positive=task.positive)
