@@ -1451,3 +1451,30 @@ def test_a_wind_knot_beyond_the_strongest_jet_streams_is_implausible():
     assert spike.failed == ["size"] and "beyond 120, the most its physics allows" in spike.check("size").detail
     assert not spike.oversized
     assert knot(-100.0).accepted
+
+
+def test_the_most_a_wind_may_be_is_judged_on_every_effect_of_the_model():
+    """The wind's knot taken at one step is judged again beside the effects added after it: a refit that adds a
+    drag correction beside a wind already in the model fails the size check when the wind's knot goes beyond the
+    most its physics allows (Auk-B: the wind's -147 m/s knot was taken with the drag correction at step 2)."""
+    import rocketid as ri
+    from rocketid.cases.ra66m import ra66m, ra66m_truth
+    from rocketid.diagnostics import with_effects
+    from rocketid.diagnostics.effects import CATALOGUE, WIND_MOST
+    from rocketid.diagnostics.refit import summarize_refit
+
+    base = ra66m()
+    wind, drag = CATALOGUE["wind"], CATALOGUE["transonic_drag"]
+    spec = with_effects(base, [wind, drag])
+    p = ra66m_truth(spec)
+    p[spec.parameter_names.index("wind_2")] = -147.0              # the 8 km knot
+    times = np.linspace(0.5, spec.tf, 400)
+    data = ri.simulate_measurements(spec, p, times, seed=0)
+    fit = ri.estimate(spec, data, guess=p)
+    assert fit.success and fit.p[spec.parameter_names.index("wind_2")] < -140
+    r = summarize_refit(fit, fit.objective + 500.0, fit.n_estimated - 1, [wind, drag], ("transonic_drag",),
+                        {**wind.realistic, **drag.realistic}, base_parameters=base.parameter_names,
+                        most={k: v for e in (wind, drag) for k, v in e.most.items()})
+    assert r.most.get("wind_2") == WIND_MOST and "dCD_transonic" not in r.most
+    size = accept(r, BAND).check("size")
+    assert not size.passed and "wind_2" in size.detail and "the most its physics allows" in size.detail

@@ -776,6 +776,10 @@ class Refit:
         combination that is.
     seconds : float
     notes : tuple of str
+    least, most : dict
+        ``{parameter: magnitude}``: the least a newly added effect's parameter may be, and the most any effect
+        parameter of the model may be, by its physics (:attr:`~rocketid.diagnostics.effects.Effect.least`,
+        :attr:`~rocketid.diagnostics.effects.Effect.most`: a wind's knot at most 120 m/s).
     location_steps : dict
         ``{parameter: step}`` for the locations of an added located shape (an event time, a drag hump's
         Mach number): the spacing of the scan that located it, the yardstick its standard error is
@@ -1071,7 +1075,7 @@ def summarize_refit(new: EstimationResult, base_objective: float, base_n_estimat
                  sizes={k: float(v) for k, v in sizes.items() if k in all_effects}, at_bound=bound,
                  plausible_coefficients=plaus, implausible=failing, identifiability=ident, seconds=float(seconds),
                  notes=tuple(notes), least={k: float(v) for k, v in (least or {}).items() if k in eff_params},
-                 most={k: float(v) for k, v in (most or {}).items() if k in eff_params},
+                 most={k: float(v) for k, v in (most or {}).items() if k in all_effects},
                  base_values={k: float(v) for k, v in (base_values or {}).items()},
                  base_chi2_per_dof=float(base_chi2_per_dof),
                  location_steps={n: step for e in effects if e.name in added_set and e.scan is not None
