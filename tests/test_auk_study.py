@@ -54,10 +54,11 @@ KNOWN_FAILURES: dict[str, str] = {
                        "(d_window 1, at its bound: the lost impulse of the casings carried 1.5 s longer, on the "
                        "ridge where a window's depth and width trade off): implausible, not taken. The free shape, a "
                        "thrust error on 32 knots alone, reaches the noise (1.003) and reads -21 % at 39 s",
-    "late-separation+jet-stream": "5ae42bd (as on 2a62fcc): wind_pl_10 + drag_mach_18 at chi2/dof 1.020, called "
-                                  "explained -- the wind right, the late separation taken by the wind and the drag "
-                                  "correction, with the wind's knot near 11 km at -147 +- 3.4 m/s (4.9 times its "
-                                  "realistic 30, just inside the five) for a 35 m/s jet: right but partly",
+    "late-separation+jet-stream": "6cca436 (a wind knot beyond 120 m/s implausible on every effect of the model): "
+                                  "wind (-47 m/s at 13 km) + bias_x_drift + time_offset at chi2/dof 1.203, partly "
+                                  "explained -- the right wind with a wrong pair, not called explained. On 5ae42bd "
+                                  "it was wind_pl_10 + drag_mach_18 called explained with a knot at -147 m/s "
+                                  "carrying the late separation (right but partly)",
     "deep-bucket": "2a62fcc and 5ae42bd: thrust_profile_5 (its knot in the bucket at -5.6 %: the bucket 6.7 % low) + "
                    "drag_mach_18 at chi2/dof 0.994, partly explained -- a drag correction beside the right family, "
                    "not called explained",
