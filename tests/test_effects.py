@@ -1108,3 +1108,5 @@ def test_a_thrust_input_beside_another_thrust_is_a_motor():
     assert thrust_motors(model(lambda m, a, b, s, h: a + 1e3 * (1 - m.t / 20))) == ("a",)
     assert thrust_motors(model(lambda m, a, b, s, h: a * (1 + 1e-5 * h) + 0.5 * h)) == ()
     assert thrust_motors(model(lambda m, a, b, s, h: 4e4 + 0 * a)) == ()
+    # an input read through a nonlinear function (an attitude in a cosine) is not a motor; the table beside it is
+    assert thrust_motors(model(lambda m, a, b, s, h: a * sp.cos(1e-3 * s) + b)) == ("a", "b")

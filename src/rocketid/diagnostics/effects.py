@@ -771,7 +771,8 @@ def burn_rate_effect() -> Effect:
 def thrust_motors(spec) -> tuple[str, ...]:
     """The thrust's motors among others: each known input (a motor's thrust table, a thrust written as an
     expression of time) that the ``thrust`` role reads beside another time-varying thrust that does not read
-    it -- a strap-on booster's table beside a throttled core, one motor of a cluster with its own table. A
+    it, in proportion to it -- a strap-on booster's table beside a throttled core, one motor of a cluster with its
+    own table (an input read through a nonlinear function, an attitude in a cosine, is not a motor). A
     vehicle whose thrust is one motor's (the thrust proportional to one table) has none: its thrust errors
     are the whole thrust's (``thrust_level``, ``burn_rate``). ``spec`` is a :class:`~rocketid.model.ModelSpec`
     or :class:`~rocketid.model.Model`; names in declaration order."""
@@ -784,7 +785,8 @@ def thrust_motors(spec) -> tuple[str, ...]:
     symbols = {u.symbol for u in inputs}
     out = []
     for u in inputs:
-        if u.symbol not in thrust.free_symbols:
+        # a motor's thrust adds to the others' in proportion to its input (not an attitude read through a cosine)
+        if u.symbol not in thrust.free_symbols or sp.diff(thrust, u.symbol, 2) != 0:
             continue
         rest = thrust.xreplace({u.symbol: sp.S.Zero})
         if rest.free_symbols & ((symbols - {u.symbol}) | {spec.t}):
