@@ -763,6 +763,11 @@ def _tried_lead(disc, ranking, free=None) -> tuple[str, str] | None:
     return _lead(disc, ranking)
 
 
+def _place_note(unit: str) -> str:
+    """What a located shape's place is measured in, after its value: time after the start, or the unit."""
+    return " s after the start" if unit == "s" else f" ({unit})"
+
+
 def _size_lead(disc) -> str:
     """The refit of the search that reaches the noise with white residuals and fails the size check alone (the
     lowest chi2/dof of them), in words: where the data ask for a change of that kind, larger (or narrower) than
@@ -789,7 +794,7 @@ def _size_lead(disc) -> str:
             continue
         v = r.estimate(n)[0]
         if n in places:
-            parts.append(f"{n} {v:.4g}" + (" s after the start" if places[n] == "s" else f" ({places[n]})"))
+            parts.append(f"{n} {v:.4g}{_place_note(places[n])}")
         else:
             parts.append(f"{n} {v:.4g}" + (f" ({abs(v) / sizes[n]:.2g} times its realistic {sizes[n]:.3g})"
                                            if sizes.get(n) else ""))
@@ -838,7 +843,7 @@ def _final(disc, ranking, level, window, free=None) -> FinalModel | None:
 
         def size_note(n):
             if n in places:
-                return " s after the start" if places[n] == "s" else f" ({places[n]})"
+                return _place_note(places[n])
             return f" (realistic {sizes[n]:.3g})" if n in sizes else ""
         est = "; ".join(f"{n} = {v:.4g} +- {s:.2g}{size_note(n)}" for n, (v, s) in params.items()
                         if n not in base_names)

@@ -680,6 +680,11 @@ def _input_table(u) -> type:
     return table_function(u.times, u.values, str(u.symbol))
 
 
+def _input_at(u, clock: sp.Expr, t: sp.Symbol) -> sp.Expr:
+    """Input ``u`` read at ``clock``: its expression of ``t`` there, or its samples through their table function."""
+    return u.expr.xreplace({t: clock}) if u.expr is not None else _input_table(u)(clock)
+
+
 @dataclass(frozen=True)
 class _Motor:
     """What a motor-clock edit reads: the ``thrust`` and ``mass`` definitions (their symbols and expanded
@@ -700,7 +705,7 @@ class _Motor:
         70 % of a Wren-H diagnosis that way)."""
         out = {t: clock}
         for u in self.inputs:
-            out[u.symbol] = u.expr.xreplace({t: clock}) if u.expr is not None else _input_table(u)(clock)
+            out[u.symbol] = _input_at(u, clock, t)
         return out
 
     def flow_at_start(self) -> sp.Expr:
@@ -860,7 +865,7 @@ def motor_burn_effect(motor: str) -> Effect:
         eps = m.parameter(par, 0.0, bounds=(-0.3, 0.3), nominal=0.02)
         k = 1 + eps
         clock = origin + k * (m.t - origin)
-        warped = u.expr.xreplace({m.t: clock}) if u.expr is not None else _input_table(u)(clock)
+        warped = _input_at(u, clock, m.t)
         start = {**mo.at_start}
         alone = sum((f.xreplace(start) - f.xreplace({u.symbol: sp.S.Zero}).xreplace(start)
                      for f in mo.flows.values()), sp.S.Zero)
