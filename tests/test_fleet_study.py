@@ -28,7 +28,13 @@ from fleet_study.cases import BY_NAME, CAMPAIGNS, CHANNELS, Hidden, exact, noisy
 from fleet_study.run import diagnose_campaign, row, score
 
 #: Campaigns measured not to meet the bar (``score(...)["acceptable"]``), with the measured reason.
-KNOWN_FAILURES: dict[str, str] = {}
+KNOWN_FAILURES: dict[str, str] = {
+    "nozzle+C-wind": "bb613fe (after the wind's limit of 120 m/s, 197672f/6cca436): flight C's path through "
+                     "start_mass + wind_pl_5 + back_pressure_fade at chi2/dof 1.055 is refused for the 5-knot wind's "
+                     "top knot at 124.8 m/s (beyond 120, for a 20 m/s jet), and C ends wind_pl_5 + thrust_profile_3 "
+                     "at 1.056, partly explained (was wind_pl_9 + back_pressure_fade, 0.936, explained); the joint "
+                     "model shares back_pressure_fade (A_e 0.0597 for 0.06) at 1.015. Not yet mended",
+}
 # (nozzle+C-wind before 2651fbd: flight C kept a start-mass error beside a 5-knot wind, partly explained; the finer
 # shape mends it -- test_a_coarse_wind_chosen_before_the_nozzle_is_refined_with_it_in)
 
