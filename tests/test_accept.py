@@ -1451,6 +1451,13 @@ def test_a_wind_knot_beyond_the_strongest_jet_streams_is_implausible():
     assert spike.failed == ["size"] and "beyond 120, the most its physics allows" in spike.check("size").detail
     assert not spike.oversized
     assert knot(-100.0).accepted
+    # judged with its standard error: a knot the data do not pin is not refused by its estimate alone (Petrel-V's
+    # fleet: a 5-knot wind's top knot at 124.8 m/s), a pinned one is (Auk-B: -147 +- 3.4)
+    loose = refit("wind_pl_test", 1.02, value=124.8, size=30.0)
+    loose = Refit(**{**loose.__dict__, "std": np.array([0.01, 20.0]), "most": {"p_wind_pl_test": WIND_MOST}})
+    assert accept(loose, BAND).accepted
+    pinned = Refit(**{**loose.__dict__, "p": np.array([0.3, -147.0]), "std": np.array([0.01, 3.4])})
+    assert accept(pinned, BAND).failed == ["size"]
 
 
 def test_the_most_a_wind_may_be_is_judged_on_every_effect_of_the_model():
